@@ -1,0 +1,197 @@
+"""``autopilot bench sitl``: the simulator's speed and the flight stack's accuracy.
+
+Takes off to 2 m, makes a 2 m position step north in OFFBOARD, hovers for 10 s and lands, with
+the forward camera rendering throughout. Scores the step response and the hover against ground
+truth (where the vehicle really is), and reports rendering throughput and real-time factor.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from autopilot.flight_ops import stream_setpoints, wait_for_state
+from drivers.base import FlightMode, Setpoint
+from drivers.sim.config import SimConfig
+from drivers.sim.driver import SimDriver
+
+TAKEOFF_ALTITUDE_M = 2.0
+STEP_M = 2.0
+SETTLE_BAND_M = 0.05
+STEP_OBSERVE_S = 5.0  # after the step, before the hover window
+HOVER_S = 10.0
+SETPOINT_RATE_HZ = 50.0
+CAMERA = "front"
+
+
+@dataclass(frozen=True, slots=True)
+class StepResponse:
+    rise_time_s: float  # 10 % → 90 % of the step
+    overshoot_pct: float  # beyond the target along the step, % of the step
+    settle_time_s: float  # from the step until the error stays within SETTLE_BAND_M
+
+
+@dataclass(frozen=True, slots=True)
+class SitlBenchResult:
+    lockstep: bool
+    real_time_factor: float
+    sim_time_s: float
+    wall_time_s: float
+    step_response: StepResponse
+    hover_rms_m: float  # 3-D distance of the true position from the setpoint, over the hover
+    hover_max_m: float
+    camera: str
+    camera_resolution: str
+    camera_frames: int
+    camera_fps: float  # frames rendered and delivered per wall-clock second
+    camera_fps_sim: float  # frames per simulated second (the camera's own rate)
+    physics_rate_hz: int
+    seed: int
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def step_response(times_s: np.ndarray, along_m: np.ndarray, step_m: float,
+                  band_m: float) -> StepResponse:
+    """Metrics of a step from 0 to ``step_m`` starting at ``times_s[0]``.
+
+    ``along_m`` is the displacement along the step direction. Crossing times are interpolated
+    linearly between samples.
+    """
+    t = times_s - times_s[0]
+    frac = along_m / step_m
+
+    def crossing(level: float) -> float:
+        idx = np.flatnonzero(frac >= level)
+        if len(idx) == 0:
+            return math.inf
+        i = int(idx[0])
+        if i == 0:
+            return 0.0
+        f0, f1 = frac[i - 1], frac[i]
+        return float(t[i - 1] + (level - f0) / (f1 - f0) * (t[i] - t[i - 1]))
+
+    rise = crossing(0.9) - crossing(0.1)
+    overshoot = max(0.0, float(np.max(frac)) - 1.0) * 100.0
+    outside = np.flatnonzero(np.abs(along_m - step_m) > band_m)
+    if len(outside) == 0:
+        settle = 0.0
+    elif outside[-1] == len(t) - 1:
+        settle = math.inf  # never settled within the observation window
+    else:
+        settle = float(t[outside[-1] + 1])
+    return StepResponse(rise, overshoot, settle)
+
+
+async def run_sitl_bench(config: SimConfig, *, lockstep: bool = True,
+                         log=lambda message: None) -> SitlBenchResult:
+    driver = SimDriver(config, lockstep=lockstep)
+    await driver.connect()
+    clock = driver.clock
+    truth: list[tuple[float, np.ndarray]] = []
+    frames = 0
+
+    async def count_frames() -> None:
+        nonlocal frames
+        async with contextlib.aclosing(driver.frames(CAMERA)) as stream:
+            async for _ in stream:
+                frames += 1
+
+    async def record_truth() -> None:
+        async with contextlib.aclosing(driver.ground_truth()) as stream:
+            async for sample in stream:
+                truth.append((sample.time_s, sample.vehicle.position_ned_m))
+
+    setpoint: Setpoint | None = None  # the bench's trivial "controller": a fixed target
+
+    try:
+        async with asyncio.TaskGroup() as tasks:
+            background = [
+                tasks.create_task(count_frames()),
+                tasks.create_task(record_truth()),
+                tasks.create_task(stream_setpoints(driver, lambda: setpoint, SETPOINT_RATE_HZ)),
+            ]
+            try:
+                log("waiting for the vehicle to be armable")
+                await wait_for_state(driver, lambda s: s.health.armable, 30.0, "armable")
+                await driver.arm()
+                log(f"armed; taking off to {TAKEOFF_ALTITUDE_M} m")
+                await driver.takeoff(TAKEOFF_ALTITUDE_M)
+                await wait_for_state(driver, lambda s: s.mode is FlightMode.HOLD and s.in_air,
+                                     30.0, "takeoff to finish")
+                await clock.sleep(2.0)
+                start = driver.latest_state
+                p0 = np.array(start.position_ned_m)
+                yaw0 = start.yaw_rad
+                setpoint = Setpoint.position(*p0, yaw_rad=yaw0)
+                await clock.sleep(0.3)
+                await driver.start_offboard()
+                log("OFFBOARD; holding")
+                await clock.sleep(2.0)
+                target = p0 + np.array([STEP_M, 0.0, 0.0])
+                t_step = clock.now()
+                setpoint = Setpoint.position(*target, yaw_rad=yaw0)
+                log(f"step {STEP_M} m north")
+                await clock.sleep(STEP_OBSERVE_S + HOVER_S)
+                t_end = clock.now()
+                setpoint = None
+                log("landing")
+                await driver.land()
+                await wait_for_state(driver, lambda s: not s.armed, 60.0, "landing and disarm")
+            finally:
+                for task in background:
+                    task.cancel()
+    finally:
+        sim_time, wall_time = driver.sim_time_s, driver.wall_time_s
+        await driver.close()
+
+    times = np.array([t for t, _ in truth])
+    positions = np.array([p for _, p in truth])
+    # the step is scored against the commanded target, in the vehicle's own (estimated) frame
+    # offset: truth positions minus the setpoint the vehicle was given
+    sel = (times >= t_step) & (times <= t_end)
+    along = positions[sel, 0] - p0[0]
+    response = step_response(times[sel], along, STEP_M, SETTLE_BAND_M)
+    hover = (times >= t_end - HOVER_S) & (times <= t_end)
+    err = np.linalg.norm(positions[hover] - target, axis=1)
+    cam = config.cameras[CAMERA]
+    return SitlBenchResult(
+        lockstep=lockstep,
+        real_time_factor=sim_time / wall_time,
+        sim_time_s=sim_time,
+        wall_time_s=wall_time,
+        step_response=response,
+        hover_rms_m=float(np.sqrt(np.mean(err ** 2))),
+        hover_max_m=float(np.max(err)),
+        camera=CAMERA,
+        camera_resolution=f"{cam.width_px}x{cam.height_px}",
+        camera_frames=frames,
+        camera_fps=frames / wall_time,
+        camera_fps_sim=frames / sim_time,
+        physics_rate_hz=config.physics_rate_hz,
+        seed=config.seed,
+    )
+
+
+def format_table(result: SitlBenchResult) -> str:
+    r = result
+    s = r.step_response
+    rows = [
+        ("clock", "lockstep" if r.lockstep else "real time", ""),
+        ("real-time factor", f"{r.real_time_factor:.2f}", "× (target ≥ 5, lockstep)"),
+        ("simulated / wall time", f"{r.sim_time_s:.1f} / {r.wall_time_s:.1f}", "s"),
+        ("step rise time (10–90 %)", f"{s.rise_time_s:.2f}", "s"),
+        ("step overshoot", f"{s.overshoot_pct:.1f}", "% (target ≤ 10)"),
+        ("step settle time (±5 cm)", f"{s.settle_time_s:.2f}", "s (target ≤ 3)"),
+        ("hover RMS error", f"{r.hover_rms_m * 100:.1f}", "cm (target ≤ 5)"),
+        ("hover max error", f"{r.hover_max_m * 100:.1f}", "cm"),
+        (f"camera {r.camera} {r.camera_resolution}", f"{r.camera_fps:.0f}",
+         f"frames per wall second ({r.camera_frames} frames, {r.camera_fps_sim:.1f}/sim s)"),
+    ]
+    width = max(len(name) for name, _, _ in rows)
+    return "\n".join(f"{name:<{width}}  {value:>10}  {unit}" for name, value, unit in rows)

@@ -1,0 +1,198 @@
+"""Configuration: ``config.yaml`` (the defaults) + command-line overrides → validated models.
+
+Validation happens once, at the boundary, before anything flies. Every problem is reported with
+the file, the line and the dotted key path, and what was expected, e.g.::
+
+    config.yaml:57: sim.cameras.front.width_px: Input should be greater than or equal to 16 (got 8)
+"""
+
+from __future__ import annotations
+
+import copy
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+import yaml
+from pydantic import BaseModel, ConfigDict, ValidationError
+
+from autopilot.resources import default_config_path
+from drivers.sim.config import SimConfig
+
+KeyPath = tuple[str | int, ...]
+
+
+class AppConfig(BaseModel):
+    """The whole of ``config.yaml``."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    driver: Literal["sim", "mavsdk", "pymavlink"]
+    sim: SimConfig
+
+
+@dataclass(frozen=True, slots=True)
+class Problem:
+    source: str  # a file name, or "--set"
+    line: int | None
+    key_path: str
+    message: str
+
+    def __str__(self) -> str:
+        where = f"{self.source}:{self.line}" if self.line is not None else self.source
+        return f"{where}: {self.key_path or '(top level)'}: {self.message}"
+
+
+class ConfigError(Exception):
+    """One or more problems in a configuration or mission file."""
+
+    def __init__(self, problems: Sequence[Problem]) -> None:
+        self.problems = list(problems)
+        super().__init__("\n".join(str(p) for p in self.problems))
+
+
+# ------------------------------------------------------------------------------------------
+# YAML with source locations
+# ------------------------------------------------------------------------------------------
+
+
+@dataclass
+class Located:
+    """Parsed YAML data plus where each key came from."""
+
+    data: Any
+    source: str
+    lines: dict[KeyPath, tuple[str, int | None]]
+
+    def locate(self, path: KeyPath) -> tuple[str, int | None]:
+        """Source and line of the longest prefix of ``path`` that exists."""
+        for n in range(len(path), -1, -1):
+            if path[:n] in self.lines:
+                return self.lines[path[:n]]
+        return self.source, None
+
+
+def load_yaml(path: str | Path) -> Located:
+    path = Path(path)
+    source = path.name
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ConfigError([Problem(str(path), None, "", f"cannot read file: {exc.strerror}")])\
+            from None
+    return parse_yaml(text, source)
+
+
+def parse_yaml(text: str, source: str) -> Located:
+    try:
+        node = yaml.compose(text, Loader=yaml.SafeLoader)
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        line = mark.line + 1 if mark is not None else None
+        problem = getattr(exc, "problem", None) or str(exc)
+        raise ConfigError([Problem(source, line, "", f"invalid YAML: {problem}")]) from None
+    lines: dict[KeyPath, tuple[str, int | None]] = {(): (source, 1)}
+    problems: list[Problem] = []
+    if node is not None:
+        _walk(node, (), source, lines, problems)
+    if problems:
+        raise ConfigError(problems)
+    return Located({} if data is None else data, source, lines)
+
+
+def _walk(node: yaml.Node, path: KeyPath, source: str,
+          lines: dict[KeyPath, tuple[str, int | None]], problems: list[Problem]) -> None:
+    if isinstance(node, yaml.MappingNode):
+        seen: set[str] = set()
+        for key_node, value_node in node.value:
+            key = key_node.value
+            child = (*path, key)
+            line = key_node.start_mark.line + 1
+            if key in seen:
+                problems.append(Problem(source, line, _dotted(child), "duplicate key"))
+            seen.add(key)
+            lines[child] = (source, line)
+            _walk(value_node, child, source, lines, problems)
+    elif isinstance(node, yaml.SequenceNode):
+        for i, item in enumerate(node.value):
+            child = (*path, i)
+            lines[child] = (source, item.start_mark.line + 1)
+            _walk(item, child, source, lines, problems)
+
+
+def _dotted(path: Iterable[str | int]) -> str:
+    out = ""
+    for part in path:
+        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
+    return out
+
+
+# ------------------------------------------------------------------------------------------
+# Overrides and validation
+# ------------------------------------------------------------------------------------------
+
+
+def apply_overrides(located: Located, overrides: Iterable[str]) -> Located:
+    """Apply ``dotted.key=value`` overrides (values parsed as YAML: 3, true, [1, 0, 0], text)."""
+    data = copy.deepcopy(located.data)
+    lines = dict(located.lines)
+    problems = []
+    for item in overrides:
+        key, sep, raw = item.partition("=")
+        key = key.strip()
+        if not sep or not key:
+            problems.append(Problem("--set", None, item, "expected dotted.key=value"))
+            continue
+        try:
+            value = yaml.safe_load(raw) if raw.strip() else ""
+        except yaml.YAMLError:
+            value = raw
+        parts = key.split(".")
+        target = data
+        for depth, part in enumerate(parts[:-1]):
+            nxt = target.get(part) if isinstance(target, dict) else None
+            if nxt is None:
+                nxt = target[part] = {} if isinstance(target, dict) else None
+            if not isinstance(nxt, dict):
+                problems.append(Problem("--set", None, ".".join(parts[:depth + 1]),
+                                        "is not a section; cannot set a key inside it"))
+                break
+            target = nxt
+        else:
+            target[parts[-1]] = value
+            lines[tuple(parts)] = ("--set", None)
+    if problems:
+        raise ConfigError(problems)
+    return Located(data, located.source, lines)
+
+
+def validate(model: type[BaseModel], located: Located) -> Any:
+    """Validate parsed data against a model; problems name file, line and key path."""
+    try:
+        return model.model_validate(located.data)
+    except ValidationError as exc:
+        problems = []
+        for err in exc.errors(include_url=False):
+            loc = tuple(err["loc"])
+            source, line = located.locate(loc)
+            if err["type"] == "extra_forbidden":
+                message = "unknown key"
+            elif err["type"] == "missing":
+                message = "missing required key"
+            else:
+                message = f"{err['msg']} (got {_short(err.get('input'))})"
+            problems.append(Problem(source, line, _dotted(loc), message))
+        raise ConfigError(problems) from None
+
+
+def _short(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def load_config(path: str | Path | None = None, overrides: Iterable[str] = ()) -> AppConfig:
+    """Load ``config.yaml`` (the shipped one by default), apply overrides, validate."""
+    located = load_yaml(path or default_config_path())
+    return validate(AppConfig, apply_overrides(located, overrides))

@@ -1,0 +1,25 @@
+"""Where the project's data files are: in the clone, or inside the installed package."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+_HERE = Path(__file__).resolve().parent
+
+
+def _find(name: str) -> Path:
+    for candidate in (_HERE.parent / name, _HERE / "_resources" / name):
+        if candidate.exists():
+            return candidate
+    raise FileNotFoundError(
+        f"{name} not found next to {_HERE} nor inside the installed package; "
+        "reinstall the project (pip install .)"
+    )
+
+
+def default_config_path() -> Path:
+    return _find("config.yaml")
+
+
+def missions_dir() -> Path:
+    return _find("missions")

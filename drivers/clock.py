@@ -1,0 +1,168 @@
+"""Clocks: the single time base that stamps every sample.
+
+* :class:`MonotonicClock` — wall time (``time.monotonic``), for hardware and for the simulator
+  running in real time.
+* :class:`LockstepClock` — simulated time that only the simulator advances, as fast as the CPU
+  allows. Time stands still while any coroutine still has work to do: the simulator advances it
+  only once the event loop has gone idle and no blocking job started through
+  :meth:`Clock.run_blocking` is running. A lockstep run is therefore deterministic for a given
+  seed, and computation takes no simulated time.
+
+Code that must behave the same under both clocks sleeps, times out and runs blocking work
+through its clock (``clock.sleep``, ``clock.wait_for``, ``clock.run_blocking``), never through
+``asyncio.sleep``/``asyncio.wait_for``/``loop.run_in_executor`` directly.
+"""
+
+from __future__ import annotations
+
+import abc
+import asyncio
+import contextlib
+import functools
+import heapq
+import itertools
+import time
+from collections.abc import Awaitable, Callable
+from concurrent.futures import Executor
+from typing import Any, TypeVar
+
+T = TypeVar("T")
+
+
+class Clock(abc.ABC):
+    #: True when time only moves as the simulator steps.
+    lockstep: bool = False
+
+    @abc.abstractmethod
+    def now(self) -> float:
+        """Current time in seconds."""
+
+    @abc.abstractmethod
+    async def sleep_until(self, time_s: float) -> None: ...
+
+    async def sleep(self, duration_s: float) -> None:
+        await self.sleep_until(self.now() + duration_s)
+
+    async def run_blocking(self, fn: Callable[..., T], /, *args: Any,
+                           executor: Executor | None = None) -> T:
+        """Run blocking or CPU-heavy ``fn(*args)`` in an executor (the loop's default if None)."""
+        loop = asyncio.get_running_loop()
+        return await loop.run_in_executor(executor, functools.partial(fn, *args))
+
+    async def wait_for(self, aw: Awaitable[T], timeout_s: float) -> T:
+        """Like ``asyncio.wait_for``, with the timeout measured on this clock."""
+        task = asyncio.ensure_future(aw)
+        timer = asyncio.ensure_future(self.sleep(timeout_s))
+        try:
+            await asyncio.wait({task, timer}, return_when=asyncio.FIRST_COMPLETED)
+        finally:
+            timer.cancel()
+            if not task.done():
+                task.cancel()
+                with contextlib.suppress(asyncio.CancelledError):
+                    await task
+        if task.cancelled():
+            raise TimeoutError(f"timed out after {timeout_s:g} s")
+        return task.result()
+
+
+class MonotonicClock(Clock):
+    """Wall-clock time from ``time.monotonic()``, shifted so that it starts at ``start_s``."""
+
+    def __init__(self, start_s: float = 0.0) -> None:
+        self._offset = time.monotonic() - start_s
+
+    def restart(self, start_s: float = 0.0) -> None:
+        """Make ``now()`` read ``start_s`` at this instant."""
+        self._offset = time.monotonic() - start_s
+
+    def now(self) -> float:
+        return time.monotonic() - self._offset
+
+    async def sleep_until(self, time_s: float) -> None:
+        await asyncio.sleep(max(0.0, time_s - self.now()))
+
+    async def wait_for(self, aw: Awaitable[T], timeout_s: float) -> T:
+        return await asyncio.wait_for(aw, timeout_s)
+
+
+class LockstepClock(Clock):
+    """Simulated time, advanced by the simulator driver (see module docstring).
+
+    The driver's stepping task calls :meth:`settle` (wait until everyone else is blocked),
+    asks :meth:`next_deadline`, steps the physics and then calls :meth:`advance`.
+    """
+
+    lockstep = True
+
+    def __init__(self, start_s: float = 0.0) -> None:
+        self._now = start_s
+        self._sleepers: list[tuple[float, int, asyncio.Future[None]]] = []
+        self._seq = itertools.count()
+        self._busy = 0
+        self._idle: asyncio.Event | None = None
+
+    def now(self) -> float:
+        return self._now
+
+    async def sleep_until(self, time_s: float) -> None:
+        if time_s <= self._now:
+            await asyncio.sleep(0)
+            return
+        future: asyncio.Future[None] = asyncio.get_running_loop().create_future()
+        heapq.heappush(self._sleepers, (time_s, next(self._seq), future))
+        await future
+
+    async def run_blocking(self, fn: Callable[..., T], /, *args: Any,
+                           executor: Executor | None = None) -> T:
+        self._busy += 1
+        try:
+            return await super().run_blocking(fn, *args, executor=executor)
+        finally:
+            self._busy -= 1
+            if self._busy == 0 and self._idle is not None:
+                self._idle.set()
+
+    # -- the simulator's side --------------------------------------------------------------
+
+    def next_deadline(self) -> float | None:
+        """Earliest time a sleeping coroutine wants to wake, or None."""
+        while self._sleepers and self._sleepers[0][2].done():  # cancelled sleeps
+            heapq.heappop(self._sleepers)
+        return self._sleepers[0][0] if self._sleepers else None
+
+    def advance(self, time_s: float) -> None:
+        """Move time forward and wake every sleeper that is due."""
+        if time_s < self._now:
+            raise ValueError(f"lockstep time cannot go back ({time_s} < {self._now})")
+        self._now = time_s
+        while self._sleepers and self._sleepers[0][0] <= time_s:
+            _, _, future = heapq.heappop(self._sleepers)
+            if not future.done():
+                future.set_result(None)
+
+    async def settle(self) -> None:
+        """Return once every other coroutine is blocked and no blocking job is running.
+
+        "Blocked" means the event loop has nothing ready to run but this coroutine. CPython's
+        loop exposes its ready queue as ``_ready``; on a loop without it we yield a fixed number
+        of times instead, which is good enough for short hand-over chains.
+        """
+        loop = asyncio.get_running_loop()
+        ready = getattr(loop, "_ready", None)
+        if self._idle is None:
+            self._idle = asyncio.Event()
+        while True:
+            if self._busy:
+                self._idle.clear()
+                await self._idle.wait()
+                continue
+            await asyncio.sleep(0)
+            if self._busy:
+                continue
+            if ready is None:
+                for _ in range(16):
+                    await asyncio.sleep(0)
+                return
+            if not ready:
+                return

@@ -1,0 +1,212 @@
+"""Configuration of the simulated vehicle: physics, sensors, cameras and the PX4-like flight stack.
+
+Models only: the values live in the project's ``config.yaml`` (section ``sim``), which is the
+single source of defaults. Unknown keys, wrong types and out-of-range values are rejected.
+Names carry their units; the PX4 parameter each one mirrors is noted where there is one.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+Positive = Annotated[float, Field(gt=0)]
+NonNegative = Annotated[float, Field(ge=0)]
+Fraction = Annotated[float, Field(ge=0, le=1)]
+Vec3 = tuple[float, float, float]
+Gains3 = tuple[NonNegative, NonNegative, NonNegative]
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class CameraConfig(_Model):
+    """A body-mounted camera. Orientation is the boresight's direction in the body frame:
+    ``pitch_deg`` 0 looks forward, -90 straight down; image "up" stays towards body -z
+    (or body +x for a straight-down camera)."""
+
+    enabled: bool
+    width_px: Annotated[int, Field(ge=16, le=4096)]
+    height_px: Annotated[int, Field(ge=16, le=4096)]
+    hfov_deg: Annotated[float, Field(gt=10, lt=170)]
+    rate_hz: Annotated[float, Field(gt=0, le=240)]
+    position_frd_m: Vec3
+    pitch_deg: Annotated[float, Field(ge=-90, le=90)]
+    yaw_deg: Annotated[float, Field(ge=-180, le=180)]
+    latency_s: Annotated[float, Field(ge=0, le=1)]
+
+
+class VehicleConfig(_Model):
+    """What Python adds to the MJCF model (mass, inertia, rotor layout and thrust limits are
+    read from the model itself)."""
+
+    model: str
+    initial_north_east_m: tuple[float, float]
+    initial_yaw_deg: Annotated[float, Field(ge=-180, le=180)]
+    motor_time_constant_s: Annotated[float, Field(gt=0, le=1)]
+    rotor_drag_n_per_m_s: NonNegative
+    body_drag_coefficient: NonNegative
+    body_area_frd_m2: tuple[NonNegative, NonNegative, NonNegative]
+    prop_diameter_m: Positive
+    propulsion_efficiency: Annotated[float, Field(gt=0, le=1)]
+
+
+class BatteryConfig(_Model):
+    cells: Annotated[int, Field(ge=1, le=14)]
+    capacity_mah: Positive
+    internal_resistance_ohm: NonNegative
+    initial_fraction: Fraction
+    avionics_power_w: NonNegative
+    low_fraction: Fraction
+    critical_fraction: Fraction
+
+
+class WindConfig(_Model):
+    steady_ned_m_s: Vec3
+    #: Standard deviation of the gusts (per horizontal axis; vertical gets 30 % of it).
+    gust_mps: NonNegative
+    gust_time_constant_s: Positive
+
+
+class EstimatorConfig(_Model):
+    """Error model of PX4's EKF output: slowly wandering errors (Gauss–Markov) that both the
+    flight controller and the telemetry see, as on a real vehicle."""
+
+    position_error_m: NonNegative
+    velocity_error_m_s: NonNegative
+    attitude_error_deg: NonNegative
+    yaw_error_deg: NonNegative
+    error_time_constant_s: Positive
+    gyro_noise_rad_s: NonNegative
+    #: Time after boot before the local position is valid (arming is refused until then).
+    init_time_s: NonNegative
+
+
+class TelemetryConfig(_Model):
+    rate_hz: Annotated[float, Field(ge=1, le=250)]
+    latency_s: Annotated[float, Field(ge=0, le=1)]
+    latency_jitter_s: Annotated[float, Field(ge=0, le=0.5)]
+
+
+class RangefinderConfig(_Model):
+    min_m: NonNegative
+    max_m: Positive
+    noise_m: NonNegative
+
+
+class PositionControlConfig(_Model):
+    """PX4 ``mc_pos_control`` (MPC_*). Velocity gains are in m/s² per m/s, as PX4's *_ACC."""
+
+    xy_p: Positive  # MPC_XY_P
+    z_p: Positive  # MPC_Z_P
+    xy_vel_p: Positive  # MPC_XY_VEL_P_ACC
+    xy_vel_i: NonNegative  # MPC_XY_VEL_I_ACC
+    xy_vel_d: NonNegative  # MPC_XY_VEL_D_ACC
+    z_vel_p: Positive  # MPC_Z_VEL_P_ACC
+    z_vel_i: NonNegative  # MPC_Z_VEL_I_ACC
+    z_vel_d: NonNegative  # MPC_Z_VEL_D_ACC
+    xy_vel_max_m_s: Positive  # MPC_XY_VEL_MAX
+    xy_cruise_m_s: Positive  # MPC_XY_CRUISE (HOLD / TAKEOFF / LAND)
+    z_vel_max_up_m_s: Positive  # MPC_Z_VEL_MAX_UP
+    z_vel_max_down_m_s: Positive  # MPC_Z_VEL_MAX_DN
+    tilt_max_deg: Annotated[float, Field(gt=0, lt=90)]  # MPC_TILTMAX_AIR
+    thrust_min: Fraction  # MPC_THR_MIN
+    thrust_max: Fraction  # MPC_THR_MAX
+    #: MPC_THR_HOVER; null: the model's true value (a converged hover-thrust estimator).
+    hover_thrust: Fraction | None = None
+    brake_accel_m_s2: Positive  # MPC_ACC_HOR, used when HOLD brakes to a stop
+
+
+class AttitudeControlConfig(_Model):
+    """PX4 ``mc_att_control`` (MC_ROLL_P, MC_PITCH_P, MC_YAW_P, MC_YAW_WEIGHT, MC_*RATE_MAX)."""
+
+    p: Gains3
+    yaw_weight: Fraction
+    rate_max_deg_s: tuple[Positive, Positive, Positive]
+
+
+class RateControlConfig(_Model):
+    """PX4 ``mc_rate_control``. Gains act on angular acceleration (rad/s² per rad/s), so they do
+    not depend on the airframe's inertia; PX4's are normalised torque."""
+
+    p: Gains3
+    i: Gains3
+    d: Gains3
+    integrator_limit_rad_s2: Positive
+    d_cutoff_hz: Positive
+
+
+class CommanderConfig(_Model):
+    """Modes and failsafes (PX4 commander / navigator)."""
+
+    takeoff_altitude_m: Positive  # MIS_TAKEOFF_ALT
+    takeoff_speed_m_s: Positive  # MPC_TKO_SPEED
+    takeoff_ramp_s: NonNegative  # MPC_TKO_RAMP_T
+    takeoff_accel_m_s2: Positive  # MPC_ACC_UP_MAX: the takeoff climb profile's acceleration
+    land_speed_m_s: Positive  # MPC_LAND_SPEED
+    descent_speed_m_s: Positive  # MPC_Z_V_AUTO_DN, above land_slow_altitude_m
+    land_slow_altitude_m: Positive  # MPC_LAND_ALT2
+    offboard_min_rate_hz: Positive  # setpoints needed before OFFBOARD is accepted
+    offboard_loss_timeout_s: Positive  # COM_OF_LOSS_T
+    offboard_loss_land_s: NonNegative  # HOLD this long after the loss, then LAND
+    disarm_after_land_s: NonNegative  # COM_DISARM_LAND
+    disarm_preflight_s: Positive  # COM_DISARM_PRFLT
+
+
+class LandDetectorConfig(_Model):
+    """PX4 ``land_detector`` (LNDMC_*)."""
+
+    z_vel_max_m_s: Positive
+    xy_vel_max_m_s: Positive
+    rot_max_deg_s: Positive
+    low_thrust_ratio: Fraction
+    trigger_time_s: NonNegative
+
+
+class FlightStackConfig(_Model):
+    rate_loop_hz: Annotated[int, Field(ge=50, le=2000)]
+    position_loop_hz: Annotated[int, Field(ge=10, le=500)]
+    #: Rotor thrust while armed on the ground, as a fraction of full thrust (PX4's idle PWM).
+    motor_idle_fraction: Annotated[float, Field(ge=0, le=0.3)]
+    position: PositionControlConfig
+    attitude: AttitudeControlConfig
+    rates: RateControlConfig
+    commander: CommanderConfig
+    land_detector: LandDetectorConfig
+
+    @model_validator(mode="after")
+    def _integer_ratio(self) -> FlightStackConfig:
+        if self.rate_loop_hz % self.position_loop_hz:
+            raise ValueError(
+                f"rate_loop_hz ({self.rate_loop_hz}) must be an integer multiple of "
+                f"position_loop_hz ({self.position_loop_hz})"
+            )
+        return self
+
+
+class SimConfig(_Model):
+    seed: Annotated[int, Field(ge=0)]
+    world: str
+    physics_rate_hz: Annotated[int, Field(ge=100, le=10000)]
+    ground_truth_rate_hz: Annotated[float, Field(gt=0, le=1000)]
+    #: Longest physics batch in real-time mode (bounds how late a setpoint takes effect).
+    realtime_batch_s: Annotated[float, Field(gt=0, le=0.1)]
+    vehicle: VehicleConfig
+    battery: BatteryConfig
+    wind: WindConfig
+    estimator: EstimatorConfig
+    telemetry: TelemetryConfig
+    rangefinder: RangefinderConfig
+    flight_stack: FlightStackConfig
+    cameras: dict[str, CameraConfig]
+
+    @model_validator(mode="after")
+    def _integer_ratio(self) -> SimConfig:
+        if self.physics_rate_hz % self.flight_stack.rate_loop_hz:
+            raise ValueError(
+                f"physics_rate_hz ({self.physics_rate_hz}) must be an integer multiple of "
+                f"flight_stack.rate_loop_hz ({self.flight_stack.rate_loop_hz})"
+            )
+        return self

@@ -1,0 +1,308 @@
+"""The simulator as a :class:`~drivers.base.Vehicle`.
+
+The synchronous :class:`~drivers.sim.simulator.Simulator` is run from the event loop in batches,
+never hopping the loop per physics step.
+
+* Lockstep (default): simulated time on a :class:`~drivers.clock.LockstepClock`. The stepping
+  task waits until every other coroutine is blocked, then steps to the next moment anything
+  happens (a telemetry sample or frame becomes due, or a coroutine's sleep ends). It steps on
+  the loop thread itself: by construction nothing else may run while simulated time moves, so a
+  worker thread would only add two thread hand-offs per batch (batches last at most one frame
+  interval, so signals are still handled promptly). Runs as fast as the CPU allows and is
+  deterministic for a given seed.
+* Real time: a :class:`~drivers.clock.MonotonicClock`; the simulator lives on one dedicated
+  thread (MuJoCo's rendering context is bound to the thread that made it), the physics runs at
+  most ``realtime_batch_s`` ahead of the wall clock, and outputs are published when they are due.
+
+Setpoints go into a thread-safe inbox and take effect at the start of the next batch; commands
+first flush that inbox, so "stream setpoints, then start OFFBOARD" works as on PX4.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import time
+from collections import deque
+from collections.abc import AsyncIterator, Mapping, Sequence
+from concurrent.futures import ThreadPoolExecutor
+
+from drivers.base import (
+    CameraInfo,
+    CommandDenied,
+    ConnectionLost,
+    Frame,
+    Setpoint,
+    Vehicle,
+    VehicleError,
+    VehicleState,
+)
+from drivers.clock import Clock, LockstepClock, MonotonicClock
+from drivers.sim.config import SimConfig
+from drivers.sim.flight.flight_stack import CommandRejected
+from drivers.sim.model import camera_intrinsics, camera_rotation_body
+from drivers.sim.scenario import ScenarioObject
+from drivers.sim.simulator import GroundTruth, SimOutput, Simulator
+from drivers.slots import Broadcast
+
+
+class SimDriver(Vehicle):
+    def __init__(self, config: SimConfig, *, scenario: Sequence[ScenarioObject] = (),
+                 seed: int | None = None, lockstep: bool = True) -> None:
+        self.config = config
+        self._scenario = list(scenario)
+        self._seed = config.seed if seed is None else seed
+        self.lockstep = lockstep
+        self._clock: LockstepClock | MonotonicClock = LockstepClock() if lockstep \
+            else MonotonicClock()
+        self._cameras = {
+            name: CameraInfo(name=name, intrinsics=camera_intrinsics(cam),
+                             rotation_body_cam=camera_rotation_body(cam.pitch_deg, cam.yaw_deg),
+                             position_body_m=cam.position_frd_m, rate_hz=cam.rate_hz)
+            for name, cam in config.cameras.items() if cam.enabled
+        }
+        self._executor: ThreadPoolExecutor | None = None
+        self._sim: Simulator | None = None
+        self._task: asyncio.Task[None] | None = None
+        self._failure: VehicleError | None = None
+        self._setpoints: deque[Setpoint] = deque()
+        self._camera_toggles: deque[tuple[str, bool]] = deque()
+        self._telemetry: Broadcast[VehicleState] = Broadcast()
+        self._truth: Broadcast[GroundTruth] = Broadcast()
+        self._events: Broadcast[tuple[float, str]] = Broadcast()
+        self._frames: dict[str, Broadcast[Frame]] = {
+            name: Broadcast(on_first=lambda n=name: self._camera_toggles.append((n, True)),
+                            on_last=lambda n=name: self._camera_toggles.append((n, False)))
+            for name in self._cameras
+        }
+        #: The newest telemetry sample (None before the first).
+        self.latest_state: VehicleState | None = None
+        self._wall_start = 0.0
+        self._wall_busy_s = 0.0
+
+    # ------------------------------------------------------------------------------------
+    # Vehicle interface
+    # ------------------------------------------------------------------------------------
+
+    @property
+    def clock(self) -> Clock:
+        return self._clock
+
+    @property
+    def cameras(self) -> Mapping[str, CameraInfo]:
+        return self._cameras
+
+    async def connect(self, timeout_s: float = 10.0) -> None:
+        if self._task is not None:
+            return
+        loop = asyncio.get_running_loop()
+        if self.lockstep:
+            self._sim = self._build()
+        else:
+            self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="simulator")
+            self._sim = await loop.run_in_executor(self._executor, self._build)
+            self._clock.restart(self._sim.time_s)
+        self._wall_start = time.perf_counter()
+        run = self._run_lockstep if self.lockstep else self._run_realtime
+        self._task = loop.create_task(run(), name="sim-driver")
+        # as a real link: connected once the vehicle has been heard from
+        async with contextlib.aclosing(self.telemetry()) as samples:
+            try:
+                await self._clock.wait_for(anext(samples), timeout_s)
+            except (TimeoutError, StopAsyncIteration):
+                await self.close()
+                raise ConnectionLost(
+                    f"no telemetry from the simulator within {timeout_s:g} s") from None
+
+    async def arm(self) -> None:
+        await self._command("arm")
+
+    async def disarm(self, *, force: bool = False) -> None:
+        await self._command("disarm", force)
+
+    async def takeoff(self, altitude_m: float | None = None) -> None:
+        if altitude_m is not None:
+            await self._call("takeoff", self._require_sim().set_takeoff_altitude, altitude_m)
+        await self._command("takeoff")
+
+    async def land(self) -> None:
+        await self._command("land")
+
+    async def hold(self) -> None:
+        await self._command("hold")
+
+    async def start_offboard(self) -> None:
+        await self._command("start_offboard")
+
+    async def stop_offboard(self) -> None:
+        await self._command("stop_offboard")
+
+    async def send_setpoint(self, setpoint: Setpoint) -> None:
+        self._check_alive()
+        self._setpoints.append(setpoint)
+
+    def telemetry(self, buffer: int = 1) -> AsyncIterator[VehicleState]:
+        return self._telemetry.subscribe(buffer)
+
+    def frames(self, camera: str) -> AsyncIterator[Frame]:
+        if camera not in self._frames:
+            raise ValueError(f"no camera {camera!r}; this vehicle has {sorted(self._frames)}")
+        return self._frames[camera].subscribe()
+
+    async def close(self) -> None:
+        if self._task is not None:
+            self._task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._task
+            self._task = None
+        for broadcast in (self._telemetry, self._truth, self._events, *self._frames.values()):
+            broadcast.close(self._failure)
+        if self._executor is not None:
+            if self._sim is not None:
+                await asyncio.get_running_loop().run_in_executor(self._executor, self._sim.close)
+            self._executor.shutdown(wait=True)
+            self._executor = None
+        elif self._sim is not None:
+            self._sim.close()
+
+    # ------------------------------------------------------------------------------------
+    # Simulator-only extras (ground truth is for scoring and tests, never for the autopilot)
+    # ------------------------------------------------------------------------------------
+
+    def ground_truth(self, buffer: int = 256) -> AsyncIterator[GroundTruth]:
+        """Ground-truth samples at ``sim.ground_truth_rate_hz`` (buffered: for loggers)."""
+        return self._truth.subscribe(buffer)
+
+    def events(self, buffer: int = 64) -> AsyncIterator[tuple[float, str]]:
+        """The flight stack's status messages (mode changes, failsafes), like STATUSTEXT."""
+        return self._events.subscribe(buffer)
+
+    @property
+    def simulator(self) -> Simulator:
+        """The simulator core, for tests (touch it only while time stands still)."""
+        return self._require_sim()
+
+    @property
+    def sim_time_s(self) -> float:
+        return self._sim.time_s if self._sim is not None else 0.0
+
+    @property
+    def wall_time_s(self) -> float:
+        return time.perf_counter() - self._wall_start if self._wall_start else 0.0
+
+    @property
+    def real_time_factor(self) -> float:
+        wall = self.wall_time_s
+        return self.sim_time_s / wall if wall > 0 else 0.0
+
+    async def inject_failure(self, name: str, failed: bool = True) -> None:
+        """Make a sensor unhealthy (``gyro``, ``accel``, ``mag``, ``local_position``)."""
+        sim = self._require_sim()
+        await self._call("inject_failure", sim.inject_failure, name, failed)
+
+    # ------------------------------------------------------------------------------------
+    # Internals
+    # ------------------------------------------------------------------------------------
+
+    def _build(self) -> Simulator:
+        return Simulator(self.config, self._scenario, self._seed)
+
+    def _require_sim(self) -> Simulator:
+        if self._sim is None:
+            raise ConnectionLost("not connected: call connect() first")
+        return self._sim
+
+    def _check_alive(self) -> None:
+        if self._failure is not None:
+            raise self._failure
+        self._require_sim()
+
+    async def _command(self, name: str, *args) -> None:
+        sim = self._require_sim()
+        await self._call(name, sim.command, name, *args)
+
+    async def _call(self, name: str, fn, *args) -> None:
+        self._check_alive()
+
+        def on_sim_thread():
+            self._drain_inbox()
+            fn(*args)
+
+        try:
+            if self._executor is None:  # lockstep: time stands still while we are running
+                on_sim_thread()
+            else:
+                await self._clock.run_blocking(on_sim_thread, executor=self._executor)
+        except CommandRejected as exc:
+            raise CommandDenied(name, exc.reason) from None
+
+    def _drain_inbox(self) -> None:
+        """On the simulator thread: apply what the loop thread queued since the last batch."""
+        sim = self._sim
+        while self._camera_toggles:
+            sim.set_camera_active(*self._camera_toggles.popleft())
+        while self._setpoints:
+            sim.push_setpoint(self._setpoints.popleft())
+
+    def _batch(self, until_s: float) -> list[SimOutput]:
+        started = time.perf_counter()
+        self._drain_inbox()
+        outputs = self._sim.advance_to(until_s)
+        self._wall_busy_s += time.perf_counter() - started
+        return outputs
+
+    def _publish(self, outputs: list[SimOutput]) -> None:
+        for out in outputs:
+            if out.kind == "telemetry":
+                self.latest_state = out.payload
+                self._telemetry.publish(out.payload)
+            elif out.kind == "frame":
+                self._frames[out.payload.camera.name].publish(out.payload)
+            elif out.kind == "truth":
+                self._truth.publish(out.payload)
+            else:
+                self._events.publish((out.delivery_s, out.payload))
+
+    async def _run_lockstep(self) -> None:
+        clock = self._clock
+        assert isinstance(clock, LockstepClock)
+        sim = self._sim
+        try:
+            while True:
+                await clock.settle()
+                target = sim.next_event_s()
+                deadline = clock.next_deadline()
+                if deadline is not None:
+                    target = min(target, max(deadline, sim.time_s + sim.dt))
+                outputs = self._batch(target)
+                clock.advance(sim.time_s)
+                self._publish(outputs)
+        except asyncio.CancelledError:
+            raise
+        except Exception as exc:
+            self._fail(exc)
+
+    async def _run_realtime(self) -> None:
+        clock = self._clock
+        loop = asyncio.get_running_loop()
+        sim = self._sim
+        batch_s = self.config.realtime_batch_s
+        try:
+            while True:
+                target = min(sim.next_event_s(), sim.time_s + batch_s)
+                outputs = await loop.run_in_executor(self._executor, self._batch, target)
+                await clock.sleep_until(sim.time_s)
+                self._publish(outputs)
+        except asyncio.CancelledError:
+            raise
+        except Exception as exc:
+            self._fail(exc)
+
+    def _fail(self, exc: Exception) -> None:
+        error = exc if isinstance(exc, VehicleError) else \
+            ConnectionLost(f"simulator failed: {type(exc).__name__}: {exc}")
+        if error is not exc:
+            error.__cause__ = exc
+        self._failure = error
+        for broadcast in (self._telemetry, self._truth, self._events, *self._frames.values()):
+            broadcast.close(error)

@@ -1,0 +1,140 @@
+"""What the simulated vehicle measures: estimator output errors, rangefinder, battery.
+
+All noise comes from generators seeded by the simulator, one per source, so that switching one
+source on or off does not change the others' sequences.
+"""
+
+from __future__ import annotations
+
+import math
+
+import mujoco
+import numpy as np
+
+from drivers.base import Battery
+from drivers.geometry import qmul, quat_from_axis_angle
+from drivers.sim.config import BatteryConfig, EstimatorConfig, RangefinderConfig
+from drivers.sim.flight.flight_stack import EstimatedState
+
+
+class GaussMarkov:
+    """First-order Gauss–Markov process, per component: stationary std ``sigma``, correlation
+    time ``tau_s``. Starts from its stationary distribution."""
+
+    def __init__(self, rng: np.random.Generator, sigma: np.ndarray,
+                 tau_s: np.ndarray | float) -> None:
+        self._rng = rng
+        self._sigma = np.asarray(sigma, dtype=float)
+        self._tau = np.broadcast_to(np.asarray(tau_s, dtype=float), self._sigma.shape)
+        self._coeffs: tuple[float, np.ndarray, np.ndarray] | None = None
+        self.value = self._sigma * rng.standard_normal(self._sigma.shape)
+
+    def step(self, dt_s: float) -> np.ndarray:
+        if self._coeffs is None or self._coeffs[0] != dt_s:
+            a = np.exp(-dt_s / self._tau)
+            self._coeffs = (dt_s, a, self._sigma * np.sqrt(1.0 - a * a))
+        _, a, b = self._coeffs
+        self.value = a * self.value + b * self._rng.standard_normal(self.value.shape)
+        return self.value
+
+
+class EstimatorModel:
+    """PX4's EKF output as truth plus slowly wandering errors (and white gyro noise).
+
+    The flight controller flies on this estimate and the telemetry reports it, so the vehicle
+    holds position to within the estimator's error, as a real one does.
+    """
+
+    def __init__(self, cfg: EstimatorConfig, rng: np.random.Generator) -> None:
+        self.cfg = cfg
+        self._rng = rng
+        tau = cfg.error_time_constant_s
+        tilt = math.radians(cfg.attitude_error_deg)
+        sigma = [cfg.position_error_m] * 3 + [cfg.velocity_error_m_s] * 3 + \
+            [tilt, tilt, math.radians(cfg.yaw_error_deg)]
+        taus = [tau] * 3 + [tau / 10.0] * 3 + [tau] * 3
+        self._errors = GaussMarkov(rng, np.array(sigma), np.array(taus))
+        self._q_err: tuple[float, ...] = (1.0, 0.0, 0.0, 0.0)
+        self._noise: list[list[float]] = []
+        self.step(0.0)
+
+    def step(self, dt_s: float) -> None:
+        err = self._errors.step(dt_s)
+        att = err[6:9]
+        angle = float(np.sqrt(att @ att))
+        self._q_err = tuple(quat_from_axis_angle(att, angle).tolist())
+
+    def attitude(self, q: tuple[float, ...], rates: list[float]) -> tuple[tuple, list[float]]:
+        """Estimated attitude and gyro from the true ones (plain floats, for the rate loop)."""
+        q_est = qmul(q, self._q_err)
+        sigma = self.cfg.gyro_noise_rad_s
+        if sigma:
+            n = self._gyro_noise()
+            rates = [rates[0] + sigma * n[0], rates[1] + sigma * n[1], rates[2] + sigma * n[2]]
+        return q_est, rates
+
+    def _gyro_noise(self) -> list[float]:
+        if not self._noise:
+            self._noise = self._rng.standard_normal((256, 3)).tolist()
+            self._noise.reverse()
+        return self._noise.pop()
+
+    def estimate(self, position: np.ndarray, velocity: np.ndarray, q: np.ndarray,
+                 rates: np.ndarray) -> EstimatedState:
+        err = self._errors.value
+        q_est, gyro = self.attitude(q.tolist(), rates.tolist())
+        return EstimatedState(position + err[0:3], velocity + err[3:6], np.array(q_est),
+                              np.array(gyro))
+
+
+class Rangefinder:
+    """Downward distance sensor at the body origin, measuring along the body z axis."""
+
+    def __init__(self, cfg: RangefinderConfig, rng: np.random.Generator, body_id: int) -> None:
+        self.cfg = cfg
+        self._rng = rng
+        self._body_id = body_id
+        self._geom = np.zeros(1, dtype=np.int32)
+        self._groups = np.array([1, 1, 1, 0, 0, 0], dtype=np.uint8)  # visible geometry only
+
+    def true_range(self, model: mujoco.MjModel, data: mujoco.MjData) -> float:
+        origin = data.xpos[self._body_id]
+        down = -data.xmat[self._body_id].reshape(3, 3)[:, 2]  # body -z in MuJoCo (FLU) = FRD +z
+        dist = mujoco.mj_ray(model, data, origin, down, self._groups, 1, self._body_id, self._geom)
+        return dist if dist >= 0.0 else math.inf
+
+    def measure(self, model: mujoco.MjModel, data: mujoco.MjData) -> float:
+        dist = self.true_range(model, data)
+        if not self.cfg.min_m <= dist <= self.cfg.max_m:
+            return math.nan
+        return dist + self.cfg.noise_m * float(self._rng.standard_normal())
+
+
+class BatteryModel:
+    """Lithium pack drained by the rotors' power (momentum theory ÷ propulsive efficiency)."""
+
+    def __init__(self, cfg: BatteryConfig, prop_diameter_m: float, efficiency: float,
+                 air_density: float = 1.225) -> None:
+        self.cfg = cfg
+        disc_area = math.pi * (prop_diameter_m / 2.0) ** 2
+        self._k_power = 1.0 / (math.sqrt(2.0 * air_density * disc_area) * efficiency)
+        self._capacity_as = cfg.capacity_mah * 3.6
+        self.remaining = cfg.initial_fraction
+        self.current_a = 0.0
+        self.voltage_v = self._open_circuit_v()
+
+    def _open_circuit_v(self) -> float:
+        # roughly linear LiPo discharge curve between 3.5 V and 4.2 V per cell
+        return self.cfg.cells * (3.5 + 0.7 * self.remaining)
+
+    def step(self, dt_s: float, rotor_thrust_n: np.ndarray) -> None:
+        power_w = sum(t ** 1.5 for t in rotor_thrust_n.tolist() if t > 0.0) * self._k_power \
+            + self.cfg.avionics_power_w
+        ocv = self._open_circuit_v()
+        self.current_a = power_w / max(ocv, 1e-3)
+        self.voltage_v = ocv - self.current_a * self.cfg.internal_resistance_ohm
+        self.remaining = max(0.0, self.remaining - self.current_a * dt_s / self._capacity_as)
+
+    def reading(self) -> Battery:
+        return Battery(voltage_v=self.voltage_v, current_a=self.current_a,
+                       remaining_fraction=self.remaining)

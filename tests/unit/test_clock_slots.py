@@ -1,0 +1,132 @@
+import asyncio
+
+import pytest
+
+from drivers.clock import LockstepClock
+from drivers.slots import Broadcast, LatestSlot, SlotClosed
+
+
+def test_latest_slot_keeps_newest_and_counts_drops():
+    async def main():
+        slot = LatestSlot()
+        for i in range(5):
+            slot.put(i)
+        assert await slot.get() == 4
+        assert slot.dropped == 4
+        slot.close()
+        with pytest.raises(SlotClosed):
+            await slot.get()
+
+    asyncio.run(main())
+
+
+def test_buffered_slot_keeps_order():
+    async def main():
+        slot = LatestSlot(capacity=3)
+        for i in range(5):
+            slot.put(i)
+        assert [await slot.get() for _ in range(3)] == [2, 3, 4]
+        assert slot.dropped == 2
+
+    asyncio.run(main())
+
+
+def test_broadcast_fans_out_and_tracks_subscribers():
+    events = []
+
+    async def main():
+        hub: Broadcast[int] = Broadcast(on_first=lambda: events.append("first"),
+                                        on_last=lambda: events.append("last"))
+        received = []
+
+        async def consume():
+            async for value in hub.subscribe(buffer=10):
+                received.append(value)
+
+        task = asyncio.ensure_future(consume())
+        await asyncio.sleep(0)
+        assert hub.subscriber_count == 1
+        hub.publish(1)
+        hub.publish(2)
+        hub.close()
+        await task
+        assert received == [1, 2]
+
+    asyncio.run(main())
+    assert events == ["first", "last"]
+
+
+def test_broadcast_error_reaches_subscribers():
+    async def main():
+        hub: Broadcast[int] = Broadcast()
+        stream = hub.subscribe()
+        waiting = asyncio.ensure_future(stream.__anext__())
+        await asyncio.sleep(0)
+        hub.close(RuntimeError("link down"))
+        with pytest.raises(RuntimeError, match="link down"):
+            await waiting
+
+    asyncio.run(main())
+
+
+def test_lockstep_clock_wakes_sleepers_in_order_and_waits_for_idle():
+    async def main():
+        clock = LockstepClock()
+        woke = []
+
+        async def sleeper(t, name):
+            await clock.sleep_until(t)
+            woke.append((clock.now(), name))
+
+        tasks = [asyncio.ensure_future(sleeper(0.3, "b")),
+                 asyncio.ensure_future(sleeper(0.1, "a"))]
+        await clock.settle()
+        assert clock.next_deadline() == pytest.approx(0.1)
+        clock.advance(0.2)
+        await clock.settle()
+        assert woke == [(0.2, "a")]
+        clock.advance(0.3)
+        await asyncio.gather(*tasks)
+        assert woke == [(0.2, "a"), (0.3, "b")]
+        with pytest.raises(ValueError, match="back"):
+            clock.advance(0.1)
+
+    asyncio.run(main())
+
+
+def test_lockstep_settle_waits_for_blocking_jobs():
+    async def main():
+        clock = LockstepClock()
+        done = []
+
+        async def job():
+            await clock.run_blocking(lambda: sum(range(100000)))
+            done.append(True)
+
+        task = asyncio.ensure_future(job())
+        await asyncio.sleep(0)
+        await clock.settle()
+        assert done == [True]  # settle returned only after the executor job finished
+        await task
+
+    asyncio.run(main())
+
+
+def test_lockstep_wait_for_times_out_on_simulated_time():
+    async def main():
+        clock = LockstepClock()
+        never = asyncio.get_running_loop().create_future()
+
+        async def driver():
+            while clock.now() < 5.0:
+                await clock.settle()
+                deadline = clock.next_deadline()
+                clock.advance(deadline if deadline is not None else clock.now() + 0.1)
+
+        drive = asyncio.ensure_future(driver())
+        with pytest.raises(TimeoutError):
+            await clock.wait_for(never, 2.0)
+        assert clock.now() == pytest.approx(2.0)
+        drive.cancel()
+
+    asyncio.run(main())

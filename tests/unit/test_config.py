@@ -1,0 +1,102 @@
+"""Configuration loading and validation: every error names the file, the line and the key."""
+
+import re
+
+import pytest
+
+from autopilot.cli import main
+from autopilot.config import ConfigError, load_config
+from autopilot.resources import default_config_path
+
+SHIPPED = default_config_path().read_text()
+
+
+def _write(tmp_path, text, name="config.yaml"):
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+def _line_of(text, needle):
+    return next(i for i, line in enumerate(text.splitlines(), 1) if needle in line)
+
+
+def test_shipped_config_is_valid():
+    cfg = load_config()
+    assert cfg.driver == "sim"
+    assert cfg.sim.cameras["front"].width_px == 640
+
+
+def test_unknown_key_names_file_line_and_path(tmp_path):
+    text = SHIPPED.replace("    prop_diameter_m: 0.254\n",
+                           "    prop_diameter_m: 0.254\n    prop_colour: red\n")
+    with pytest.raises(ConfigError) as err:
+        load_config(_write(tmp_path, text))
+    line = _line_of(text, "prop_colour")
+    assert str(err.value) == f"config.yaml:{line}: sim.vehicle.prop_colour: unknown key"
+
+
+def test_wrong_type(tmp_path):
+    text = SHIPPED.replace("      width_px: 640\n", "      width_px: wide\n", 1)
+    with pytest.raises(ConfigError) as err:
+        load_config(_write(tmp_path, text))
+    line = _line_of(text, "width_px: wide")
+    assert re.fullmatch(rf"config.yaml:{line}: sim.cameras.front.width_px: .*integer.*'wide'.*",
+                        str(err.value))
+
+
+def test_out_of_range(tmp_path):
+    text = SHIPPED.replace("      tilt_max_deg: 45.0", "      tilt_max_deg: 120.0")
+    with pytest.raises(ConfigError) as err:
+        load_config(_write(tmp_path, text))
+    line = _line_of(text, "tilt_max_deg")
+    assert f"config.yaml:{line}: sim.flight_stack.position.tilt_max_deg: " in str(err.value)
+    assert "less than 90" in str(err.value)
+
+
+def test_missing_key_points_at_its_section(tmp_path):
+    text = SHIPPED.replace("    capacity_mah: 5000\n", "")
+    with pytest.raises(ConfigError) as err:
+        load_config(_write(tmp_path, text))
+    assert f"config.yaml:{_line_of(text, 'battery:')}: sim.battery.capacity_mah: missing" \
+        in str(err.value)
+
+
+def test_cross_field_rule(tmp_path):
+    text = SHIPPED.replace("  physics_rate_hz: 500", "  physics_rate_hz: 600")
+    with pytest.raises(ConfigError) as err:
+        load_config(_write(tmp_path, text))
+    assert "physics_rate_hz (600) must be an integer multiple" in str(err.value)
+
+
+def test_duplicate_key(tmp_path):
+    text = SHIPPED.replace("driver: sim", "driver: sim\ndriver: mavsdk", 1)
+    with pytest.raises(ConfigError, match=r"config.yaml:\d+: driver: duplicate key"):
+        load_config(_write(tmp_path, text))
+
+
+def test_invalid_yaml_reports_line(tmp_path):
+    text = SHIPPED.replace("  seed: 0", "  seed: [0", 1)
+    with pytest.raises(ConfigError, match=r"config.yaml:\d+: .*invalid YAML"):
+        load_config(_write(tmp_path, text))
+
+
+def test_overrides_apply_and_are_validated():
+    cfg = load_config(overrides=["sim.wind.gust_mps=2.5", "sim.cameras.down.enabled=false"])
+    assert cfg.sim.wind.gust_mps == 2.5
+    assert cfg.sim.cameras["down"].enabled is False
+    with pytest.raises(ConfigError, match=r"--set: sim\.wind\.gust: unknown key"):
+        load_config(overrides=["sim.wind.gust=1"])
+    with pytest.raises(ConfigError, match=r"--set: sim.seed: .*greater than or equal to 0"):
+        load_config(overrides=["sim.seed=-1"])
+    with pytest.raises(ConfigError, match=r"expected dotted\.key=value"):
+        load_config(overrides=["sim.seed"])
+
+
+def test_validate_command_exit_codes(tmp_path, capsys):
+    assert main(["validate", str(default_config_path())]) == 0
+    bad = _write(tmp_path, SHIPPED.replace("driver: sim", "driver: ardupilot", 1), "bad.yaml")
+    assert main(["validate", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert "bad.yaml:" in err
+    assert "driver:" in err
