@@ -3,8 +3,9 @@
 Commander (arming and its checks, modes, failsafes, auto-disarm), the navigator's TAKEOFF / HOLD /
 LAND behaviour, OFFBOARD setpoint handling, and the control cascade
 position P → velocity PID → attitude P → rate PID → allocation. It knows nothing of MuJoCo: the
-simulator feeds it the estimator's output (NED/FRD) at the rate-loop frequency and applies the
-rotor thrusts it returns.
+simulator calls :meth:`FlightStack.update_outer` at the position-loop rate and
+:meth:`FlightStack.update_inner` at the rate-loop rate with the estimator's output (NED/FRD), and
+applies the rotor thrusts that the latter returns.
 
 Semantics follow PX4 (v1.14+) as MAVSDK sees it; where this differs from PX4 it says so here:
 
@@ -98,8 +99,6 @@ class FlightStack:
         self._idle_n = motor_idle_fraction * float(airframe.thrust_max_n.min())
         self._inertia = np.asarray(airframe.inertia_frd_kg_m2, dtype=float)
         self._thrust_total_max = float(airframe.thrust_max_n.sum())
-        self._pos_div = cfg.rate_loop_hz // cfg.position_loop_hz
-        self._tick = 0
 
         # commander state
         self.armed = False
@@ -159,11 +158,6 @@ class FlightStack:
             return LandedState.LANDING
         return LandedState.IN_AIR
 
-    @property
-    def collective_thrust(self) -> float:
-        """Normalised collective thrust setpoint (0..1)."""
-        return self._att_sp.thrust if self.armed else 0.0
-
     # ------------------------------------------------------------------------------------
     # Commands (MAVLink COMMAND_LONG equivalents). Raise CommandRejected to deny.
     # ------------------------------------------------------------------------------------
@@ -180,7 +174,7 @@ class FlightStack:
         self._ever_airborne = False
         self._landed_since = self._now
         self._home = self._est.position_ned_m.copy() if self._est is not None else np.zeros(3)
-        if self.mode not in (FlightMode.OFFBOARD,):
+        if self.mode is not FlightMode.OFFBOARD:
             self._enter_hold()
         self._event("armed")
 
@@ -249,16 +243,6 @@ class FlightStack:
         self._now = now_s
         self._est = est
         self._health = health
-
-    def update(self, now_s: float, dt_s: float, est: EstimatedState, health: Health,
-               height_agl_m: float, battery_fraction: float) -> list[float]:
-        """One rate-loop tick (running the position loop when it is due). Returns the rotor
-        thrust commands in newtons."""
-        if self._tick % self._pos_div == 0:
-            self.update_outer(now_s, dt_s * self._pos_div, est, health, height_agl_m,
-                              battery_fraction)
-        self._tick += 1
-        return self.update_inner(dt_s, est.q_ned_frd.tolist(), est.rates_frd_rad_s.tolist())
 
     def update_outer(self, now_s: float, dt_s: float, est: EstimatedState, health: Health,
                      height_agl_m: float, battery_fraction: float) -> None:
