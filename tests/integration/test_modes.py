@@ -201,3 +201,20 @@ def test_yaw_rate_setpoint(sim_config):
             await offboard.aclose()
 
     run(main())
+
+
+def test_takeoff_without_altitude_uses_the_parameter(sim_config):
+    expected = sim_config.flight_stack.commander.takeoff_altitude_m  # PX4's MIS_TAKEOFF_ALT
+
+    async def main():
+        async with simulator(sim_config) as drv:
+            await armable(drv)
+            await drv.arm()
+            await drv.takeoff()
+            await wait_for_state(drv, lambda s: s.mode is FlightMode.HOLD and s.in_air, 20.0,
+                                 "takeoff")
+            truth = (await record_truth(drv, 1.0))[-1]
+            assert -truth.vehicle.position_ned_m[2] == pytest.approx(-GROUND_Z + expected,
+                                                                     abs=0.1)
+
+    run(main())
