@@ -31,6 +31,18 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"autopilot {__version__}")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
+    run = commands.add_parser("run", help="fly a mission (in the simulator unless configured "
+                              "otherwise)")
+    run.add_argument("--mission", required=True, metavar="NAME|FILE",
+                     help="a shipped mission's name (see 'autopilot missions') or a YAML file")
+    run.add_argument("--out", metavar="DIR", help="where flight.mcap and summary.json go "
+                     "(default: a new folder under runs/)")
+    run.add_argument("--realtime", action="store_true",
+                     help="run against the wall clock instead of lockstep")
+    _add_config_options(run)
+
+    commands.add_parser("missions", help="list the shipped missions")
+
     bench = commands.add_parser("bench", help="run a benchmark")
     benches = bench.add_subparsers(dest="bench", required=True, metavar="BENCH")
     sitl = benches.add_parser(
@@ -40,7 +52,7 @@ def build_parser() -> argparse.ArgumentParser:
                       help="run against the wall clock instead of lockstep")
     _add_config_options(sitl)
 
-    validate = commands.add_parser("validate", help="check a configuration file")
+    validate = commands.add_parser("validate", help="check a mission or configuration file")
     validate.add_argument("file")
     return parser
 
@@ -48,12 +60,14 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
+        if args.command == "run":
+            return _run(args)
+        if args.command == "missions":
+            return _missions()
         if args.command == "bench":
             return _bench(args)
         if args.command == "validate":
-            load_config(args.file)
-            print(f"{args.file}: ok")
-            return EXIT_OK
+            return _validate(args.file)
     except ConfigError as exc:
         print(f"error: invalid configuration:\n{exc}", file=sys.stderr)
         return EXIT_USAGE
@@ -61,6 +75,70 @@ def main(argv: Sequence[str] | None = None) -> int:
         print("interrupted", file=sys.stderr)
         return 130
     raise AssertionError(f"unhandled command {args.command}")
+
+
+def _run(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from autopilot.mission import load_mission
+    from autopilot.run import default_out_dir, fly
+
+    plan = load_mission(args.mission, args.overrides, args.config)
+    out = Path(args.out) if args.out else default_out_dir(plan)
+
+    def progress(line: str) -> None:
+        if sys.stderr.isatty():
+            sys.stderr.write("\r" + " " * 100 + "\r")
+        print(line, file=sys.stderr, flush=True)
+
+    print(f"mission {plan.mission.name} ({plan.source}); log in {out}", file=sys.stderr)
+    summary = asyncio.run(fly(plan, out, realtime=args.realtime, progress=progress,
+                              handle_signals=True))
+    if sys.stderr.isatty():
+        sys.stderr.write("\n")
+    follow = summary["metrics"]["follow"]
+    lines = [f"status: {summary['status']}" + (f" ({summary['reason']})" if summary["reason"]
+                                                else ""),
+             f"simulated {summary['sim_time_s']:.1f} s in {summary['wall_time_s']:.1f} s "
+             f"(× {summary['metrics']['sim']['real_time_factor']:.1f})"]
+    if follow:
+        lines.append("follow: " + ", ".join(
+            f"{k}={_fmt(follow[k])}" for k in ("detection_rate", "rms_range_error_m",
+                                               "rms_image_error_px", "max_lost_s")))
+    lat = summary["metrics"]["latency_ms"]
+    if lat["samples"]:
+        lines.append(f"latency: p50 {lat['p50']:.1f} ms, p95 {lat['p95']:.1f} ms")
+    lines.append(f"wrote {out / 'summary.json'} and {out / 'flight.mcap'}")
+    print("\n".join(lines))
+    return {"completed": EXIT_OK, "aborted": 130}.get(summary["status"], EXIT_FAILED)
+
+
+def _fmt(value) -> str:
+    return "n/a" if value is None else f"{value:.3f}" if isinstance(value, float) else str(value)
+
+
+def _missions() -> int:
+    from autopilot.mission import load_mission, shipped_missions
+
+    for path in shipped_missions():
+        try:
+            plan = load_mission(str(path))
+            print(f"{path.stem:<20} {plan.mission.description}")
+        except ConfigError as exc:
+            print(f"{path.stem:<20} INVALID: {exc.problems[0]}")
+    return EXIT_OK
+
+
+def _validate(file: str) -> int:
+    from autopilot.mission import is_mission_file, load_mission
+
+    if is_mission_file(file):
+        plan = load_mission(file)
+        print(f"{file}: ok (mission {plan.mission.name}, {len(plan.steps)} steps)")
+    else:
+        load_config(file)
+        print(f"{file}: ok (configuration)")
+    return EXIT_OK
 
 
 def _bench(args: argparse.Namespace) -> int:

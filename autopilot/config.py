@@ -12,23 +12,97 @@ import copy
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 import yaml
-from pydantic import BaseModel, ConfigDict, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
+from autopilot.perception.colors import COLORS
 from autopilot.resources import default_config_path
 from drivers.sim.config import SimConfig
 
 KeyPath = tuple[str | int, ...]
+Positive = Annotated[float, Field(gt=0)]
+NonNegative = Annotated[float, Field(ge=0)]
+ColorName = Literal[tuple(COLORS)]  # type: ignore[valid-type]
+HsvTriple = tuple[Annotated[int, Field(ge=0, le=180)], Annotated[int, Field(ge=0, le=255)],
+                  Annotated[int, Field(ge=0, le=255)]]
 
 
-class AppConfig(BaseModel):
-    """The whole of ``config.yaml``."""
-
+class _Model(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
+
+class RuntimeConfig(_Model):
+    control_rate_hz: Annotated[float, Field(ge=5, le=200)]  # at least; also on every estimate
+    setpoint_rate_hz: Annotated[float, Field(ge=20, le=100)]  # streaming to the vehicle
+    setpoint_expiry_s: Annotated[float, Field(gt=0, le=1)]  # a setpoint not renewed expires
+    offboard_warmup_s: Annotated[float, Field(ge=0.1, le=2)]  # streaming before OFFBOARD
+    shutdown_timeout_s: Positive  # bound on the safe stop (hold, land, disarm)
+    progress_interval_s: Positive  # plain progress lines (not a terminal), wall seconds
+
+
+class BallPerceptionConfig(_Model):
+    camera: str
+    color: ColorName
+    #: Explicit HSV ranges ([[h, s, v], [h, s, v]] pairs) instead of the colour's preset.
+    hsv_ranges: list[tuple[HsvTriple, HsvTriple]] | None = None
+    diameter_m: Positive
+    open_kernel_px: Annotated[int, Field(ge=1, le=31)]
+    close_kernel_px: Annotated[int, Field(ge=1, le=31)]
+    min_radius_px: Positive
+    max_radius_px: Positive
+    min_circularity: Annotated[float, Field(ge=0, le=1)]
+    min_fill_ratio: Annotated[float, Field(ge=0, le=1)]
+
+
+class PerceptionConfig(_Model):
+    ball: BallPerceptionConfig
+
+
+class TargetEstimationConfig(_Model):
+    accel_noise_m_s2: Positive
+    gate_chi2: Positive
+    stale_after_s: Positive
+    initial_velocity_std_m_s: Positive
+    max_extrapolation_s: NonNegative
+    pixel_noise_px: Positive
+    radius_noise_px: Positive
+    border_noise_scale: Annotated[float, Field(ge=1)]  # blobs cut by the image border
+
+
+class EstimationConfig(_Model):
+    target: TargetEstimationConfig
+
+
+class FollowControlConfig(_Model):
+    mode: Literal["yaw", "lateral"]
+    standoff_m: Annotated[float, Field(gt=0.3, le=20)]
+    position_gain: Positive
+    yaw_gain: Positive
+    max_speed_m_s: Positive
+    max_vertical_speed_m_s: Positive
+    max_accel_m_s2: Positive
+    max_yaw_rate_deg_s: Positive
+    altitude_floor_m: NonNegative
+    lost_after_s: Positive
+    lost_hold_s: NonNegative
+    search_yaw_rate_deg_s: Positive
+    lost_timeout_s: Positive
+
+
+class ControlConfig(_Model):
+    follow: FollowControlConfig
+
+
+class AppConfig(_Model):
+    """The whole of ``config.yaml``."""
+
     driver: Literal["sim", "mavsdk", "pymavlink"]
+    runtime: RuntimeConfig
+    perception: PerceptionConfig
+    estimation: EstimationConfig
+    control: ControlConfig
     sim: SimConfig
 
 
@@ -149,20 +223,26 @@ def apply_overrides(located: Located, overrides: Iterable[str]) -> Located:
             value = yaml.safe_load(raw) if raw.strip() else ""
         except yaml.YAMLError:
             value = raw
-        parts = key.split(".")
+        parts: list[str | int] = [int(p) if p.isdigit() else p for p in key.split(".")]
         target = data
-        for depth, part in enumerate(parts[:-1]):
-            nxt = target.get(part) if isinstance(target, dict) else None
-            if nxt is None:
-                nxt = target[part] = {} if isinstance(target, dict) else None
-            if not isinstance(nxt, dict):
-                problems.append(Problem("--set", None, ".".join(parts[:depth + 1]),
+        for depth, part in enumerate(parts):
+            last = depth == len(parts) - 1
+            if isinstance(target, list) and isinstance(part, int):
+                if part >= len(target):
+                    problems.append(Problem("--set", None, _dotted(parts[:depth + 1]),
+                                            f"no item {part} (the list has {len(target)})"))
+                    break
+            elif not isinstance(target, dict) or isinstance(part, int):
+                problems.append(Problem("--set", None, _dotted(parts[:depth]),
                                         "is not a section; cannot set a key inside it"))
                 break
-            target = nxt
-        else:
-            target[parts[-1]] = value
-            lines[tuple(parts)] = ("--set", None)
+            if last:
+                target[part] = value
+                lines[tuple(parts)] = ("--set", None)
+            else:
+                if isinstance(target, dict) and target.get(part) is None:
+                    target[part] = {}
+                target = target[part]
     if problems:
         raise ConfigError(problems)
     return Located(data, located.source, lines)

@@ -200,12 +200,13 @@ class Simulator:
     def _step_once(self) -> None:
         m, d = self.model, self.data
         k = self._step
-        if self._moving:
+        control = k % self._rate_div == 0
+        if self._moving and (control or k >= self._next_capture):
             t = k * self.dt
             for obj in self._moving:
                 obj.update(t, d)
         mujoco.mj_step1(m, d)
-        if k % self._rate_div == 0:
+        if control:
             self._control_tick()
         omega = self._omega
         omega += self._motor_alpha * (self._omega_cmd - omega)

@@ -1,0 +1,1 @@
+"""Control laws turning estimates into setpoints (synchronous)."""

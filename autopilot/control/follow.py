@@ -1,0 +1,121 @@
+"""Follow a tracked target at a standoff distance, keeping it centred in a camera.
+
+The vehicle aims for the point ``standoff_m`` back from the target along the camera's line of
+sight (so a camera pitched down δ puts the vehicle standoff·sin δ above the target, which then
+sits in the image centre), and flies there with a velocity command: the target's velocity as
+feed-forward plus a proportional correction, limited in speed and acceleration. Two modes
+(seed 001):
+
+* ``yaw`` — turn to face the target; the standoff point lies behind it on the bearing line.
+* ``lateral`` — keep the heading the vehicle had when following began; translate so the target
+  stays straight ahead.
+
+Yaw rate: proportional on the heading error plus the bearing's rate as feed-forward, limited.
+An altitude floor bounds the descent. Synchronous; called by the follow behaviour.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from autopilot.estimation.target import TargetEstimate
+from drivers.base import CameraInfo, Setpoint, VehicleState
+from drivers.geometry import wrap_pi
+
+_MIN_BEARING_DISTANCE_M = 0.4  # closer than this (horizontally) the bearing is meaningless
+
+
+@dataclass(frozen=True, slots=True)
+class FollowSettings:
+    mode: Literal["yaw", "lateral"]
+    standoff_m: float
+    position_gain: float  # 1/s
+    yaw_gain: float  # 1/s
+    max_speed_m_s: float
+    max_vertical_speed_m_s: float
+    max_accel_m_s2: float
+    max_yaw_rate_rad_s: float
+    altitude_floor_m: float
+
+
+def camera_depression_rad(camera: CameraInfo) -> float:
+    """How far below the body's horizontal plane the camera looks (positive: down)."""
+    boresight = camera.rotation_body_cam[:, 2]
+    return math.asin(max(-1.0, min(1.0, boresight[2])))
+
+
+class FollowController:
+    def __init__(self, settings: FollowSettings, camera: CameraInfo) -> None:
+        self.settings = settings
+        self._depression = camera_depression_rad(camera)
+        self._heading: float | None = None
+        self._yaw_target = 0.0
+        self._last_cmd: np.ndarray | None = None
+        self._last_time: float | None = None
+        #: Where the controller wants the vehicle (NED), for logging.
+        self.desired_position_ned_m = np.full(3, np.nan)
+
+    def reset(self, state: VehicleState) -> None:
+        """Start following from the vehicle's current motion and heading."""
+        self._heading = state.yaw_rad
+        self._yaw_target = state.yaw_rad
+        self._last_cmd = np.array(state.velocity_ned_m_s)
+        self._last_time = state.time_s
+
+    def update(self, now_s: float, state: VehicleState, target: TargetEstimate) -> Setpoint:
+        s = self.settings
+        if self._heading is None:
+            self.reset(state)
+        p_v = np.asarray(state.position_ned_m)
+        p_t, v_t = target.position_ned_m, target.velocity_ned_m_s
+        rel = p_t - p_v
+        horizontal = math.hypot(rel[0], rel[1])
+
+        if s.mode == "yaw":
+            if horizontal > _MIN_BEARING_DISTANCE_M:
+                self._yaw_target = math.atan2(rel[1], rel[0])
+            yaw_des = self._yaw_target
+        else:
+            yaw_des = self._heading
+
+        # the standoff point: back from the target along the camera's line of sight
+        back = s.standoff_m * math.cos(self._depression)
+        desired = p_t - back * np.array([math.cos(yaw_des), math.sin(yaw_des), 0.0])
+        desired[2] = min(p_t[2] - s.standoff_m * math.sin(self._depression),
+                         -s.altitude_floor_m)
+        self.desired_position_ned_m = desired
+
+        cmd = v_t + s.position_gain * (desired - p_v)
+        if cmd[2] > 0.0 and p_v[2] > -s.altitude_floor_m - 0.1:
+            # near the floor: no descending feed-forward, only the correction towards the
+            # (floor-limited) desired altitude
+            cmd[2] = s.position_gain * (desired[2] - p_v[2])
+        cmd = self._limit(now_s, cmd)
+
+        yaw_rate = s.yaw_gain * wrap_pi(yaw_des - state.yaw_rad)
+        if s.mode == "yaw" and horizontal > _MIN_BEARING_DISTANCE_M:
+            rel_v = v_t - np.asarray(state.velocity_ned_m_s)
+            yaw_rate += (rel[0] * rel_v[1] - rel[1] * rel_v[0]) / (horizontal * horizontal)
+        yaw_rate = max(-s.max_yaw_rate_rad_s, min(s.max_yaw_rate_rad_s, yaw_rate))
+        return Setpoint.velocity_ned(*cmd, yaw_rate_rad_s=yaw_rate, time_s=now_s)
+
+    def _limit(self, now_s: float, cmd: np.ndarray) -> np.ndarray:
+        s = self.settings
+        speed = math.hypot(cmd[0], cmd[1])
+        if speed > s.max_speed_m_s:
+            cmd[:2] *= s.max_speed_m_s / speed
+        cmd[2] = max(-s.max_vertical_speed_m_s, min(s.max_vertical_speed_m_s, cmd[2]))
+        if self._last_cmd is not None and self._last_time is not None:
+            dt = max(now_s - self._last_time, 0.0)
+            step = cmd - self._last_cmd
+            max_step = s.max_accel_m_s2 * dt
+            norm = float(np.linalg.norm(step))
+            if norm > max_step:
+                cmd = self._last_cmd + step * (max_step / norm)
+        self._last_cmd = cmd.copy()
+        self._last_time = now_s
+        return cmd

@@ -1,0 +1,1 @@
+"""Estimation: target filters and the vehicle-pose history they need (synchronous)."""

@@ -1,0 +1,190 @@
+"""Target tracking: a constant-velocity Kalman filter (filterpy) on the target's position in
+world NED.
+
+* Each measurement is applied at its capture time: the filter predicts to that time, so the
+  estimate carries no camera or processing latency; :meth:`TargetFilter.estimate` extrapolates
+  to "now" for the controller.
+* Outliers are gated on the Mahalanobis distance of the innovation (χ², 3 degrees of freedom).
+* An estimate has an age (time since the last accepted measurement); past ``stale_after_s`` the
+  track is stale and the next measurement starts a new one, whatever its distance.
+
+Data flow: detections (camera frame) + the vehicle pose at capture time → world-frame position
+measurements → this filter → :class:`TargetEstimate` for behaviours.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from filterpy.kalman import KalmanFilter
+
+from autopilot.estimation.pose_history import Pose
+from drivers.base import CameraInfo
+from drivers.geometry import quat_to_matrix
+
+
+@dataclass(frozen=True, slots=True)
+class TargetFilterSettings:
+    accel_noise_m_s2: float  # white-acceleration process noise (target manoeuvres)
+    gate_chi2: float  # Mahalanobis² gate (3 dof: 16.3 ≈ 99.9 %)
+    stale_after_s: float
+    initial_velocity_std_m_s: float
+    max_extrapolation_s: float  # estimates are not extrapolated further than this
+    pixel_noise_px: float  # bearing noise of a detection
+    radius_noise_px: float  # apparent-radius noise (drives the range noise)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class PositionMeasurement:
+    time_s: float
+    position_ned_m: np.ndarray
+    covariance: np.ndarray  # 3 × 3
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class TargetEstimate:
+    """The target at ``time_s`` (NED), with its uncertainty and the age of its last update."""
+
+    time_s: float
+    position_ned_m: np.ndarray
+    velocity_ned_m_s: np.ndarray
+    covariance: np.ndarray  # 6 × 6, position then velocity
+    age_s: float
+    stale: bool
+    updates: int
+
+    @property
+    def position_std_m(self) -> np.ndarray:
+        return np.sqrt(np.diag(self.covariance)[:3])
+
+
+@dataclass(frozen=True, slots=True)
+class UpdateResult:
+    accepted: bool
+    mahalanobis2: float
+    reinitialised: bool
+
+
+@dataclass
+class TargetFilter:
+    settings: TargetFilterSettings
+    _kf: KalmanFilter | None = field(default=None, init=False)
+    _time: float = field(default=-math.inf, init=False)
+    _last_update: float = field(default=-math.inf, init=False)
+    _updates: int = field(default=0, init=False)
+
+    @property
+    def initialised(self) -> bool:
+        return self._kf is not None
+
+    def is_stale(self, now_s: float) -> bool:
+        return self._kf is None or now_s - self._last_update > self.settings.stale_after_s
+
+    def reset(self) -> None:
+        self._kf = None
+        self._updates = 0
+
+    def update(self, meas: PositionMeasurement) -> UpdateResult:
+        if self.is_stale(meas.time_s):
+            self._initialise(meas)
+            return UpdateResult(True, 0.0, True)
+        if meas.time_s < self._time:
+            return UpdateResult(False, math.inf, False)  # older than the state: ignore
+        self._predict_to(meas.time_s)
+        kf = self._kf
+        innovation = meas.position_ned_m - kf.H @ kf.x
+        s = kf.H @ kf.P @ kf.H.T + meas.covariance
+        d2 = float(innovation @ np.linalg.solve(s, innovation))
+        if d2 > self.settings.gate_chi2:
+            return UpdateResult(False, d2, False)
+        kf.update(meas.position_ned_m, R=meas.covariance)
+        self._last_update = meas.time_s
+        self._updates += 1
+        return UpdateResult(True, d2, False)
+
+    def estimate(self, now_s: float) -> TargetEstimate | None:
+        """The estimate extrapolated to ``now_s`` (at most ``max_extrapolation_s`` past the last
+        update); None before the first measurement."""
+        kf = self._kf
+        if kf is None:
+            return None
+        horizon = min(now_s, self._last_update + self.settings.max_extrapolation_s)
+        dt = max(0.0, horizon - self._time)
+        f, q = self._transition(dt)
+        x = f @ kf.x
+        p = f @ kf.P @ f.T + q
+        return TargetEstimate(
+            time_s=now_s,
+            position_ned_m=x[:3].copy(),
+            velocity_ned_m_s=x[3:].copy(),
+            covariance=p,
+            age_s=now_s - self._last_update,
+            stale=self.is_stale(now_s),
+            updates=self._updates,
+        )
+
+    # -- internals --------------------------------------------------------------------------
+
+    def _initialise(self, meas: PositionMeasurement) -> None:
+        kf = KalmanFilter(dim_x=6, dim_z=3)
+        kf.x = np.concatenate((meas.position_ned_m, np.zeros(3)))
+        kf.P = np.zeros((6, 6))
+        kf.P[:3, :3] = meas.covariance
+        kf.P[3:, 3:] = np.eye(3) * self.settings.initial_velocity_std_m_s ** 2
+        kf.H = np.hstack((np.eye(3), np.zeros((3, 3))))
+        self._kf = kf
+        self._time = meas.time_s
+        self._last_update = meas.time_s
+        self._updates = 1
+
+    def _predict_to(self, time_s: float) -> None:
+        dt = time_s - self._time
+        if dt > 0.0:
+            f, q = self._transition(dt)
+            self._kf.predict(F=f, Q=q)
+            self._time = time_s
+
+    def _transition(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        f = np.eye(6)
+        f[:3, 3:] = np.eye(3) * dt
+        return f, process_noise(dt, self.settings.accel_noise_m_s2)
+
+
+_EYE3 = np.eye(3)
+
+
+def process_noise(dt: float, accel_std_m_s2: float) -> np.ndarray:
+    """Discrete white-noise-acceleration covariance for state (x, y, z, vx, vy, vz): what
+    filterpy's ``Q_discrete_white_noise(dim=2, dt, var, block_size=3, order_by_dim=False)``
+    returns, in closed form (this runs several times per frame)."""
+    var = accel_std_m_s2 * accel_std_m_s2
+    q = np.empty((6, 6))
+    q[:3, :3] = _EYE3 * (0.25 * dt ** 4 * var)
+    q[:3, 3:] = q[3:, :3] = _EYE3 * (0.5 * dt ** 3 * var)
+    q[3:, 3:] = _EYE3 * (dt * dt * var)
+    return q
+
+
+def camera_measurement(position_cam_m: np.ndarray, range_m: float, radius_px: float,
+                       camera: CameraInfo, pose: Pose, settings: TargetFilterSettings,
+                       time_s: float, noise_scale: float = 1.0) -> PositionMeasurement:
+    """A target position in the optical frame → world NED, with its covariance.
+
+    Bearing noise is ``pixel_noise_px`` across the line of sight; range noise follows from the
+    apparent-radius noise (δr/r = δR_px/R_px). Both are expressed in the camera frame and rotated
+    into NED with the vehicle's attitude at capture time.
+    """
+    r_world_body = quat_to_matrix(pose.attitude_q)
+    r_world_cam = r_world_body @ camera.rotation_body_cam
+    position = pose.position_ned_m + r_world_body @ camera.position_body_m + \
+        r_world_cam @ position_cam_m
+    f = camera.intrinsics.fx
+    lateral = range_m * settings.pixel_noise_px / f
+    along = range_m * settings.radius_noise_px / max(radius_px, 1.0)
+    # the optical frame's z is (almost) the line of sight to a centred target
+    los = position_cam_m / np.linalg.norm(position_cam_m)
+    cov_cam = lateral ** 2 * np.eye(3) + (along ** 2 - lateral ** 2) * np.outer(los, los)
+    cov = r_world_cam @ cov_cam @ r_world_cam.T * noise_scale ** 2
+    return PositionMeasurement(time_s, position, cov)

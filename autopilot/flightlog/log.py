@@ -1,0 +1,61 @@
+"""The flight log: every record goes to ``flight.mcap`` as it happens (so a run that crashes
+still leaves a readable log) and stays in memory for the end-of-run metrics.
+
+One channel per stream, JSON-encoded with a JSON Schema per channel (``jsonschema`` encoding),
+which Foxglove Studio and PlotJuggler open. Records in memory may hold numpy values and NaN;
+in the file they are plain numbers and null. Log time is the run's clock (simulated seconds in
+lockstep), in nanoseconds.
+"""
+
+from __future__ import annotations
+
+import json
+from collections import defaultdict
+from pathlib import Path
+from typing import IO
+
+import orjson
+from mcap.writer import Writer
+
+from autopilot.flightlog.records import SCHEMAS
+
+
+def encode(record: dict) -> bytes:
+    """Strict JSON: numpy arrays and scalars as numbers, NaN and infinities as null."""
+    return orjson.dumps(record, option=orjson.OPT_SERIALIZE_NUMPY)
+
+
+class FlightLog:
+    def __init__(self, path: Path | None) -> None:
+        self.records: dict[str, list[dict]] = defaultdict(list)
+        self.path = path
+        self._file: IO[bytes] | None = None
+        self._writer: Writer | None = None
+        self._channels: dict[str, int] = {}
+        self._seq = 0
+        if path is not None:
+            self._file = open(path, "wb")  # noqa: SIM115 - closed in close()
+            self._writer = Writer(self._file)
+            self._writer.start(profile="", library="autopilot")
+            for topic, schema in SCHEMAS.items():
+                schema_id = self._writer.register_schema(
+                    name=schema["title"], encoding="jsonschema",
+                    data=json.dumps(schema).encode())
+                self._channels[topic] = self._writer.register_channel(
+                    topic=topic, message_encoding="json", schema_id=schema_id)
+
+    def write(self, topic: str, time_s: float, record: dict) -> None:
+        self.records[topic].append(record)
+        if self._writer is not None:
+            ns = max(0, round(time_s * 1e9))
+            self._seq += 1
+            self._writer.add_message(self._channels[topic], log_time=ns, publish_time=ns,
+                                     sequence=self._seq, data=encode(record))
+
+    def close(self) -> None:
+        if self._writer is not None:
+            self._writer.finish()
+            self._writer = None
+        if self._file is not None:
+            self._file.close()
+            self._file = None

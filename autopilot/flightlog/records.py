@@ -1,0 +1,120 @@
+"""The flight log's channels: topic names, JSON Schemas, and message → record converters.
+
+Records are JSON-shaped dicts (the serialisation boundary; stages exchange typed messages);
+they may hold numpy arrays and NaN, which the log writes as numbers and null. Readers treat null
+and NaN alike. Times are seconds on the run's clock.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from drivers.base import CameraInfo, VehicleState
+
+CAMERA_INFO = "/camera/info"
+VEHICLE_STATE = "/vehicle/state"
+VEHICLE_STATUS = "/vehicle/status_text"
+BALL_DETECTIONS = "/perception/ball"
+TARGET_ESTIMATES = "/estimation/target"
+SETPOINTS = "/control/setpoint"
+MISSION_EVENTS = "/mission/events"
+MISSION_PLAN = "/mission/plan"
+GROUND_TRUTH = "/sim/ground_truth"
+
+_NUM = {"type": ["number", "null"]}
+_INT = {"type": "integer"}
+_BOOL = {"type": "boolean"}
+_STR = {"type": "string"}
+
+
+def _vec(n: int) -> dict:
+    return {"type": "array", "items": _NUM, "minItems": n, "maxItems": n}
+
+
+def _obj(title: str, **props: dict) -> dict:
+    return {"$schema": "https://json-schema.org/draft/2020-12/schema", "title": title,
+            "type": "object", "properties": props}
+
+
+SCHEMAS: dict[str, dict] = {
+    CAMERA_INFO: _obj("CameraInfo", name=_STR, width_px=_INT, height_px=_INT, fx=_NUM, fy=_NUM,
+                      cx=_NUM, cy=_NUM, distortion={"type": "array", "items": _NUM},
+                      rotation_body_cam=_vec(9), position_body_m=_vec(3), rate_hz=_NUM),
+    VEHICLE_STATE: _obj("VehicleState", time_s=_NUM, position_ned_m=_vec(3),
+                        velocity_ned_m_s=_vec(3), attitude_q=_vec(4), yaw_rad=_NUM,
+                        angular_velocity_frd_rad_s=_vec(3), armed=_BOOL, mode=_STR,
+                        landed_state=_STR, distance_to_ground_m=_NUM, battery_voltage_v=_NUM,
+                        battery_remaining=_NUM, failsafe=_BOOL),
+    VEHICLE_STATUS: _obj("StatusText", time_s=_NUM, text=_STR),
+    BALL_DETECTIONS: _obj("BallDetection", time_s=_NUM, seq=_INT, camera=_STR, detected=_BOOL,
+                          u_px=_NUM, v_px=_NUM, radius_px=_NUM, range_m=_NUM,
+                          position_cam_m=_vec(3), score=_NUM, candidates=_INT,
+                          cut_by_border=_BOOL, processing_ms=_NUM),
+    TARGET_ESTIMATES: _obj("TargetEstimate", time_s=_NUM, measurement_time_s=_NUM,
+                           accepted=_BOOL, reinitialised=_BOOL, mahalanobis2=_NUM,
+                           measured_position_ned_m=_vec(3), position_ned_m=_vec(3),
+                           velocity_ned_m_s=_vec(3), position_std_m=_vec(3),
+                           velocity_std_m_s=_vec(3), updates=_INT),
+    SETPOINTS: _obj("Setpoint", time_s=_NUM, source_frame_time_s=_NUM, latency_ms=_NUM,
+                    frame=_STR, position_ned_m=_vec(3), velocity_m_s=_vec(3), yaw_rad=_NUM,
+                    yaw_rate_rad_s=_NUM, expires_s=_NUM, step=_STR, phase=_STR),
+    MISSION_EVENTS: _obj("MissionEvent", time_s=_NUM, step=_STR, text=_STR),
+    MISSION_PLAN: _obj("MissionPlan", mission=_STR, source=_STR, steps={"type": "array"},
+                       standoff_m=_NUM, camera=_STR, ball_diameter_m=_NUM, driver=_STR,
+                       scenario={"type": ["object", "null"]}),
+    GROUND_TRUTH: _obj("GroundTruth", time_s=_NUM, vehicle_position_ned_m=_vec(3),
+                       vehicle_velocity_ned_m_s=_vec(3), vehicle_attitude_q=_vec(4),
+                       wind_ned_m_s=_vec(3), bodies={"type": "object"}),
+}
+
+
+def clean(value: Any) -> Any:
+    """numpy → lists/floats, NaN/inf → None, recursively."""
+    if isinstance(value, np.ndarray):
+        return [clean(v) for v in value.tolist()]
+    if isinstance(value, (list, tuple)):
+        return [clean(v) for v in value]
+    if isinstance(value, dict):
+        return {k: clean(v) for k, v in value.items()}
+    if isinstance(value, (float, np.floating)):
+        value = float(value)
+        return value if math.isfinite(value) else None
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, np.bool_):
+        return bool(value)
+    return value
+
+
+def camera_info_record(info: CameraInfo) -> dict:
+    i = info.intrinsics
+    return {"name": info.name, "width_px": i.width_px, "height_px": i.height_px,
+            "fx": i.fx, "fy": i.fy, "cx": i.cx, "cy": i.cy, "distortion": list(i.distortion),
+            "rotation_body_cam": info.rotation_body_cam.reshape(-1),
+            "position_body_m": info.position_body_m, "rate_hz": info.rate_hz}
+
+
+def vehicle_state_record(s: VehicleState) -> dict:
+    return {"time_s": s.time_s, "position_ned_m": s.position_ned_m,
+            "velocity_ned_m_s": s.velocity_ned_m_s, "attitude_q": s.attitude_q,
+            "yaw_rad": s.yaw_rad, "angular_velocity_frd_rad_s": s.angular_velocity_frd_rad_s,
+            "armed": s.armed, "mode": s.mode.value, "landed_state": s.landed_state.value,
+            "distance_to_ground_m": s.distance_to_ground_m,
+            "battery_voltage_v": s.battery.voltage_v,
+            "battery_remaining": s.battery.remaining_fraction, "failsafe": s.failsafe}
+
+
+def ground_truth_record(gt) -> dict:
+    return {
+        "time_s": gt.time_s,
+        "vehicle_position_ned_m": gt.vehicle.position_ned_m,
+        "vehicle_velocity_ned_m_s": gt.vehicle.velocity_ned_m_s,
+        "vehicle_attitude_q": gt.vehicle.attitude_q,
+        "wind_ned_m_s": gt.wind_ned_m_s,
+        "bodies": {name: {"position_ned_m": b.position_ned_m,
+                          "velocity_ned_m_s": b.velocity_ned_m_s}
+                   for name, b in gt.bodies.items()},
+    }

@@ -1,0 +1,1 @@
+"""Perception: detectors turning camera frames into measurements (synchronous, no event loop)."""

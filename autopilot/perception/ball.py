@@ -1,0 +1,308 @@
+"""Coloured-ball detection (seeds 001 and 003, done properly).
+
+HSV thresholds (several ranges, so red can wrap around hue 0) → morphological opening and
+closing → external contours → shape checks → an ellipse fit per candidate. A sphere seen off
+the optical axis images as an ellipse elongated radially; its minor semi-axis, with the angle
+off-axis, gives the sphere's angular radius exactly, hence the range from the known diameter.
+Blobs cut by the image border are fitted on their interior contour points only. A blob that
+fails the shape checks may be the ball merged with something of the same colour behind or
+beside it: a circle refitted around its largest inscribed circle is then accepted if the blob's
+outline follows it most of the way round (true of a ball with a box touching it, not of a box
+alone, whose inscribed circle touches its outline at four points).
+
+Data flow: a camera :class:`~drivers.base.Frame` goes in; a :class:`BallDetection` (or None)
+comes out, in the camera's optical frame. Synchronous and stateless apart from its settings;
+the runtime calls it in an executor.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from drivers.base import CameraInfo
+
+HsvRange = tuple[tuple[int, int, int], tuple[int, int, int]]
+
+
+@dataclass(frozen=True, slots=True)
+class BallDetectorSettings:
+    hsv_ranges: tuple[HsvRange, ...]
+    diameter_m: float
+    open_kernel_px: int = 3
+    close_kernel_px: int = 5
+    min_radius_px: float = 3.0
+    max_radius_px: float = 240.0
+    min_circularity: float = 0.8
+    min_fill_ratio: float = 0.75
+    max_axis_ratio: float = 1.6  # major/minor beyond what a sphere off-axis can produce
+    min_edge_coverage: float = 0.7  # merged blobs: share of a circle's outline on the edge
+
+
+@dataclass(frozen=True, slots=True)
+class BallCandidate:
+    u_px: float
+    v_px: float
+    radius_px: float  # apparent radius (minor semi-axis of the fitted ellipse)
+    circularity: float
+    fill_ratio: float
+    cut_by_border: bool
+    merged: bool = False  # recovered from a blob merged with something else
+
+    @property
+    def score(self) -> float:
+        penalty = (0.8 if self.cut_by_border else 1.0) * (0.9 if self.merged else 1.0)
+        return self.circularity * self.fill_ratio * penalty
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class BallDetection:
+    """A ball found in one frame. Position and bearing are in the camera's optical frame."""
+
+    time_s: float  # the frame's capture time
+    camera: str
+    u_px: float
+    v_px: float
+    radius_px: float
+    range_m: float
+    position_cam_m: np.ndarray
+    score: float
+    candidates: int  # how many blobs passed the shape checks
+    cut_by_border: bool
+    others: tuple[BallCandidate, ...] = field(default=())
+
+    def __post_init__(self) -> None:
+        arr = np.array(self.position_cam_m, dtype=float)
+        arr.flags.writeable = False
+        object.__setattr__(self, "position_cam_m", arr)
+
+
+class BallDetector:
+    def __init__(self, settings: BallDetectorSettings) -> None:
+        self.settings = settings
+        self._open = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (settings.open_kernel_px,) * 2)
+        self._close = cv2.getStructuringElement(cv2.MORPH_ELLIPSE,
+                                                (settings.close_kernel_px,) * 2)
+
+    def mask(self, image_bgr: np.ndarray) -> np.ndarray:
+        """Binary mask of pixels in the colour ranges, cleaned by opening and closing."""
+        hsv = cv2.cvtColor(image_bgr, cv2.COLOR_BGR2HSV)
+        mask = None
+        for lo, hi in self.settings.hsv_ranges:
+            part = cv2.inRange(hsv, np.array(lo, np.uint8), np.array(hi, np.uint8))
+            mask = part if mask is None else cv2.bitwise_or(mask, part)
+        mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, self._open)
+        return cv2.morphologyEx(mask, cv2.MORPH_CLOSE, self._close)
+
+    def candidates(self, image_bgr: np.ndarray,
+                   window: tuple[int, int, int, int] | None = None) -> list[BallCandidate]:
+        """Every blob that looks like a ball, best first (image coordinates).
+
+        With a ``window`` (x0, y0, x1, y1) only that part of the image is searched; the result
+        is None-equivalent (empty) when the window cannot tell: colour touching one of its edges
+        that is not an image edge may be a ball cut by the window."""
+        s = self.settings
+        height, width = image_bgr.shape[:2]
+        x0, y0 = 0, 0
+        if window is not None:
+            x0, y0, x1, y1 = window
+            mask = self.mask(image_bgr[y0:y1, x0:x1])
+            inner_edges = [mask[0, :] if y0 > 0 else None, mask[-1, :] if y1 < height else None,
+                           mask[:, 0] if x0 > 0 else None, mask[:, -1] if x1 < width else None]
+            if any(e is not None and e.any() for e in inner_edges):
+                return []
+        else:
+            mask = self.mask(image_bgr)
+        contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE,
+                                       offset=(x0, y0))
+        found = []
+        min_area = math.pi * s.min_radius_px ** 2 * 0.5
+        for contour in contours:
+            area = cv2.contourArea(contour)
+            if area < min_area or len(contour) < 6:
+                continue
+            candidate = self._whole_blob(contour, area, width, height)
+            if candidate is not None:
+                found.append(candidate)
+            elif area > 4.0 * min_area:
+                found.extend(self._merged_balls(contour, width, height))
+        found.sort(key=lambda c: c.score, reverse=True)
+        return found
+
+    def _whole_blob(self, contour: np.ndarray, area: float, width: int,
+                    height: int) -> BallCandidate | None:
+        """The blob as one ball, if it passes the shape checks."""
+        s = self.settings
+        pts = contour.reshape(-1, 2)
+        on_border = ((pts[:, 0] <= 0) | (pts[:, 1] <= 0) | (pts[:, 0] >= width - 1)
+                     | (pts[:, 1] >= height - 1))
+        cut = bool(on_border.any())
+        if cut:
+            inner = pts[~on_border]
+            if len(inner) < 0.4 * len(pts) or len(inner) < 8:
+                return None  # too little of the outline is visible to fit
+            fit_pts = inner.astype(np.float32)
+        else:
+            fit_pts = pts.astype(np.float32)
+        (cu, cv_), (ax1, ax2), _ = cv2.fitEllipse(fit_pts)
+        # contour points are pixel centres on the blob's edge: half a pixel inside it
+        major, minor = max(ax1, ax2) / 2.0 + 0.5, min(ax1, ax2) / 2.0 + 0.5
+        if not s.min_radius_px <= minor <= s.max_radius_px or major / minor > s.max_axis_ratio:
+            return None
+        perimeter = cv2.arcLength(contour, True)
+        if cut:
+            circularity = 1.0 - _circle_fit_residual(fit_pts, cu, cv_, major, minor)
+            ellipse_area = math.pi * major * minor
+            visible = max(_visible_fraction(cu, cv_, major, width, height), 1e-6)
+            fill = min(1.0, (area + 0.5 * perimeter) / ellipse_area / visible)
+        else:
+            circularity = min(1.0, 4.0 * math.pi * area / (perimeter * perimeter)
+                              * _pixel_circularity_correction(minor))
+            # against the smallest enclosing circle: ~1 for a ball (≥ 0.87 off-axis), 0.64 for
+            # a square, far less for poles and bars
+            _, enclosing = cv2.minEnclosingCircle(contour)
+            fill = min(1.0, (area + 0.5 * perimeter) / (math.pi * (enclosing + 0.5) ** 2))
+        if circularity < s.min_circularity or fill < s.min_fill_ratio:
+            return None
+        return BallCandidate(cu, cv_, minor, circularity, fill, cut)
+
+    def _merged_balls(self, contour: np.ndarray, width: int,
+                      height: int) -> list[BallCandidate]:
+        """A ball inside a blob that is not one (the ball with something of its colour
+        touching it). Start from the blob's largest inscribed circle, refit a circle to the
+        outline points near it, and accept it if those points go most of the way round."""
+        s = self.settings
+        x, y, w, h = cv2.boundingRect(contour)
+        blob = np.zeros((h + 4, w + 4), np.uint8)
+        cv2.drawContours(blob, [contour], -1, 255, cv2.FILLED, offset=(2 - x, 2 - y))
+        _, r_in, _, (px, py) = cv2.minMaxLoc(cv2.distanceTransform(blob, cv2.DIST_L2, 5))
+        if r_in + 0.5 < 2.0 * s.min_radius_px:
+            return []  # too small to tell a circle from a corner
+        pts = contour.reshape(-1, 2).astype(np.float64)
+        cu, cv_, radius = px + x - 2.0, py + y - 2.0, r_in + 0.5
+        for tolerance in (2.0, 1.2, 1.0):
+            near = np.abs(np.hypot(pts[:, 0] - cu, pts[:, 1] - cv_) - radius) < \
+                max(tolerance, 0.08 * radius)
+            if near.sum() < 8:
+                return []
+            cu, cv_, radius = _fit_circle(pts[near])
+        off = np.hypot(pts[:, 0] - cu, pts[:, 1] - cv_) - radius
+        on = np.abs(off) < max(0.7, 0.05 * radius)
+        angles = np.arctan2(pts[on, 1] - cv_, pts[on, 0] - cu)
+        coverage = len(np.unique(((angles + math.pi) / (2.0 * math.pi) * 36).astype(int) % 36)) \
+            / 36.0
+        radius += 0.5  # outline points are pixel centres, half a pixel inside the edge
+        if coverage < s.min_edge_coverage or radius > s.max_radius_px:
+            return []
+        cut = cu - radius < 0 or cv_ - radius < 0 or cu + radius > width - 1 or \
+            cv_ + radius > height - 1
+        return [BallCandidate(float(cu), float(cv_), float(radius), coverage, 1.0, cut,
+                              merged=True)]
+
+    def _window(self, image_bgr: np.ndarray, centre: Sequence[float],
+                radius_px: float | None) -> tuple[int, int, int, int] | None:
+        height, width = image_bgr.shape[:2]
+        u, v = centre
+        if not (0 <= u < width and 0 <= v < height):
+            return None
+        half = max(48.0, 3.0 * (radius_px or 0.0))
+        x0, y0 = max(0, int(u - half)), max(0, int(v - half))
+        x1, y1 = min(width, int(u + half) + 1), min(height, int(v + half) + 1)
+        return x0, y0, x1, y1
+
+    def detect(self, image_bgr: np.ndarray, camera: CameraInfo, time_s: float,
+               predicted_uv: Sequence[float] | None = None,
+               predicted_radius_px: float | None = None) -> BallDetection | None:
+        """The ball in a frame, or None.
+
+        With a prediction (where the tracker expects the ball, and how big), a window around it
+        is searched first and the whole image only if that finds nothing conclusive; the
+        candidate nearest the prediction wins. Without one, the most ball-like candidate."""
+        found: list[BallCandidate] = []
+        if predicted_uv is not None:
+            found = self.candidates(image_bgr, self._window(image_bgr, predicted_uv,
+                                                            predicted_radius_px))
+        if not found:
+            found = self.candidates(image_bgr)
+        if not found:
+            return None
+        if predicted_uv is not None:
+            pu, pv = predicted_uv
+            best = min(found, key=lambda c: math.hypot(c.u_px - pu, c.v_px - pv))
+        else:
+            best = found[0]
+        position = ball_position(camera, best.u_px, best.v_px, best.radius_px,
+                                 self.settings.diameter_m)
+        return BallDetection(
+            time_s=time_s,
+            camera=camera.name,
+            u_px=best.u_px,
+            v_px=best.v_px,
+            radius_px=best.radius_px,
+            range_m=float(np.linalg.norm(position)),
+            position_cam_m=position,
+            score=best.score,
+            candidates=len(found),
+            cut_by_border=best.cut_by_border,
+            others=tuple(c for c in found if c is not best),
+        )
+
+
+def _fit_circle(points: np.ndarray) -> tuple[float, float, float]:
+    """Least-squares (Kåsa) circle through points: centre and radius."""
+    a = np.column_stack((points[:, 0], points[:, 1], np.ones(len(points))))
+    b = -(points[:, 0] ** 2 + points[:, 1] ** 2)
+    d, e, f = np.linalg.lstsq(a, b, rcond=None)[0]
+    cu, cv_ = -d / 2.0, -e / 2.0
+    return cu, cv_, math.sqrt(max(cu * cu + cv_ * cv_ - f, 0.0))
+
+
+def ball_position(camera: CameraInfo, u_px: float, v_px: float, radius_px: float,
+                  diameter_m: float) -> np.ndarray:
+    """Centre of a sphere of known diameter in the optical frame, from its image.
+
+    For a sphere of angular radius α seen at angle θ off the optical axis, the image is an
+    ellipse whose minor semi-axis is b = f·sin α / √(cos²θ − sin²α); hence
+    sin α = b·cos θ / √(f² + b²) and the range is R / sin α.
+    """
+    intr = camera.intrinsics
+    if any(intr.distortion):
+        pts = cv2.undistortPoints(np.array([[[u_px, v_px]]], np.float64), intr.matrix,
+                                  np.array(intr.distortion))
+        x, y = pts[0, 0]
+    else:
+        x, y = (u_px - intr.cx) / intr.fx, (v_px - intr.cy) / intr.fy
+    direction = np.array([x, y, 1.0])
+    direction /= np.linalg.norm(direction)
+    cos_theta = direction[2]
+    f = math.sqrt(intr.fx * intr.fy)
+    sin_alpha = radius_px * cos_theta / math.sqrt(f * f + radius_px * radius_px)
+    return direction * (diameter_m / 2.0) / sin_alpha
+
+
+def _pixel_circularity_correction(radius_px: float) -> float:
+    """Pixelated discs have a jagged, longer outline: 4πA/P² of a digitised circle of radius r
+    is below 1 by roughly 1/(1 + 1.5/r); undo that so the threshold means the same at any size."""
+    return 1.0 + 1.5 / max(radius_px, 1.0)
+
+
+def _circle_fit_residual(points: np.ndarray, cu: float, cv_: float, major: float,
+                         minor: float) -> float:
+    """RMS distance of points from the fitted outline, relative to the radius."""
+    radius = 0.5 * (major + minor)
+    d = np.hypot(points[:, 0] - cu, points[:, 1] - cv_) - (radius - 0.5)
+    return float(np.sqrt(np.mean(d * d)) / radius)
+
+
+def _visible_fraction(cu: float, cv_: float, radius: float, width: int, height: int) -> float:
+    """Fraction of a disc's area inside the image (sampled on a coarse grid)."""
+    g = np.linspace(-1.0, 1.0, 21)
+    gx, gy = np.meshgrid(g, g)
+    inside_disc = gx * gx + gy * gy <= 1.0
+    x, y = cu + gx * radius, cv_ + gy * radius
+    inside_img = (x >= 0) & (x <= width - 1) & (y >= 0) & (y <= height - 1)
+    return float((inside_disc & inside_img).sum() / inside_disc.sum())

@@ -1,0 +1,27 @@
+"""Named colours: how the simulator paints an object, and the HSV ranges that find it.
+
+OpenCV's HSV: hue 0–180 (half degrees), saturation and value 0–255. Red wraps around hue 0, so
+it needs two ranges. The ranges are wide in value (shaded sides of a lit sphere are dark) and
+narrow in hue.
+"""
+
+from __future__ import annotations
+
+HsvRange = tuple[tuple[int, int, int], tuple[int, int, int]]
+
+#: name → (RGBA used to render it, HSV ranges that detect it)
+COLORS: dict[str, tuple[tuple[float, float, float, float], tuple[HsvRange, ...]]] = {
+    "orange": ((1.0, 0.42, 0.0, 1.0), (((9, 150, 50), (18, 255, 255)),)),
+    "red": ((0.9, 0.05, 0.05, 1.0), (((0, 150, 50), (5, 255, 255)),
+                                      ((172, 150, 50), (180, 255, 255)))),
+    "yellow": ((0.95, 0.85, 0.05, 1.0), (((24, 150, 60), (34, 255, 255)),)),
+    "green": ((0.1, 0.75, 0.15, 1.0), (((50, 150, 40), (70, 255, 255)),)),
+    "blue": ((0.1, 0.25, 0.95, 1.0), (((105, 150, 40), (125, 255, 255)),)),
+}
+
+#: Colours close to orange but not orange, for distractors (rendered only).
+ORANGEISH_RGBA = (
+    (1.0, 0.42, 0.0, 1.0),  # the ball's own orange (shape and tracking must reject these)
+    (1.0, 0.17, 0.0, 1.0),  # red-orange
+    (1.0, 0.75, 0.05, 1.0),  # amber
+)

@@ -1,0 +1,104 @@
+"""Flying one mission: vehicle, runtime, flight log and summary, from a validated plan."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import datetime as dt
+import json
+import signal
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+from autopilot.config import ConfigError, Problem
+from autopilot.flightlog.log import FlightLog
+from autopilot.flightlog.metrics import follow_metrics, latency_metrics
+from autopilot.flightlog.records import clean
+from autopilot.mission import MissionPlan
+from autopilot.runtime import Runtime
+from autopilot.scenario import build_world
+from drivers.sim.driver import SimDriver
+
+
+def default_out_dir(plan: MissionPlan, root: Path = Path("runs")) -> Path:
+    stamp = dt.datetime.now().strftime("%Y%m%d-%H%M%S")
+    path = root / f"{stamp}-{plan.mission.name}"
+    n = 1
+    while path.exists():
+        n += 1
+        path = root / f"{stamp}-{plan.mission.name}-{n}"
+    return path
+
+
+async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False,
+              progress: Callable[[str], None] | None = None,
+              handle_signals: bool = False) -> dict:
+    """Fly ``plan`` and return its summary (also written to ``out_dir/summary.json``)."""
+    if plan.config.driver != "sim":
+        raise ConfigError([Problem("config", None, "driver",
+                                   f"the {plan.config.driver!r} driver is not available yet "
+                                   "(only 'sim' in this version)")])
+    if out_dir is not None:
+        await asyncio.to_thread(out_dir.mkdir, parents=True, exist_ok=True)
+    sim_config, objects = build_world(plan.mission.scenario, plan.config.sim)
+    vehicle = SimDriver(sim_config, scenario=objects, lockstep=not realtime)
+    log = FlightLog(out_dir / "flight.mcap" if out_dir is not None else None)
+    wall_start = time.perf_counter()
+    runtime: Runtime | None = None
+    loop = asyncio.get_running_loop()
+    signals = (signal.SIGINT, signal.SIGTERM)
+    main_task = asyncio.current_task()
+    received: list[str] = []
+
+    def on_signal(name: str) -> None:
+        received.append(name)
+        if len(received) == 1 and runtime is not None:
+            runtime.request_stop(f"{name} received")
+        elif main_task is not None:  # a second signal: stop waiting for the safe stop
+            main_task.cancel()
+
+    try:
+        await vehicle.connect()
+        runtime = Runtime(vehicle, plan, log, progress=progress)
+        if handle_signals:
+            for sig in signals:
+                loop.add_signal_handler(sig, on_signal, sig.name)
+        status = await runtime.run()
+        reason = runtime.reason
+    except asyncio.CancelledError:
+        status, reason = "aborted", f"{' then '.join(received) or 'cancelled'}: forced exit"
+        with contextlib.suppress(Exception):
+            await asyncio.wait_for(vehicle.land(), 2.0)
+    finally:
+        if handle_signals:
+            for sig in signals:
+                loop.remove_signal_handler(sig)
+        sim_time = vehicle.sim_time_s
+        wall_time = time.perf_counter() - wall_start
+        await vehicle.close()
+        log.close()
+
+    summary = {
+        "status": status,
+        "reason": reason,
+        "mission": plan.mission.name,
+        "source": str(plan.source),
+        "driver": plan.config.driver,
+        "clock": "realtime" if realtime else "lockstep",
+        "seed": sim_config.seed,
+        "sim_time_s": sim_time,
+        "wall_time_s": wall_time,
+        "metrics": {
+            "follow": follow_metrics(log.records),
+            "sim": {"real_time_factor": sim_time / wall_time if wall_time > 0 else None},
+            "latency_ms": latency_metrics(log.records),
+        },
+        "stats": vars(runtime.stats) if runtime is not None else {},
+        "log": "flight.mcap" if out_dir is not None else None,
+    }
+    summary["stats"] = {k: v for k, v in summary["stats"].items() if not isinstance(v, list)}
+    summary = clean(summary)
+    if out_dir is not None:
+        (out_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    return summary

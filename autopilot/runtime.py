@@ -1,0 +1,450 @@
+"""The runtime: one event loop, one task per stage, latest-value hand-over between them.
+
+::
+
+    vehicle.frames ─► detection (executor) ─► [slot] ─► estimation ─► [event] ─┐
+    vehicle.telemetry ─► pose history, latest state ────────────────────────────┤
+                                                           control (≥ control_rate_hz,
+                                                           and on every estimate)
+                                                                   │ intent (expires)
+                                                                   ▼
+                                                      setpoint streaming ─► vehicle
+
+* Frames and telemetry carry their capture times end to end: a detection is placed in the world
+  with the vehicle pose at its frame's capture time, and the latency of each setpoint computed
+  from a frame (capture → sent) is logged.
+* A setpoint is an *intent with an expiry*: the streaming task re-sends it at
+  ``setpoint_rate_hz`` only until ``setpoint_expiry_s`` after the control step made it. If the
+  control task stalls, streaming stops, and the vehicle's own offboard-loss failsafe takes over.
+* :meth:`Runtime.request_stop` (Ctrl-C, SIGTERM) switches the mission to its safe stop — hold,
+  land, disarm — bounded by ``shutdown_timeout_s``; every task belongs to one TaskGroup, so none
+  outlives the run.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import math
+import sys
+import time
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from autopilot.behaviors.base import BehaviorInputs, RequestKind, VehicleRequest
+from autopilot.estimation.pose_history import PoseHistory
+from autopilot.estimation.target import TargetFilter, TargetFilterSettings, camera_measurement
+from autopilot.flightlog import records as ch
+from autopilot.flightlog.log import FlightLog
+from autopilot.mission import MissionExecutor, MissionOutput, MissionPlan, build_behavior
+from autopilot.perception.ball import BallDetection, BallDetector, BallDetectorSettings
+from autopilot.perception.colors import COLORS
+from drivers.base import Frame, Setpoint, Vehicle, VehicleError, VehicleState
+from drivers.geometry import quat_to_matrix
+from drivers.slots import LatestSlot
+
+
+@dataclass(slots=True)
+class Intent:
+    setpoint: Setpoint
+    made_s: float
+    expires_s: float
+    source_frame_time_s: float | None
+    step: str
+    phase: str
+    sent: bool = False
+
+
+@dataclass(frozen=True, slots=True)
+class ProcessedFrame:
+    time_s: float
+    seq: int
+    frame: Frame
+    detection: BallDetection | None
+
+
+@dataclass
+class RunStats:
+    frames: int = 0
+    detections: int = 0
+    follow_frames: int = 0
+    follow_detections: int = 0
+    setpoints_sent: int = 0
+    stages_ms: list[float] = field(default_factory=list)
+
+
+class Runtime:
+    def __init__(self, vehicle: Vehicle, plan: MissionPlan, log: FlightLog, *,
+                 progress: Callable[[str], None] | None = None) -> None:
+        self.vehicle = vehicle
+        self.plan = plan
+        self.config = plan.config
+        self.log = log
+        self.clock = vehicle.clock
+        cfg = plan.config
+        ball = cfg.perception.ball
+        ranges = tuple(tuple(map(tuple, r)) for r in ball.hsv_ranges) if ball.hsv_ranges \
+            else COLORS[ball.color][1]
+        self.detector = BallDetector(BallDetectorSettings(
+            hsv_ranges=ranges, diameter_m=ball.diameter_m, open_kernel_px=ball.open_kernel_px,
+            close_kernel_px=ball.close_kernel_px, min_radius_px=ball.min_radius_px,
+            max_radius_px=ball.max_radius_px, min_circularity=ball.min_circularity,
+            min_fill_ratio=ball.min_fill_ratio))
+        t = cfg.estimation.target
+        self.filter_settings = TargetFilterSettings(
+            accel_noise_m_s2=t.accel_noise_m_s2, gate_chi2=t.gate_chi2,
+            stale_after_s=t.stale_after_s, initial_velocity_std_m_s=t.initial_velocity_std_m_s,
+            max_extrapolation_s=t.max_extrapolation_s, pixel_noise_px=t.pixel_noise_px,
+            radius_noise_px=t.radius_noise_px)
+        self.filter = TargetFilter(self.filter_settings)
+        self.history = PoseHistory()
+        self.camera_name = ball.camera
+        self.stats = RunStats()
+        self.status = "running"
+        self.reason = ""
+        self.errors: list[BaseException] = []
+        self._progress = progress
+        self._state: VehicleState | None = None
+        self._frames: LatestSlot[ProcessedFrame] = LatestSlot()
+        self._estimated: LatestSlot[float] = LatestSlot()  # capture time of the frame used
+        self._last_frame: ProcessedFrame | None = None
+        self._last_detection: BallDetection | None = None
+        self._intent: Intent | None = None
+        self._last_send_s = -math.inf
+        self._stop_reason: str | None = None
+        self._stop_requested = asyncio.Event()
+        self._executor: MissionExecutor | None = None
+        self._step = ""
+        self._phase = ""
+        self._detect_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="detect")
+
+    # ------------------------------------------------------------------------------------
+    # Control from outside
+    # ------------------------------------------------------------------------------------
+
+    def request_stop(self, reason: str = "stop requested") -> None:
+        """Ask for a safe stop (hold, land, disarm). Safe to call from a signal handler."""
+        if self._stop_reason is None:
+            self._stop_reason = reason
+        self._stop_requested.set()
+        self._estimated.put(math.nan)  # wake the control loop now
+
+    # ------------------------------------------------------------------------------------
+    # The run
+    # ------------------------------------------------------------------------------------
+
+    async def run(self) -> str:
+        """Fly the mission; returns ``completed``, ``failed`` or ``aborted``."""
+        self._log_plan()
+        cameras = self.vehicle.cameras
+        behaviors = [build_behavior(step, self.config, cameras) for step in self.plan.steps]
+        self._executor = MissionExecutor(behaviors)
+        try:
+            async with asyncio.TaskGroup() as tasks:
+                background = [
+                    tasks.create_task(self._telemetry(), name="telemetry"),
+                    tasks.create_task(self._detection(), name="detection"),
+                    tasks.create_task(self._estimation(), name="estimation"),
+                    tasks.create_task(self._streaming(), name="setpoint-streaming"),
+                    *self._simulator_tasks(tasks),
+                ]
+                if self._progress is not None:
+                    background.append(tasks.create_task(self._report_progress(), name="progress"))
+                try:
+                    await self._control()
+                finally:
+                    for task in background:
+                        task.cancel()
+        except* Exception as group:  # the link broke, or a bug: never leave the motors running
+            self.status = "failed"
+            self.reason = "; ".join(f"{type(e).__name__}: {e}" for e in group.exceptions)
+            self.errors = list(group.exceptions)
+            await self._last_resort()
+        finally:
+            self._detect_pool.shutdown(wait=True, cancel_futures=True)
+        return self.status
+
+    async def _control(self) -> None:
+        executor = self._executor
+        state = await self._first_state()
+        out = executor.start(self._inputs(state))
+        await self._apply(out)
+        period = 1.0 / self.config.runtime.control_rate_hz
+        deadline: float | None = None
+        while not out.finished:
+            source = await self._next_tick(period)
+            inputs = self._inputs(self._state)
+            if self._stop_requested.is_set() and deadline is None:
+                deadline = self.clock.now() + self.config.runtime.shutdown_timeout_s
+                out = executor.abort(self._stop_reason or "stop requested", inputs)
+            elif deadline is not None and self.clock.now() > deadline:
+                self.status, self.reason = "failed", "safe stop did not finish in time"
+                await self._last_resort()
+                return
+            else:
+                out = executor.update(inputs)
+            await self._apply(out, source)
+        self.status = executor.status
+        self.reason = executor.failure
+
+    async def _apply(self, out: MissionOutput, source_frame_s: float | None = None) -> None:
+        now = self.clock.now()
+        for text in out.events:
+            self._event(now, text)
+        self._step, self._phase = out.step, out.phase
+        if out.setpoint is not None:
+            self._intent = Intent(out.setpoint, now, now + self.config.runtime.setpoint_expiry_s,
+                                  source_frame_s, out.step, out.phase)
+            await self._send(self._intent)
+        for request in out.requests:
+            try:
+                await self._perform(request)
+            except VehicleError as exc:
+                failed = self._executor.request_failed(request, str(exc),
+                                                       self._inputs(self._state))
+                await self._apply(failed)
+                return
+
+    async def _perform(self, request: VehicleRequest) -> None:
+        v = self.vehicle
+        self._event(self.clock.now(), f"request {request.kind.value}")
+        if request.kind is RequestKind.ARM:
+            await v.arm()
+        elif request.kind is RequestKind.TAKEOFF:
+            await v.takeoff(request.altitude_m)
+        elif request.kind is RequestKind.START_OFFBOARD:
+            warmup = self.config.runtime.offboard_warmup_s
+            if self._intent is not None:  # keep the entry setpoint alive while warming up
+                self._intent.expires_s = self.clock.now() + warmup + \
+                    self.config.runtime.setpoint_expiry_s
+            await self.clock.sleep(warmup)
+            await v.start_offboard()
+        elif request.kind is RequestKind.HOLD:
+            await v.hold()
+        elif request.kind is RequestKind.LAND:
+            await v.land()
+
+    async def _last_resort(self) -> None:
+        """The orderly stop failed or the link broke: one bounded attempt to land."""
+        with contextlib.suppress(Exception):
+            await self.clock.wait_for(self.vehicle.land(), 2.0)
+
+    # ------------------------------------------------------------------------------------
+    # Stages
+    # ------------------------------------------------------------------------------------
+
+    async def _telemetry(self) -> None:
+        async with contextlib.aclosing(self.vehicle.telemetry(buffer=64)) as samples:
+            async for state in samples:
+                self._state = state
+                self.history.add(state)
+                self.log.write(ch.VEHICLE_STATE, state.time_s, ch.vehicle_state_record(state))
+
+    async def _detection(self) -> None:
+        camera = self.vehicle.cameras[self.camera_name]
+        self.log.write(ch.CAMERA_INFO, self.clock.now(), ch.camera_info_record(camera))
+        async with contextlib.aclosing(self.vehicle.frames(self.camera_name)) as frames:
+            async for frame in frames:
+                hint = self._predicted_pixel(frame)
+                uv, radius = hint if hint is not None else (None, None)
+                started = time.perf_counter()
+                detection = await self.clock.run_blocking(
+                    self.detector.detect, frame.image, frame.camera, frame.time_s, uv, radius,
+                    executor=self._detect_pool)
+                elapsed_ms = (time.perf_counter() - started) * 1e3
+                processed = ProcessedFrame(frame.time_s, frame.seq, frame, detection)
+                self._frames.put(processed)
+                self._count_frame(detection)
+                self.log.write(ch.BALL_DETECTIONS, frame.time_s,
+                               _detection_record(frame, detection, elapsed_ms))
+
+    async def _estimation(self) -> None:
+        scale = self.config.estimation.target.border_noise_scale
+        while True:
+            item = await self._frames.get()
+            self._last_frame = item
+            det = item.detection
+            if det is not None:
+                self._last_detection = det
+                pose = self.history.pose_at(item.time_s)
+                if pose is not None:
+                    meas = camera_measurement(
+                        det.position_cam_m, det.range_m, det.radius_px, item.frame.camera, pose,
+                        self.filter_settings, item.time_s,
+                        noise_scale=scale if det.cut_by_border else 1.0)
+                    result = self.filter.update(meas)
+                    est = self.filter.estimate(item.time_s)
+                    std = np.sqrt(np.diag(est.covariance))
+                    self.log.write(ch.TARGET_ESTIMATES, item.time_s, {
+                        "time_s": item.time_s, "measurement_time_s": item.time_s,
+                        "accepted": result.accepted, "reinitialised": result.reinitialised,
+                        "mahalanobis2": result.mahalanobis2,
+                        "measured_position_ned_m": meas.position_ned_m,
+                        "position_ned_m": est.position_ned_m,
+                        "velocity_ned_m_s": est.velocity_ned_m_s,
+                        "position_std_m": std[:3], "velocity_std_m_s": std[3:],
+                        "updates": est.updates})
+            self._estimated.put(item.time_s)
+
+    async def _streaming(self) -> None:
+        period = 1.0 / self.config.runtime.setpoint_rate_hz
+        while True:
+            await self.clock.sleep(period)
+            intent = self._intent
+            now = self.clock.now()
+            if intent is not None and now < intent.expires_s and \
+                    now - self._last_send_s >= 0.9 * period:
+                await self._send(intent)
+
+    async def _send(self, intent: Intent) -> None:
+        await self.vehicle.send_setpoint(intent.setpoint)
+        now = self.clock.now()
+        self._last_send_s = now
+        self.stats.setpoints_sent += 1
+        if not intent.sent:
+            intent.sent = True
+            sp = intent.setpoint
+            latency = None if intent.source_frame_time_s is None \
+                else (now - intent.source_frame_time_s) * 1e3
+            self.log.write(ch.SETPOINTS, now, {
+                "time_s": now, "source_frame_time_s": intent.source_frame_time_s,
+                "latency_ms": latency, "frame": sp.frame.value,
+                "position_ned_m": sp.position_ned_m, "velocity_m_s": sp.velocity_m_s,
+                "yaw_rad": sp.yaw_rad, "yaw_rate_rad_s": sp.yaw_rate_rad_s,
+                "expires_s": intent.expires_s, "step": intent.step, "phase": intent.phase})
+
+    def _simulator_tasks(self, tasks: asyncio.TaskGroup) -> list[asyncio.Task]:
+        """Ground truth and status messages, when the vehicle is the simulator (for the log
+        and scoring only; nothing here reaches the autopilot's decisions)."""
+        found = []
+        truth = getattr(self.vehicle, "ground_truth", None)
+        if callable(truth):
+            found.append(tasks.create_task(self._record_truth(truth), name="ground-truth"))
+        events = getattr(self.vehicle, "events", None)
+        if callable(events):
+            found.append(tasks.create_task(self._record_status(events), name="status-text"))
+        return found
+
+    async def _record_truth(self, stream) -> None:
+        async with contextlib.aclosing(stream(buffer=1024)) as samples:
+            async for gt in samples:
+                self.log.write(ch.GROUND_TRUTH, gt.time_s, ch.ground_truth_record(gt))
+
+    async def _record_status(self, stream) -> None:
+        async with contextlib.aclosing(stream(buffer=64)) as messages:
+            async for time_s, text in messages:
+                self.log.write(ch.VEHICLE_STATUS, time_s, {"time_s": time_s, "text": text})
+
+    # ------------------------------------------------------------------------------------
+    # Helpers
+    # ------------------------------------------------------------------------------------
+
+    async def _first_state(self) -> VehicleState:
+        while self._state is None:
+            await self.clock.sleep(0.01)
+        return self._state
+
+    async def _next_tick(self, period: float) -> float | None:
+        """Wait for a fresh estimate (returns its frame's capture time) or the period."""
+        try:
+            source = await self.clock.wait_for(self._estimated.get(), period)
+        except TimeoutError:
+            return None
+        return None if math.isnan(source) else source
+
+    def _inputs(self, state: VehicleState) -> BehaviorInputs:
+        now = self.clock.now()
+        frame = self._last_frame
+        return BehaviorInputs(
+            now_s=now, state=state, target=self.filter.estimate(now),
+            detection=frame.detection if frame is not None else None,
+            last_detection=self._last_detection,
+            frame_seq=frame.seq if frame is not None else -1)
+
+    def _predicted_pixel(self, frame: Frame) -> tuple[tuple[float, float], float] | None:
+        """Where the tracked target should appear in this frame, and how big (a hint for the
+        detector)."""
+        if self.filter.is_stale(frame.time_s):
+            return None
+        est = self.filter.estimate(frame.time_s)
+        pose = self.history.pose_at(frame.time_s)
+        if est is None or pose is None:
+            return None
+        cam = frame.camera
+        r_wb = quat_to_matrix(pose.attitude_q)
+        p_cam = cam.rotation_body_cam.T @ (
+            r_wb.T @ (est.position_ned_m - pose.position_ned_m) - cam.position_body_m)
+        if p_cam[2] <= 0.1:
+            return None
+        u, v = cam.intrinsics.project(p_cam)
+        radius = cam.intrinsics.fx * self.detector.settings.diameter_m / 2.0 / \
+            float(np.linalg.norm(p_cam))
+        return (float(u), float(v)), radius
+
+    def _count_frame(self, detection: BallDetection | None) -> None:
+        self.stats.frames += 1
+        self.stats.detections += detection is not None
+        if self._step == "follow_ball":
+            self.stats.follow_frames += 1
+            self.stats.follow_detections += detection is not None
+
+    def _event(self, time_s: float, text: str) -> None:
+        self.log.write(ch.MISSION_EVENTS, time_s, {"time_s": time_s, "step": self._step,
+                                                    "text": text})
+        if self._progress is not None and not text.startswith("request "):
+            self._progress(f"[{time_s:7.2f} s] {text}")
+
+    def _log_plan(self) -> None:
+        plan = self.plan
+        follow = next((s.params for s in plan.steps if s.name == "follow_ball"), None)
+        standoff = (follow.standoff_m if follow is not None and follow.standoff_m else
+                    self.config.control.follow.standoff_m)
+        self.log.write(ch.MISSION_PLAN, self.clock.now(), ch.clean({
+            "mission": plan.mission.name, "source": str(plan.source),
+            "steps": [{s.name: s.params.model_dump()} for s in plan.steps],
+            "standoff_m": standoff, "camera": self.camera_name,
+            "ball_diameter_m": self.config.perception.ball.diameter_m,
+            "driver": self.config.driver,
+            "scenario": plan.mission.scenario.model_dump() if plan.mission.scenario else None}))
+
+    def progress_line(self) -> str:
+        s = self._state
+        now = self.clock.now()
+        parts = [f"t={now:6.1f}s", f"step={self._step or '-'}", f"phase={self._phase or '-'}"]
+        if s is not None:
+            parts += [f"mode={s.mode.value}", f"alt={s.altitude_m:4.1f}m"]
+            est = self.filter.estimate(now)
+            if est is not None and not est.stale:
+                distance = float(np.linalg.norm(est.position_ned_m - s.position_ned_m))
+                parts.append(f"target={distance:4.2f}m")
+        st = self.stats
+        if st.follow_frames:
+            parts.append(f"det={100.0 * st.follow_detections / st.follow_frames:3.0f}%")
+        return " ".join(parts)
+
+    async def _report_progress(self) -> None:
+        interactive = sys.stderr.isatty()
+        interval = 0.25 if interactive else self.config.runtime.progress_interval_s
+        while True:
+            await asyncio.sleep(interval)  # wall time: progress is for the person watching
+            line = self.progress_line()
+            if interactive:
+                sys.stderr.write("\r" + line.ljust(100))
+                sys.stderr.flush()
+            else:
+                self._progress(line)
+
+
+def _detection_record(frame: Frame, det: BallDetection | None, elapsed_ms: float) -> dict:
+    base = {"time_s": frame.time_s, "seq": frame.seq, "camera": frame.camera.name,
+            "detected": det is not None, "processing_ms": elapsed_ms}
+    if det is None:
+        return {**base, "u_px": None, "v_px": None, "radius_px": None, "range_m": None,
+                "position_cam_m": [None] * 3, "score": None, "candidates": 0,
+                "cut_by_border": False}
+    return {**base, "u_px": det.u_px, "v_px": det.v_px, "radius_px": det.radius_px,
+            "range_m": det.range_m, "position_cam_m": det.position_cam_m, "score": det.score,
+            "candidates": det.candidates, "cut_by_border": det.cut_by_border}

@@ -1,0 +1,95 @@
+"""Turns a mission's ``scenario:`` section into the simulated world: the ball on its path, the
+distractors, the wind and the seed. Simulator only; a real vehicle ignores scenarios.
+
+The ball starts ``start_distance_m`` ahead of the vehicle's starting position and heading, at
+``height_m``, and (after ``start_delay_s``) moves along its path at ``speed_mps``. Distractors are
+orange-ish objects that are not the ball — orange boxes, poles, bricks and discs, and spheres of
+neighbouring hues — placed beside the ball's path, where the following camera will see them.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from autopilot.mission import BallScenario, Scenario
+from autopilot.perception.colors import COLORS, ORANGEISH_RGBA
+from drivers.sim.config import SimConfig
+from drivers.sim.scenario import (
+    Delayed,
+    Geom,
+    MocapBody,
+    RandomWalk,
+    ScenarioObject,
+    Static,
+    Trajectory,
+    circle,
+    figure8,
+    lissajous,
+)
+
+BALL = "ball"
+
+
+def build_world(scenario: Scenario | None, sim: SimConfig) -> tuple[SimConfig,
+                                                                     list[ScenarioObject]]:
+    """The simulator configuration (seed and wind from the scenario) and the scenario objects."""
+    if scenario is None:
+        return sim, []
+    wind = sim.wind.model_copy(update={"gust_mps": scenario.wind.gust_mps,
+                                       "steady_ned_m_s": scenario.wind.steady_ned_m_s})
+    sim = sim.model_copy(update={"seed": scenario.seed, "wind": wind})
+    path = ball_trajectory(scenario.ball, sim, scenario.seed)
+    ball = MocapBody(BALL, [Geom("sphere", (scenario.ball.diameter_m / 2.0,),
+                                 COLORS[scenario.ball.color][0])], path)
+    return sim, [ball, *distractors(scenario, sim, path)]
+
+
+def ball_trajectory(ball: BallScenario, sim: SimConfig, seed: int) -> Trajectory:
+    yaw = math.radians(sim.vehicle.initial_yaw_deg)
+    north, east = sim.vehicle.initial_north_east_m
+    start = (north + ball.start_distance_m * math.cos(yaw),
+             east + ball.start_distance_m * math.sin(yaw), -ball.height_m)
+    size, speed = ball.size_m, ball.speed_mps
+    if ball.path == "static" or speed == 0.0:
+        path: Trajectory = Static(start)
+    elif ball.path == "circle":
+        path = circle(start, speed, radius_m=size / 2.0, heading_rad=yaw)
+    elif ball.path == "figure8":
+        path = figure8(start, speed, length_m=size, width_m=size / 2.0, heading_rad=yaw)
+    elif ball.path == "lissajous":
+        path = lissajous(start, speed, size_m=(0.75 * size, size), heading_rad=yaw)
+    else:
+        path = RandomWalk(start, speed, seed=seed, radius_m=size / 2.0)
+    return Delayed(path, ball.start_delay_s) if ball.start_delay_s > 0 else path
+
+
+def distractors(scenario: Scenario, sim: SimConfig, path: Trajectory) -> list[ScenarioObject]:
+    rng = np.random.default_rng(scenario.seed + 7919)
+    start = np.array([*sim.vehicle.initial_north_east_m, 0.0])
+    ball_start = path(0.0)[0]
+    orange = ORANGEISH_RGBA[0]
+    kinds = [
+        ("box", [Geom("box", (0.15, 0.15, 0.15), orange, collide=False)]),
+        ("pole", [Geom("cylinder", (0.06, 0.6), orange)]),
+        ("red-orange ball", [Geom("sphere", (0.1,), ORANGEISH_RGBA[1])]),
+        ("amber ball", [Geom("sphere", (0.1,), ORANGEISH_RGBA[2])]),
+        ("brick", [Geom("box", (0.3, 0.1, 0.06), orange)]),
+        ("disc", [Geom("cylinder", (0.2, 0.01), orange)]),
+    ]
+    objects: list[ScenarioObject] = []
+    for i in range(scenario.distractors):
+        name, geoms = kinds[i % len(kinds)]
+        for _ in range(100):  # a spot beside the path, clear of the start and of the ball
+            along = path(float(rng.uniform(0.0, 60.0)))[0]
+            angle = rng.uniform(0.0, 2.0 * math.pi)
+            offset = rng.uniform(1.5, 3.5) * np.array([math.cos(angle), math.sin(angle), 0.0])
+            pos = along + offset
+            pos[2] = -float(rng.uniform(0.3, 2.5))
+            if (np.linalg.norm(pos[:2] - start[:2]) > 2.5
+                    and np.linalg.norm(pos - ball_start) > 1.5):
+                break
+        objects.append(MocapBody(f"distractor{i}_{name.replace(' ', '_')}", geoms,
+                                 Static(tuple(pos), float(rng.uniform(-math.pi, math.pi)))))
+    return objects
