@@ -51,6 +51,13 @@ def build_parser() -> argparse.ArgumentParser:
     sitl.add_argument("--realtime", action="store_true",
                       help="run against the wall clock instead of lockstep")
     _add_config_options(sitl)
+    follow = benches.add_parser(
+        "follow_ball", help="follow_ball, default and figure-8 2 m/s gusts scenarios: our "
+        "controller against the seed 001 and 003 rules")
+    follow.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    follow.add_argument("--mission", default="follow_ball", metavar="NAME|FILE")
+    follow.add_argument("--set", dest="overrides", action="append", default=[],
+                        metavar="KEY=VALUE", help="override a mission or configuration key")
 
     validate = commands.add_parser("validate", help="check a mission or configuration file")
     validate.add_argument("file")
@@ -142,11 +149,18 @@ def _validate(file: str) -> int:
 
 
 def _bench(args: argparse.Namespace) -> int:
+    log = (lambda message: None) if args.json else \
+        (lambda message: print(f"  {message}", file=sys.stderr, flush=True))
+    if args.bench == "follow_ball":
+        from autopilot.bench import follow_ball
+
+        result = follow_ball.run_bench(args.mission, args.overrides, log)
+        print(json.dumps(result) if args.json else follow_ball.format_table(result))
+        return EXIT_OK
+
     from autopilot.bench.sitl import format_table, run_sitl_bench
 
     config = load_config(args.config, args.overrides)
-    log = (lambda message: None) if args.json else \
-        (lambda message: print(f"  {message}", file=sys.stderr, flush=True))
     result = asyncio.run(run_sitl_bench(config.sim, lockstep=not args.realtime, log=log))
     if args.json:
         print(json.dumps(result.to_dict()))

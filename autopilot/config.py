@@ -69,6 +69,8 @@ class TargetEstimationConfig(_Model):
     pixel_noise_px: Positive
     radius_noise_px: Positive
     border_noise_scale: Annotated[float, Field(ge=1)]  # blobs cut by the image border
+    restart_after: Annotated[int, Field(ge=2, le=30)]
+    confirm_after: Annotated[int, Field(ge=1, le=60)]
 
 
 class EstimationConfig(_Model):
@@ -85,6 +87,8 @@ class FollowControlConfig(_Model):
     max_accel_m_s2: Positive
     max_yaw_rate_deg_s: Positive
     altitude_floor_m: NonNegative
+    accel_lead_s: NonNegative
+    accel_filter_s: Positive
     lost_after_s: Positive
     lost_hold_s: NonNegative
     search_yaw_rate_deg_s: Positive

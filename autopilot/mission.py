@@ -83,6 +83,7 @@ class BallScenario(_Model):
     height_m: Annotated[float, Field(gt=0.1, le=50)] = 1.5  # of the ball's centre
     start_distance_m: Annotated[float, Field(gt=0.5, le=50)] = 2.0  # ahead of the vehicle
     start_delay_s: NonNegative = 0.0  # the ball waits this long before moving
+    accel_mps2: Annotated[float, Field(gt=0, le=50)] = 2.0  # then gets up to speed this fast
     size_m: Annotated[float, Field(gt=0.5, le=100)] = 8.0  # extent of the path
 
 
@@ -270,6 +271,8 @@ def build_behavior(step: Step, config: AppConfig, cameras: Mapping[str, CameraIn
             max_accel_m_s2=f.max_accel_m_s2,
             max_yaw_rate_rad_s=math.radians(f.max_yaw_rate_deg_s),
             altitude_floor_m=f.altitude_floor_m,
+            accel_lead_s=f.accel_lead_s,
+            accel_filter_s=f.accel_filter_s,
         )
         lost = LostTargetSettings(f.lost_after_s, f.lost_hold_s,
                                   math.radians(f.search_yaw_rate_deg_s), f.lost_timeout_s)

@@ -98,7 +98,8 @@ class Runtime:
             accel_noise_m_s2=t.accel_noise_m_s2, gate_chi2=t.gate_chi2,
             stale_after_s=t.stale_after_s, initial_velocity_std_m_s=t.initial_velocity_std_m_s,
             max_extrapolation_s=t.max_extrapolation_s, pixel_noise_px=t.pixel_noise_px,
-            radius_noise_px=t.radius_noise_px)
+            radius_noise_px=t.radius_noise_px, restart_after=t.restart_after,
+            confirm_after=t.confirm_after)
         self.filter = TargetFilter(self.filter_settings)
         self.history = PoseHistory()
         self.camera_name = ball.camera
@@ -248,6 +249,7 @@ class Runtime:
         self.log.write(ch.CAMERA_INFO, self.clock.now(), ch.camera_info_record(camera))
         async with contextlib.aclosing(self.vehicle.frames(self.camera_name)) as frames:
             async for frame in frames:
+                received = self.clock.now()
                 hint = self._predicted_pixel(frame)
                 uv, radius = hint if hint is not None else (None, None)
                 started = time.perf_counter()
@@ -258,8 +260,10 @@ class Runtime:
                 processed = ProcessedFrame(frame.time_s, frame.seq, frame, detection)
                 self._frames.put(processed)
                 self._count_frame(detection)
-                self.log.write(ch.BALL_DETECTIONS, frame.time_s,
-                               _detection_record(frame, detection, elapsed_ms))
+                record = _detection_record(frame, detection, elapsed_ms)
+                record["received_s"] = received
+                record["detected_s"] = self.clock.now()
+                self.log.write(ch.BALL_DETECTIONS, frame.time_s, record)
 
     async def _estimation(self) -> None:
         scale = self.config.estimation.target.border_noise_scale

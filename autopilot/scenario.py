@@ -62,7 +62,9 @@ def ball_trajectory(ball: BallScenario, sim: SimConfig, seed: int) -> Trajectory
         path = lissajous(start, speed, size_m=(0.75 * size, size), heading_rad=yaw)
     else:
         path = RandomWalk(start, speed, seed=seed, radius_m=size / 2.0)
-    return Delayed(path, ball.start_delay_s) if ball.start_delay_s > 0 else path
+    ramp = ball.speed_mps / ball.accel_mps2
+    return Delayed(path, ball.start_delay_s, ramp) if ball.start_delay_s > 0 or ramp > 0 \
+        else path
 
 
 def distractors(scenario: Scenario, sim: SimConfig, path: Trajectory) -> list[ScenarioObject]:

@@ -105,7 +105,8 @@ class FollowBall(Behavior):
             return BehaviorOutput(Status.RUNNING, setpoint=self._rule.command(inputs),
                                   phase="tracking")
         target = inputs.target
-        if target is not None and not target.stale and target.age_s <= self.lost.lost_after_s:
+        if (target is not None and target.confirmed and not target.stale
+                and target.age_s <= self.lost.lost_after_s):
             if not self._tracking:
                 self.controller.reset(inputs.state)
                 self._tracking = True

@@ -3,7 +3,10 @@
 The vehicle aims for the point ``standoff_m`` back from the target along the camera's line of
 sight (so a camera pitched down δ puts the vehicle standoff·sin δ above the target, which then
 sits in the image centre), and flies there with a velocity command: the target's velocity as
-feed-forward plus a proportional correction, limited in speed and acceleration. Two modes
+feed-forward, plus its acceleration times ``accel_lead_s`` (the vehicle's velocity loop lags its
+command by about that much, so the command leads the target's motion), plus a proportional
+correction, limited in speed and acceleration. Leading, rather than correcting harder later,
+keeps the vehicle's pitch — and so the target's place in a body-fixed camera — calm. Two modes
 (seed 001):
 
 * ``yaw`` — turn to face the target; the standoff point lies behind it on the bearing line.
@@ -40,6 +43,8 @@ class FollowSettings:
     max_accel_m_s2: float
     max_yaw_rate_rad_s: float
     altitude_floor_m: float
+    accel_lead_s: float = 0.0  # feed-forward of the target's acceleration
+    accel_filter_s: float = 0.2  # time constant of the target-acceleration estimate
 
 
 def camera_depression_rad(camera: CameraInfo) -> float:
@@ -56,6 +61,9 @@ class FollowController:
         self._yaw_target = 0.0
         self._last_cmd: np.ndarray | None = None
         self._last_time: float | None = None
+        self._target_vel: np.ndarray | None = None
+        self._target_acc = np.zeros(3)
+        self._target_time = 0.0
         #: Where the controller wants the vehicle (NED), for logging.
         self.desired_position_ned_m = np.full(3, np.nan)
 
@@ -65,6 +73,8 @@ class FollowController:
         self._yaw_target = state.yaw_rad
         self._last_cmd = np.array(state.velocity_ned_m_s)
         self._last_time = state.time_s
+        self._target_vel = None
+        self._target_acc = np.zeros(3)
 
     def update(self, now_s: float, state: VehicleState, target: TargetEstimate) -> Setpoint:
         s = self.settings
@@ -89,12 +99,24 @@ class FollowController:
                          -s.altitude_floor_m)
         self.desired_position_ned_m = desired
 
-        cmd = v_t + s.position_gain * (desired - p_v)
+        acc_t = self._target_acceleration(now_s, v_t)
+        lead = v_t + s.accel_lead_s * acc_t
+        if s.mode == "yaw" and horizontal > _MIN_BEARING_DISTANCE_M:
+            # facing the target, only the line of sight matters: move along it to hold the
+            # range, and let the yaw follow sideways motion (no orbiting)
+            u = np.array([rel[0] / horizontal, rel[1] / horizontal, 0.0])
+            radial = float(lead @ u) + s.position_gain * (horizontal - back)
+            cmd = radial * u
+            cmd[2] = lead[2] + s.position_gain * (desired[2] - p_v[2])
+        else:
+            cmd = lead + s.position_gain * (desired - p_v)
+        cmd = self._limit(now_s, cmd)
         if cmd[2] > 0.0 and p_v[2] > -s.altitude_floor_m - 0.1:
             # near the floor: no descending feed-forward, only the correction towards the
-            # (floor-limited) desired altitude
-            cmd[2] = s.position_gain * (desired[2] - p_v[2])
-        cmd = self._limit(now_s, cmd)
+            # (floor-limited) desired altitude; applied after the smoothing, which must not
+            # carry a descent through the floor
+            cmd[2] = max(0.0, min(cmd[2], s.position_gain * (desired[2] - p_v[2])))
+            self._last_cmd[2] = cmd[2]
 
         yaw_rate = s.yaw_gain * wrap_pi(yaw_des - state.yaw_rad)
         if s.mode == "yaw" and horizontal > _MIN_BEARING_DISTANCE_M:
@@ -102,6 +124,18 @@ class FollowController:
             yaw_rate += (rel[0] * rel_v[1] - rel[1] * rel_v[0]) / (horizontal * horizontal)
         yaw_rate = max(-s.max_yaw_rate_rad_s, min(s.max_yaw_rate_rad_s, yaw_rate))
         return Setpoint.velocity_ned(*cmd, yaw_rate_rad_s=yaw_rate, time_s=now_s)
+
+    def _target_acceleration(self, now_s: float, v_t: np.ndarray) -> np.ndarray:
+        """Low-passed derivative of the target's estimated velocity."""
+        if self._target_vel is not None:
+            dt = now_s - self._target_time
+            if dt > 1e-6:
+                alpha = dt / (dt + self.settings.accel_filter_s)
+                self._target_acc += alpha * ((v_t - self._target_vel) / dt - self._target_acc)
+        if self._target_vel is None or now_s > self._target_time:
+            self._target_vel = np.array(v_t)
+            self._target_time = now_s
+        return self._target_acc
 
     def _limit(self, now_s: float, cmd: np.ndarray) -> np.ndarray:
         s = self.settings

@@ -7,6 +7,11 @@ world NED.
 * Outliers are gated on the Mahalanobis distance of the innovation (χ², 3 degrees of freedom).
 * An estimate has an age (time since the last accepted measurement); past ``stale_after_s`` the
   track is stale and the next measurement starts a new one, whatever its distance.
+* ``restart_after`` consecutive rejected measurements that agree with one another mean the
+  filter, not the measurements, is wrong (the target manoeuvred beyond the model): the track
+  restarts from them, with their velocity.
+* A track is *confirmed* once ``confirm_after`` measurements have updated it; a lone false
+  detection starts a track that never gets there.
 
 Data flow: detections (camera frame) + the vehicle pose at capture time → world-frame position
 measurements → this filter → :class:`TargetEstimate` for behaviours.
@@ -34,6 +39,8 @@ class TargetFilterSettings:
     max_extrapolation_s: float  # estimates are not extrapolated further than this
     pixel_noise_px: float  # bearing noise of a detection
     radius_noise_px: float  # apparent-radius noise (drives the range noise)
+    restart_after: int = 4  # consecutive consistent rejections that restart the track
+    confirm_after: int = 5  # updates before a track is trusted
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -54,6 +61,7 @@ class TargetEstimate:
     age_s: float
     stale: bool
     updates: int
+    confirmed: bool
 
     @property
     def position_std_m(self) -> np.ndarray:
@@ -74,6 +82,7 @@ class TargetFilter:
     _time: float = field(default=-math.inf, init=False)
     _last_update: float = field(default=-math.inf, init=False)
     _updates: int = field(default=0, init=False)
+    _rejected: list[PositionMeasurement] = field(default_factory=list, init=False)
 
     @property
     def initialised(self) -> bool:
@@ -98,7 +107,12 @@ class TargetFilter:
         s = kf.H @ kf.P @ kf.H.T + meas.covariance
         d2 = float(innovation @ np.linalg.solve(s, innovation))
         if d2 > self.settings.gate_chi2:
+            self._rejected.append(meas)
+            if len(self._rejected) >= self.settings.restart_after and self._consistent():
+                self._restart()
+                return UpdateResult(True, d2, True)
             return UpdateResult(False, d2, False)
+        self._rejected.clear()
         kf.update(meas.position_ned_m, R=meas.covariance)
         self._last_update = meas.time_s
         self._updates += 1
@@ -123,9 +137,40 @@ class TargetFilter:
             age_s=now_s - self._last_update,
             stale=self.is_stale(now_s),
             updates=self._updates,
+            confirmed=self._updates >= self.settings.confirm_after,
         )
 
     # -- internals --------------------------------------------------------------------------
+
+    def _consistent(self) -> bool:
+        """Do the rejected measurements lie on one straight, constant-speed track?"""
+        t, p, v = self._line_fit(self._rejected[-self.settings.restart_after:])
+        for m in self._rejected[-self.settings.restart_after:]:
+            residual = m.position_ned_m - (p + v * (m.time_s - t))
+            if residual @ np.linalg.solve(m.covariance, residual) > self.settings.gate_chi2:
+                return False
+        return True
+
+    @staticmethod
+    def _line_fit(ms: list[PositionMeasurement]) -> tuple[float, np.ndarray, np.ndarray]:
+        """Least-squares position (at the last time) and velocity through measurements."""
+        times = np.array([m.time_s for m in ms])
+        pos = np.array([m.position_ned_m for m in ms])
+        t_last = times[-1]
+        a = np.column_stack((np.ones(len(ms)), times - t_last))
+        coef = np.linalg.lstsq(a, pos, rcond=None)[0]
+        return t_last, coef[0], coef[1]
+
+    def _restart(self) -> None:
+        recent = self._rejected[-self.settings.restart_after:]
+        t, p, v = self._line_fit(recent)
+        self._initialise(PositionMeasurement(t, p, recent[-1].covariance))
+        self._kf.x[3:] = v
+        span = max(recent[-1].time_s - recent[0].time_s, 1e-3)
+        pos_std = float(np.sqrt(np.max(np.diag(recent[-1].covariance))))
+        self._kf.P[3:, 3:] = np.eye(3) * (2.0 * pos_std / span) ** 2
+        self._updates = len(recent)  # these measurements agree: the new track is as good
+        self._rejected.clear()
 
     def _initialise(self, meas: PositionMeasurement) -> None:
         kf = KalmanFilter(dim_x=6, dim_z=3)
@@ -138,6 +183,7 @@ class TargetFilter:
         self._time = meas.time_s
         self._last_update = meas.time_s
         self._updates = 1
+        self._rejected = []
 
     def _predict_to(self, time_s: float) -> None:
         dt = time_s - self._time

@@ -7,7 +7,8 @@ Follow metrics cover the intervals in which a ``follow_ball`` step ran:
   max(3 px, half its apparent radius)) ÷ frames in which the whole ball was inside the image;
 * ``rms_range_error_m`` — RMS of (true vehicle–ball distance − standoff) over the truth samples;
 * ``rms_image_error_px`` — RMS distance of the ball's true image position from the image centre,
-  over the frames in which it was in front of the camera;
+  over the frames in which it was in front of the camera, each clipped at the image's
+  half-diagonal (a ball out of view counts as at the edge);
 * ``max_lost_s`` — the longest time without a correct detection;
 * ``false_detection_rate`` — detections that were not the ball ÷ frames processed.
 
@@ -107,7 +108,8 @@ def follow_metrics(log: Mapping[str, Sequence[Mapping]]) -> dict:
         proj = _project(cam, *pose, radius_m) if pose is not None else None
         if proj is not None:
             u, v, r_px = proj
-            image_errors.append(math.hypot(u - cam["cx"], v - cam["cy"]))
+            half_diagonal = 0.5 * math.hypot(cam["width_px"], cam["height_px"])
+            image_errors.append(min(math.hypot(u - cam["cx"], v - cam["cy"]), half_diagonal))
             visible = (u - r_px >= 0 and v - r_px >= 0 and u + r_px <= cam["width_px"] - 1
                        and v + r_px <= cam["height_px"] - 1)
             in_view += visible

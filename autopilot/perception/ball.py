@@ -1,14 +1,17 @@
 """Coloured-ball detection (seeds 001 and 003, done properly).
 
 HSV thresholds (several ranges, so red can wrap around hue 0) → morphological opening and
-closing → external contours → shape checks → an ellipse fit per candidate. A sphere seen off
+closing → external contours → shape checks (circularity, fill of the enclosing circle, and
+enough vertices when the outline is simplified: a cube seen corner-on is a fairly round hexagon)
+→ an ellipse fit per candidate. A sphere seen off
 the optical axis images as an ellipse elongated radially; its minor semi-axis, with the angle
 off-axis, gives the sphere's angular radius exactly, hence the range from the known diameter.
 Blobs cut by the image border are fitted on their interior contour points only. A blob that
 fails the shape checks may be the ball merged with something of the same colour behind or
-beside it: a circle refitted around its largest inscribed circle is then accepted if the blob's
-outline follows it most of the way round (true of a ball with a box touching it, not of a box
-alone, whose inscribed circle touches its outline at four points).
+beside it: circles refitted around its largest inscribed circles are accepted where the blob's
+outline follows them unbroken most of the way round (true of a ball with a box touching it,
+which hides one stretch of its outline; not of a box alone, whose inscribed circle meets the
+outline in several short stretches).
 
 Data flow: a camera :class:`~drivers.base.Frame` goes in; a :class:`BallDetection` (or None)
 comes out, in the camera's optical frame. Synchronous and stateless apart from its settings;
@@ -40,7 +43,8 @@ class BallDetectorSettings:
     min_circularity: float = 0.8
     min_fill_ratio: float = 0.75
     max_axis_ratio: float = 1.6  # major/minor beyond what a sphere off-axis can produce
-    min_edge_coverage: float = 0.7  # merged blobs: share of a circle's outline on the edge
+    min_polygon_vertices: int = 8  # of the outline simplified to 2 % of its length
+    min_edge_arc: float = 0.75  # merged blobs: longest unbroken arc of outline on the circle
 
 
 @dataclass(frozen=True, slots=True)
@@ -102,19 +106,14 @@ class BallDetector:
                    window: tuple[int, int, int, int] | None = None) -> list[BallCandidate]:
         """Every blob that looks like a ball, best first (image coordinates).
 
-        With a ``window`` (x0, y0, x1, y1) only that part of the image is searched; the result
-        is None-equivalent (empty) when the window cannot tell: colour touching one of its edges
-        that is not an image edge may be a ball cut by the window."""
+        With a ``window`` (x0, y0, x1, y1) only that part of the image is searched, and only
+        balls lying wholly inside it count (one cut by the window's edge would be mis-fitted)."""
         s = self.settings
         height, width = image_bgr.shape[:2]
         x0, y0 = 0, 0
         if window is not None:
             x0, y0, x1, y1 = window
             mask = self.mask(image_bgr[y0:y1, x0:x1])
-            inner_edges = [mask[0, :] if y0 > 0 else None, mask[-1, :] if y1 < height else None,
-                           mask[:, 0] if x0 > 0 else None, mask[:, -1] if x1 < width else None]
-            if any(e is not None and e.any() for e in inner_edges):
-                return []
         else:
             mask = self.mask(image_bgr)
         contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE,
@@ -130,6 +129,8 @@ class BallDetector:
                 found.append(candidate)
             elif area > 4.0 * min_area:
                 found.extend(self._merged_balls(contour, width, height))
+        if window is not None:
+            found = [c for c in found if _inside(c, window, width, height)]
         found.sort(key=lambda c: c.score, reverse=True)
         return found
 
@@ -168,40 +169,62 @@ class BallDetector:
             fill = min(1.0, (area + 0.5 * perimeter) / (math.pi * (enclosing + 0.5) ** 2))
         if circularity < s.min_circularity or fill < s.min_fill_ratio:
             return None
+        # a round outline reduces to many vertices, a cube's hexagon or square to few (below
+        # about 6 px of radius even a circle reduces to few: the test says nothing there)
+        if not cut and minor >= 6.0 and len(cv2.approxPolyDP(contour, 0.02 * perimeter, True)) \
+                < s.min_polygon_vertices:
+            return None
         return BallCandidate(cu, cv_, minor, circularity, fill, cut)
 
     def _merged_balls(self, contour: np.ndarray, width: int,
                       height: int) -> list[BallCandidate]:
-        """A ball inside a blob that is not one (the ball with something of its colour
-        touching it). Start from the blob's largest inscribed circle, refit a circle to the
-        outline points near it, and accept it if those points go most of the way round."""
+        """Balls inside a blob that is not one (a ball with something of its colour touching
+        it). Try the blob's largest inscribed circles in turn: refit a circle to the outline
+        points near each, and keep it if those points go most of the way round."""
         s = self.settings
         x, y, w, h = cv2.boundingRect(contour)
         blob = np.zeros((h + 4, w + 4), np.uint8)
         cv2.drawContours(blob, [contour], -1, 255, cv2.FILLED, offset=(2 - x, 2 - y))
-        _, r_in, _, (px, py) = cv2.minMaxLoc(cv2.distanceTransform(blob, cv2.DIST_L2, 5))
-        if r_in + 0.5 < 2.0 * s.min_radius_px:
-            return []  # too small to tell a circle from a corner
+        inside = cv2.distanceTransform(blob, cv2.DIST_L2, 5)
         pts = contour.reshape(-1, 2).astype(np.float64)
-        cu, cv_, radius = px + x - 2.0, py + y - 2.0, r_in + 0.5
+        found = []
+        for _ in range(3):
+            _, r_in, _, (px, py) = cv2.minMaxLoc(inside)
+            if r_in + 0.5 < 2.0 * s.min_radius_px:
+                break  # too small to tell a circle from a corner
+            cv2.circle(inside, (px, py), math.ceil(1.2 * r_in), 0, cv2.FILLED)
+            circle = self._circle_around(pts, px + x - 2.0, py + y - 2.0, r_in + 0.5)
+            if circle is None:
+                continue
+            cu, cv_, radius, arc = circle
+            if arc < s.min_edge_arc or radius > s.max_radius_px:
+                continue
+            cut = cu - radius < 0 or cv_ - radius < 0 or cu + radius > width - 1 or \
+                cv_ + radius > height - 1
+            found.append(BallCandidate(float(cu), float(cv_), float(radius), arc, 1.0, cut,
+                                       merged=True))
+        return found
+
+    @staticmethod
+    def _circle_around(pts: np.ndarray, cu: float, cv_: float,
+                       radius: float) -> tuple[float, float, float, float] | None:
+        """Refit a circle to the outline points near a starting circle; its centre, radius,
+        and the longest unbroken arc of it that outline points follow (fraction of the circle,
+        in 10° sectors). Something touching a ball hides one stretch of its outline; a
+        polygon's inscribed circle meets the outline in several short stretches."""
         for tolerance in (2.0, 1.2, 1.0):
             near = np.abs(np.hypot(pts[:, 0] - cu, pts[:, 1] - cv_) - radius) < \
                 max(tolerance, 0.08 * radius)
             if near.sum() < 8:
-                return []
+                return None
             cu, cv_, radius = _fit_circle(pts[near])
         off = np.hypot(pts[:, 0] - cu, pts[:, 1] - cv_) - radius
         on = np.abs(off) < max(0.7, 0.05 * radius)
         angles = np.arctan2(pts[on, 1] - cv_, pts[on, 0] - cu)
-        coverage = len(np.unique(((angles + math.pi) / (2.0 * math.pi) * 36).astype(int) % 36)) \
-            / 36.0
-        radius += 0.5  # outline points are pixel centres, half a pixel inside the edge
-        if coverage < s.min_edge_coverage or radius > s.max_radius_px:
-            return []
-        cut = cu - radius < 0 or cv_ - radius < 0 or cu + radius > width - 1 or \
-            cv_ + radius > height - 1
-        return [BallCandidate(float(cu), float(cv_), float(radius), coverage, 1.0, cut,
-                              merged=True)]
+        covered = np.zeros(36, dtype=bool)
+        covered[((angles + math.pi) / (2.0 * math.pi) * 36).astype(int) % 36] = True
+        # outline points are pixel centres, half a pixel inside the edge
+        return cu, cv_, radius + 0.5, _longest_circular_run(covered) / 36.0
 
     def _window(self, image_bgr: np.ndarray, centre: Sequence[float],
                 radius_px: float | None) -> tuple[int, int, int, int] | None:
@@ -250,6 +273,26 @@ class BallDetector:
             cut_by_border=best.cut_by_border,
             others=tuple(c for c in found if c is not best),
         )
+
+
+def _longest_circular_run(flags: np.ndarray) -> int:
+    if flags.all():
+        return len(flags)
+    doubled = np.concatenate((flags, flags))
+    best = run = 0
+    for flag in doubled:
+        run = run + 1 if flag else 0
+        best = max(best, run)
+    return min(best, len(flags))
+
+
+def _inside(c: BallCandidate, window: tuple[int, int, int, int], width: int,
+            height: int) -> bool:
+    """Is the candidate clear of the window's edges (image edges excepted)?"""
+    x0, y0, x1, y1 = window
+    r = c.radius_px + 1.0
+    return ((x0 == 0 or c.u_px - r >= x0) and (y0 == 0 or c.v_px - r >= y0)
+            and (x1 == width or c.u_px + r <= x1 - 1) and (y1 == height or c.v_px + r <= y1 - 1))
 
 
 def _fit_circle(points: np.ndarray) -> tuple[float, float, float]:

@@ -7,7 +7,10 @@ Mesa's llvmpipe rasterises on worker threads of its own); :meth:`CameraRig.finis
 image when the frame is due (capture time + camera latency). The image content is fixed at
 capture, so this changes nothing but speed, and lockstep runs stay deterministic.
 
-The OpenGL context lives on the render thread, the only thread that touches it. Each camera has
+The OpenGL context lives on the render thread, the only thread that touches it. That thread
+(and Mesa's rasteriser threads, which inherit it) runs at a lower CPU priority: on a real
+vehicle the camera is its own hardware, so rendering should not take the CPU from the
+autopilot's detector when both are busy (it changes nothing in lockstep). Each camera has
 its own MuJoCo render context (offscreen framebuffer) and scene. Pixels are read back as BGRA
 (llvmpipe's native layout, cheaper than MuJoCo's RGB read-back); wherever nothing was drawn
 (alpha 0: MuJoCo clears to transparent black) the sky is painted in the world's haze colour.
@@ -16,14 +19,15 @@ Frames are delivered top-down BGR, as OpenCV expects.
 
 from __future__ import annotations
 
+import contextlib
 import os
+import threading
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 
 import cv2
 import mujoco
 import numpy as np
-from mujoco import gl_context
 
 from drivers.base import CameraInfo, Frame
 
@@ -113,10 +117,14 @@ class CameraRig:
     def _render(self, target: _CameraTarget) -> np.ndarray:
         """On the render thread: draw the snapshot, read it back top-down BGR."""
         if self._gl is None:
+            lower_thread_priority()
             self._gl = _make_gl_context(self._model)
         if target.context is None:
-            target.context = mujoco.MjrContext(self._model,
-                                               mujoco.mjtFontScale.mjFONTSCALE_50.value)
+            try:
+                target.context = mujoco.MjrContext(self._model,
+                                                   mujoco.mjtFontScale.mjFONTSCALE_50.value)
+            except Exception as exc:  # mujoco.FatalError and friends
+                raise _unavailable(exc) from exc
             mujoco.mjr_setBuffer(mujoco.mjtFramebuffer.mjFB_OFFSCREEN.value, target.context)
             _fast_texture_filtering(target.context)
         context = target.context
@@ -156,20 +164,40 @@ class CameraRig:
         self._targets.clear()
 
 
+def lower_thread_priority(niceness: int = 10) -> None:
+    """Lower this thread's scheduling priority (Linux: niceness is per thread, and threads
+    started from here inherit it). Elsewhere, or if not permitted, nothing changes."""
+    with contextlib.suppress(AttributeError, OSError):  # not Linux, or not permitted
+        os.setpriority(os.PRIO_PROCESS, threading.get_native_id(),
+                       os.getpriority(os.PRIO_PROCESS, 0) + niceness)
+
+
 def _make_gl_context(model: mujoco.MjModel):
-    backend = os.environ.get("MUJOCO_GL")
+    """An OpenGL context for the backend ``MUJOCO_GL`` names (EGL by default), chosen here
+    rather than when mujoco was imported, so that importing mujoco first does not matter."""
+    backend = os.environ.get("MUJOCO_GL", "egl").lower()
     try:
-        if gl_context.GLContext is None:
-            raise RuntimeError("MuJoCo found no OpenGL backend")
-        ctx = gl_context.GLContext(model.vis.global_.offwidth, model.vis.global_.offheight)
+        if backend == "egl":
+            from mujoco.egl import GLContext
+        elif backend == "osmesa":
+            from mujoco.osmesa import GLContext
+        elif backend == "glfw":
+            from mujoco.glfw import GLContext
+        else:
+            raise RuntimeError(f"unknown MUJOCO_GL backend {backend!r} (egl, osmesa, glfw)")
+        ctx = GLContext(model.vis.global_.offwidth, model.vis.global_.offheight)
         ctx.make_current()
         return ctx
     except Exception as exc:
-        raise RenderingUnavailable(
-            f"cannot render headless with MUJOCO_GL={backend!r}: {exc}. Install Mesa's EGL "
-            "(Debian: apt install libegl1 libgl1-mesa-dri) or disable the cameras "
-            "(--set sim.cameras.front.enabled=false --set sim.cameras.down.enabled=false)."
-        ) from exc
+        raise _unavailable(exc) from exc
+
+
+def _unavailable(exc: Exception) -> RenderingUnavailable:
+    backend = os.environ.get("MUJOCO_GL", "egl")
+    return RenderingUnavailable(
+        f"cannot render headless with MUJOCO_GL={backend!r}: {exc}. Install Mesa's EGL "
+        "(Debian: apt install libegl1 libgl1-mesa-dri) or disable the cameras "
+        "(--set sim.cameras.front.enabled=false --set sim.cameras.down.enabled=false).")
 
 
 def _gl():

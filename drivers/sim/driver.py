@@ -11,8 +11,9 @@ never hopping the loop per physics step.
   interval, so signals are still handled promptly). Runs as fast as the CPU allows and is
   deterministic for a given seed.
 * Real time: a :class:`~drivers.clock.MonotonicClock`; the simulator lives on one dedicated
-  thread (MuJoCo's rendering context is bound to the thread that made it), the physics runs at
-  most ``realtime_batch_s`` ahead of the wall clock, and outputs are published when they are due.
+  thread, the physics runs at most ``realtime_batch_s`` ahead of the wall clock, and outputs are
+  published when they are due. That thread runs at a lower CPU priority, standing in for the
+  vehicle's own hardware: when the machine is busy the autopilot's work comes first.
 
 Setpoints go into a thread-safe inbox and take effect at the start of the next batch; commands
 first flush that inbox, so "stream setpoints, then start OFFBOARD" works as on PX4.
@@ -38,6 +39,7 @@ from drivers.base import (
     VehicleState,
 )
 from drivers.clock import Clock, LockstepClock, MonotonicClock
+from drivers.sim.camera import lower_thread_priority
 from drivers.sim.config import SimConfig
 from drivers.sim.flight.flight_stack import CommandRejected
 from drivers.sim.model import camera_intrinsics, camera_rotation_body
@@ -99,7 +101,8 @@ class SimDriver(Vehicle):
         if self.lockstep:
             self._sim = self._build()
         else:
-            self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="simulator")
+            self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="simulator",
+                                                initializer=lower_thread_priority)
             self._sim = await loop.run_in_executor(self._executor, self._build)
             self._clock.restart(self._sim.time_s)
         self._wall_start = time.perf_counter()

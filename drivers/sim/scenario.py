@@ -175,16 +175,22 @@ class RandomWalk:
 
 @dataclass(frozen=True, slots=True)
 class Delayed:
-    """Holds a trajectory's starting pose until ``start_s``, then runs it."""
+    """Holds a trajectory's starting pose until ``start_s``, then runs it, getting up to speed
+    with constant acceleration over ``ramp_s`` (time along the path runs slow at first)."""
 
     trajectory: Trajectory
     start_s: float
+    ramp_s: float = 0.0
 
     def __call__(self, time_s: float) -> tuple[np.ndarray, np.ndarray, float]:
-        if time_s < self.start_s:
+        t = time_s - self.start_s
+        if t <= 0.0:
             pos, _, yaw = self.trajectory(0.0)
             return pos, np.zeros(3), yaw
-        return self.trajectory(time_s - self.start_s)
+        if t >= self.ramp_s:
+            return self.trajectory(t - 0.5 * self.ramp_s)
+        pos, vel, yaw = self.trajectory(0.5 * t * t / self.ramp_s)
+        return pos, vel * (t / self.ramp_s), yaw
 
 
 @dataclass(frozen=True, slots=True)

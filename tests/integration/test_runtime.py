@@ -1,0 +1,150 @@
+"""Whole missions through the runtime, on the simulator's lockstep clock."""
+
+import asyncio
+import json
+import os
+import signal
+
+import pytest
+from mcap.reader import make_reader
+
+from autopilot.flightlog import records as ch
+from autopilot.mission import load_mission
+from autopilot.run import fly
+from autopilot.runtime import Runtime
+from drivers.base import FlightMode
+
+SHORT = ["steps.1.follow_ball.duration_s=20"]
+
+
+def _fly(overrides, out=None, **kwargs):
+    plan = load_mission("follow_ball", [*SHORT, *overrides])
+
+    async def main():
+        summary = await fly(plan, out, **kwargs)
+        orphans = [t for t in asyncio.all_tasks() if t is not asyncio.current_task()]
+        return summary, orphans
+
+    return asyncio.run(main())
+
+
+def test_follow_ball_closed_loop(tmp_path):
+    summary, orphans = _fly([], tmp_path)
+    assert orphans == []
+    assert summary["status"] == "completed"
+    follow = summary["metrics"]["follow"]
+    assert follow["detection_rate"] >= 0.98
+    assert follow["rms_range_error_m"] <= 0.20
+    assert follow["max_lost_s"] <= 0.5
+    assert follow["false_detection_rate"] == 0.0
+    # lockstep: computation takes no simulated time, so capture → setpoint is the camera's
+    # own latency
+    assert summary["metrics"]["latency_ms"]["p95"] == pytest.approx(30.0, abs=1.0)
+    on_disk = json.loads((tmp_path / "summary.json").read_text())
+    for key in ("status", "mission", "driver", "sim_time_s", "wall_time_s"):
+        assert key in on_disk
+    assert on_disk["metrics"]["sim"]["real_time_factor"] > 0
+
+    with open(tmp_path / "flight.mcap", "rb") as f:
+        reader = make_reader(f)
+        channels = {c.topic: c for c in reader.get_summary().channels.values()}
+        schemas = reader.get_summary().schemas
+        counts = {}
+        for _, channel, message in reader.iter_messages():
+            json.loads(message.data)  # strict JSON
+            counts[channel.topic] = counts.get(channel.topic, 0) + 1
+    for topic in (ch.VEHICLE_STATE, ch.BALL_DETECTIONS, ch.TARGET_ESTIMATES, ch.SETPOINTS,
+                  ch.GROUND_TRUTH, ch.MISSION_EVENTS, ch.CAMERA_INFO, ch.MISSION_PLAN):
+        assert counts.get(topic, 0) > 0, topic
+        assert channels[topic].message_encoding == "json"
+        assert schemas[channels[topic].schema_id].encoding == "jsonschema"
+
+
+def test_lateral_mode_closed_loop():
+    summary, _ = _fly(["control.follow.mode=lateral"])
+    assert summary["status"] == "completed"
+    assert summary["metrics"]["follow"]["detection_rate"] >= 0.95
+    assert summary["metrics"]["follow"]["rms_range_error_m"] <= 0.35
+
+
+def test_invisible_target_is_searched_for_then_the_fallback_lands():
+    # the world has a red ball; the autopilot looks for orange: it never sees it
+    summary, _ = _fly(["scenario.ball.color=red", "control.follow.lost_timeout_s=3"])
+    assert summary["status"] == "failed"
+    assert "target lost" in summary["reason"]
+
+
+class _Probe:
+    """Hooks into a run to act at a simulated time and watch the vehicle."""
+
+    def __init__(self, monkeypatch, action):
+        self.seen = {}
+        original = Runtime.run
+        probe = self
+
+        async def run(runtime):
+            watcher = asyncio.ensure_future(action(runtime, probe, asyncio.current_task()))
+            try:
+                return await original(runtime)
+            finally:
+                watcher.cancel()
+
+        monkeypatch.setattr(Runtime, "run", run)
+
+
+def test_ctrl_c_in_flight_lands_and_disarms(monkeypatch, tmp_path):
+    async def interrupt(runtime, probe, _task):
+        await runtime.clock.sleep_until(15.0)  # following by then
+        probe.seen["step"] = runtime._step
+        os.kill(os.getpid(), signal.SIGINT)
+
+    probe = _Probe(monkeypatch, interrupt)
+    summary, orphans = _fly([], tmp_path, handle_signals=True)
+    assert probe.seen["step"] == "follow_ball"
+    assert summary["status"] == "aborted"
+    assert "SIGINT" in summary["reason"]
+    assert orphans == []
+    # ended landed and disarmed, in bounded (simulated) time
+    from autopilot.flightlog.read import read_records
+
+    log = read_records(tmp_path / "flight.mcap")
+    last = log[ch.VEHICLE_STATE][-1]
+    assert last["armed"] is False
+    assert last["landed_state"] == "on_ground"
+    assert last["time_s"] < 15.0 + 15.0
+    texts = [e["text"] for e in log[ch.MISSION_EVENTS]]
+    assert "aborted: SIGINT received" in texts
+    assert texts.index("request hold") < texts.index("request land")
+
+
+def test_stalled_control_stops_setpoints_and_the_vehicle_fails_safe(monkeypatch):
+    runtime_cfg = load_mission("follow_ball").config
+    expiry = runtime_cfg.runtime.setpoint_expiry_s
+    loss = runtime_cfg.sim.flight_stack.commander.offboard_loss_timeout_s
+    original_tick = Runtime._next_tick
+
+    async def stalling_tick(self, period):
+        if self._step == "follow_ball" and self.clock.now() > 12.0:
+            self._stalled_at = getattr(self, "_stalled_at", self.clock.now())
+            await asyncio.Event().wait()  # the control task hangs
+        return await original_tick(self, period)
+
+    monkeypatch.setattr(Runtime, "_next_tick", stalling_tick)
+
+    async def watch(runtime, probe, task):
+        while True:
+            await runtime.clock.sleep(0.02)
+            s = runtime._state
+            if hasattr(runtime, "_stalled_at") and s.mode is FlightMode.HOLD and s.failsafe:
+                probe.seen["hold_s"] = s.time_s - runtime._stalled_at
+                probe.seen["last_send_s"] = runtime._last_send_s - runtime._stalled_at
+                task.cancel()  # end the run (the control task will never finish)
+                return
+
+    probe = _Probe(monkeypatch, watch)
+    summary, _ = _fly([])
+    assert summary["status"] == "aborted"
+    # streaming stopped when the last setpoint expired, not later ...
+    assert 0.0 < probe.seen["last_send_s"] <= expiry + 0.05
+    # ... and the vehicle's own offboard-loss failsafe took over
+    assert probe.seen["hold_s"] == pytest.approx(expiry + loss, abs=0.1)

@@ -1,0 +1,163 @@
+"""The follow controller (yaw and lateral modes, limits) and the follow behaviour's handling of
+a lost target (hold, search, fail), with synthetic states and estimates."""
+
+import math
+
+import numpy as np
+import pytest
+
+from autopilot.behaviors.base import BehaviorInputs, RequestKind, Status
+from autopilot.behaviors.follow_ball import FollowBall, FollowBallParams, LostTargetSettings
+from autopilot.control.follow import FollowController, FollowSettings, camera_depression_rad
+from autopilot.estimation.target import TargetEstimate
+from drivers.base import (
+    Battery,
+    CameraInfo,
+    CameraIntrinsics,
+    FlightMode,
+    Health,
+    LandedState,
+    SetpointFrame,
+    VehicleState,
+)
+from drivers.geometry import quat_from_euler
+from drivers.sim.model import camera_rotation_body
+
+
+def _settings(mode="yaw", **kw):
+    base = dict(mode=mode, standoff_m=2.0, position_gain=1.2, yaw_gain=2.5, max_speed_m_s=5.0,
+                max_vertical_speed_m_s=1.5, max_accel_m_s2=4.0,
+                max_yaw_rate_rad_s=math.radians(120), altitude_floor_m=1.0)
+    base.update(kw)
+    return FollowSettings(**base)
+
+
+CAMERA = CameraInfo("front", CameraIntrinsics(640, 480, 320.0, 320.0, 319.5, 239.5),
+                    camera_rotation_body(-5.0, 0.0), np.zeros(3), 30.0)
+
+
+def _state(t=0.0, pos=(0.0, 0.0, -2.0), vel=(0.0, 0.0, 0.0), yaw=0.0):
+    return VehicleState(t, pos, vel, quat_from_euler(0, 0, yaw), (0, 0, 0), True,
+                        FlightMode.OFFBOARD, LandedState.IN_AIR, 2.0,
+                        Battery(16.0, 10.0, 0.9), Health())
+
+
+def _target(t, pos, vel=(0.0, 0.0, 0.0), age=0.0, stale=False):
+    return TargetEstimate(t, np.array(pos, float), np.array(vel, float), np.eye(6) * 0.01,
+                          age, stale, 10, True)
+
+
+def test_depression_of_a_camera_pitched_down():
+    assert math.degrees(camera_depression_rad(CAMERA)) == pytest.approx(5.0)
+
+
+def test_yaw_mode_faces_the_target_and_closes_range_along_the_line_of_sight():
+    ctl = FollowController(_settings("yaw"), CAMERA)
+    state = _state()
+    ctl.reset(state)
+    target = _target(0.0, (4.0, 3.0, -1.8))  # 5 m away, ahead-right
+    sp = ctl.update(0.1, state, target)  # 0.1 s later: the acceleration limit allows 0.4 m/s
+    assert sp.frame is SetpointFrame.LOCAL_NED
+    v = np.array(sp.velocity_m_s)
+    bearing = np.array([0.8, 0.6])
+    assert v[:2] @ bearing == pytest.approx(np.linalg.norm(v[:2]))  # purely radial
+    assert np.linalg.norm(v) == pytest.approx(0.4, abs=1e-6)
+    assert sp.yaw_rate_rad_s > 0  # turn right, towards the target
+    assert math.isnan(sp.yaw_rad)
+
+
+def test_yaw_mode_does_not_orbit_a_target_moving_sideways():
+    ctl = FollowController(_settings("yaw", max_accel_m_s2=100.0), CAMERA)
+    state = _state()
+    ctl.reset(state)
+    # target at the standoff straight ahead, moving east (sideways) at 2 m/s
+    d = camera_depression_rad(CAMERA)
+    target = _target(0.0, (2.0 * math.cos(d), 0.0, -2.0 + 2.0 * math.sin(d)), (0.0, 2.0, 0.0))
+    sp = ctl.update(0.05, state, target)
+    assert abs(sp.velocity_m_s[1]) < 1e-6  # no sideways flight ...
+    assert sp.yaw_rate_rad_s == pytest.approx(2.0 / (2.0 * math.cos(d)), rel=1e-3)  # ... a turn
+
+
+def test_lateral_mode_keeps_heading_and_translates():
+    ctl = FollowController(_settings("lateral", max_accel_m_s2=100.0), CAMERA)
+    state = _state(yaw=0.0)
+    ctl.reset(state)
+    target = _target(0.0, (2.0, 1.5, -1.83))  # ahead and to the right
+    sp = ctl.update(0.05, state, target)
+    assert sp.velocity_m_s[1] > 0.5  # translate east
+    assert abs(sp.yaw_rate_rad_s) < 1e-9  # heading held
+
+
+def test_limits_speed_acceleration_yaw_rate_and_floor():
+    s = _settings("yaw")
+    ctl = FollowController(s, CAMERA)
+    state = _state()
+    ctl.reset(state)
+    target = _target(0.0, (-30.0, 30.0, 5.0), (10.0, -10.0, 3.0))  # far, behind, underground
+    previous = np.zeros(3)
+    for k in range(1, 200):
+        now = k * 0.05
+        sp = ctl.update(now, state, target)
+        v = np.array(sp.velocity_m_s)
+        assert math.hypot(v[0], v[1]) <= s.max_speed_m_s + 1e-9
+        assert abs(v[2]) <= s.max_vertical_speed_m_s + 1e-9
+        assert np.linalg.norm(v - previous) <= s.max_accel_m_s2 * 0.05 + 1e-9
+        assert abs(sp.yaw_rate_rad_s) <= s.max_yaw_rate_rad_s + 1e-9
+        previous = v
+    assert ctl.desired_position_ned_m[2] <= -s.altitude_floor_m  # never below the floor
+    low = _state(pos=(0.0, 0.0, -1.0))  # at the floor, target below: no descent
+    assert ctl.update(10.05, low, target).velocity_m_s[2] <= 0.0 + 1e-9
+
+
+def _behavior(duration=60.0):
+    lost = LostTargetSettings(lost_after_s=0.5, hold_s=1.0,
+                              search_yaw_rate_rad_s=math.radians(90), timeout_s=10.0)
+    return FollowBall(FollowBallParams(duration_s=duration), _settings(), lost, CAMERA, 0.2)
+
+
+def test_follow_behaviour_enters_offboard_then_tracks():
+    b = _behavior()
+    out = b.activate(BehaviorInputs(0.0, _state()))
+    assert [r.kind for r in out.requests] == [RequestKind.START_OFFBOARD]
+    assert out.setpoint is not None  # hold here while OFFBOARD starts
+    out = b.update(BehaviorInputs(0.1, _state(0.1), target=_target(0.1, (2.0, 0.0, -1.8))))
+    assert out.status is Status.RUNNING
+    assert out.phase == "tracking"
+
+
+def test_lost_target_holds_then_searches_then_fails():
+    b = _behavior()
+    b.activate(BehaviorInputs(0.0, _state()))
+    # last seen ahead-left, then nothing
+    b.update(BehaviorInputs(0.1, _state(0.1), target=_target(0.1, (1.0, -2.0, -1.8))))
+    gone = _target(0.7, (1.0, -2.0, -1.8), age=0.6)
+    out = b.update(BehaviorInputs(0.7, _state(0.7), target=gone))
+    assert out.phase == "holding"
+    assert math.isfinite(out.setpoint.position_ned_m[0])  # position hold
+    out = b.update(BehaviorInputs(1.8, _state(1.8), target=gone))
+    assert out.phase == "searching"
+    assert out.setpoint.yaw_rad == pytest.approx(math.atan2(-2.0, 1.0))  # face where it was
+    facing = _state(2.5, yaw=math.atan2(-2.0, 1.0))
+    out = b.update(BehaviorInputs(2.5, facing, target=gone))
+    assert out.phase == "searching"
+    assert out.setpoint.yaw_rate_rad_s == pytest.approx(-math.radians(90))  # sweep on, leftwards
+    out = b.update(BehaviorInputs(10.8, facing, target=None))
+    assert out.status is Status.FAILED
+    assert "lost" in out.reason
+
+
+def test_target_reacquired_while_searching():
+    b = _behavior()
+    b.activate(BehaviorInputs(0.0, _state()))
+    b.update(BehaviorInputs(2.0, _state(2.0), target=None))  # lost from the start
+    out = b.update(BehaviorInputs(4.0, _state(4.0), target=None))
+    assert out.phase == "searching"
+    out = b.update(BehaviorInputs(4.1, _state(4.1), target=_target(4.1, (2.0, 0.5, -1.8))))
+    assert out.phase == "tracking"
+
+
+def test_follow_ends_after_its_duration():
+    b = _behavior(duration=5.0)
+    b.activate(BehaviorInputs(0.0, _state()))
+    out = b.update(BehaviorInputs(5.0, _state(5.0), target=_target(5.0, (2.0, 0.0, -1.8))))
+    assert out.status is Status.SUCCEEDED
