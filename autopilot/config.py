@@ -38,6 +38,7 @@ class RuntimeConfig(_Model):
     setpoint_rate_hz: Annotated[float, Field(ge=20, le=100)]  # streaming to the vehicle
     setpoint_expiry_s: Annotated[float, Field(gt=0, le=1)]  # a setpoint not renewed expires
     offboard_warmup_s: Annotated[float, Field(ge=0.1, le=2)]  # streaming before OFFBOARD
+    lockstep_detection_s: Annotated[float, Field(ge=0, le=0.5)]  # modelled detection time
     shutdown_timeout_s: Positive  # bound on the safe stop (hold, land, disarm)
     progress_interval_s: Positive  # plain progress lines (not a terminal), wall seconds
 

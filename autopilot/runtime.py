@@ -255,7 +255,7 @@ class Runtime:
                 started = time.perf_counter()
                 detection = await self.clock.run_blocking(
                     self.detector.detect, frame.image, frame.camera, frame.time_s, uv, radius,
-                    executor=self._detect_pool)
+                    executor=self._detect_pool, budget_s=self.config.runtime.lockstep_detection_s)
                 elapsed_ms = (time.perf_counter() - started) * 1e3
                 processed = ProcessedFrame(frame.time_s, frame.seq, frame, detection)
                 self._frames.put(processed)

@@ -6,7 +6,10 @@
   allows. Time stands still while any coroutine still has work to do: the simulator advances it
   only once the event loop has gone idle and no blocking job started through
   :meth:`Clock.run_blocking` is running. A lockstep run is therefore deterministic for a given
-  seed, and computation takes no simulated time.
+  seed, and computation takes no simulated time, unless it is given a budget: a blocking job
+  run with ``budget_s`` is modelled as taking exactly that long. Time may move on while it
+  runs (the simulator steps in parallel with it), its result is delivered ``budget_s`` after
+  it started, and time does not pass that instant until the job has finished.
 
 Code that must behave the same under both clocks sleeps, times out and runs blocking work
 through its clock (``clock.sleep``, ``clock.wait_for``, ``clock.run_blocking``), never through
@@ -44,8 +47,11 @@ class Clock(abc.ABC):
         await self.sleep_until(self.now() + duration_s)
 
     async def run_blocking(self, fn: Callable[..., T], /, *args: Any,
-                           executor: Executor | None = None) -> T:
-        """Run blocking or CPU-heavy ``fn(*args)`` in an executor (the loop's default if None)."""
+                           executor: Executor | None = None, budget_s: float | None = None) -> T:
+        """Run blocking or CPU-heavy ``fn(*args)`` in an executor (the loop's default if None).
+
+        ``budget_s`` is how long the job is modelled to take on a lockstep clock; in real time
+        it takes as long as it takes, and the budget is ignored."""
         loop = asyncio.get_running_loop()
         return await loop.run_in_executor(executor, functools.partial(fn, *args))
 
@@ -90,7 +96,8 @@ class LockstepClock(Clock):
     """Simulated time, advanced by the simulator driver (see module docstring).
 
     The driver's stepping task calls :meth:`settle` (wait until everyone else is blocked),
-    asks :meth:`next_deadline`, steps the physics and then calls :meth:`advance`.
+    asks :meth:`next_deadline`, steps the physics, waits for :meth:`jobs_done` and then calls
+    :meth:`advance`.
     """
 
     lockstep = True
@@ -101,6 +108,7 @@ class LockstepClock(Clock):
         self._seq = itertools.count()
         self._busy = 0
         self._idle: asyncio.Event | None = None
+        self._jobs: list[tuple[float, asyncio.Future[Any]]] = []  # budgeted: (deadline, job)
 
     def now(self) -> float:
         return self._now
@@ -114,7 +122,20 @@ class LockstepClock(Clock):
         await future
 
     async def run_blocking(self, fn: Callable[..., T], /, *args: Any,
-                           executor: Executor | None = None) -> T:
+                           executor: Executor | None = None, budget_s: float | None = None) -> T:
+        if budget_s is not None:
+            if not budget_s >= 0.0:
+                raise ValueError(f"budget_s must be >= 0, got {budget_s}")
+            loop = asyncio.get_running_loop()
+            job = loop.run_in_executor(executor, functools.partial(fn, *args))
+            entry = (self._now + budget_s, job)
+            self._jobs.append(entry)
+            try:
+                # the simulator stops at the deadline and waits there for the job (jobs_done)
+                await self.sleep_until(entry[0])
+                return await job
+            finally:
+                self._jobs.remove(entry)
         self._busy += 1
         try:
             return await super().run_blocking(fn, *args, executor=executor)
@@ -130,6 +151,13 @@ class LockstepClock(Clock):
         while self._sleepers and self._sleepers[0][2].done():  # cancelled sleeps
             heapq.heappop(self._sleepers)
         return self._sleepers[0][0] if self._sleepers else None
+
+    async def jobs_done(self, time_s: float) -> None:
+        """Wait for every budgeted job whose result is due by ``time_s`` (call before
+        :meth:`advance`: time may not pass a job's deadline while it is still running)."""
+        due = [job for deadline, job in self._jobs if deadline <= time_s and not job.done()]
+        if due:
+            await asyncio.wait(due)
 
     def advance(self, time_s: float) -> None:
         """Move time forward and wake every sleeper that is due."""

@@ -44,8 +44,8 @@ class SitlBenchResult:
     step_response: StepResponse
     hover_rms_m: float  # 3-D distance of the true position from the setpoint, over the hover
     hover_max_m: float
-    camera: str
-    camera_resolution: str
+    camera: str | None  # None when the forward camera is disabled
+    camera_resolution: str | None
     camera_frames: int
     camera_fps: float  # frames rendered and delivered per wall-clock second
     camera_fps_sim: float  # frames per simulated second (the camera's own rate)
@@ -95,6 +95,8 @@ async def run_sitl_bench(config: SimConfig, *, lockstep: bool = True,
     clock = driver.clock
     truth: list[tuple[float, np.ndarray]] = []
     frames = 0
+    cam = config.cameras.get(CAMERA)
+    rendering = cam is not None and cam.enabled
 
     async def count_frames() -> None:
         nonlocal frames
@@ -112,10 +114,11 @@ async def run_sitl_bench(config: SimConfig, *, lockstep: bool = True,
     try:
         async with asyncio.TaskGroup() as tasks:
             background = [
-                tasks.create_task(count_frames()),
                 tasks.create_task(record_truth()),
                 tasks.create_task(stream_setpoints(driver, lambda: setpoint, SETPOINT_RATE_HZ)),
             ]
+            if rendering:
+                background.append(tasks.create_task(count_frames()))
             try:
                 log("waiting for the vehicle to be armable")
                 await wait_for_state(driver, lambda s: s.health.armable, 30.0, "armable")
@@ -159,7 +162,6 @@ async def run_sitl_bench(config: SimConfig, *, lockstep: bool = True,
     response = step_response(times[sel], along, STEP_M, SETTLE_BAND_M)
     hover = (times >= t_end - HOVER_S) & (times <= t_end)
     err = np.linalg.norm(positions[hover] - target, axis=1)
-    cam = config.cameras[CAMERA]
     return SitlBenchResult(
         lockstep=lockstep,
         real_time_factor=sim_time / wall_time,
@@ -168,8 +170,8 @@ async def run_sitl_bench(config: SimConfig, *, lockstep: bool = True,
         step_response=response,
         hover_rms_m=float(np.sqrt(np.mean(err ** 2))),
         hover_max_m=float(np.max(err)),
-        camera=CAMERA,
-        camera_resolution=f"{cam.width_px}x{cam.height_px}",
+        camera=CAMERA if rendering else None,
+        camera_resolution=f"{cam.width_px}x{cam.height_px}" if rendering else None,
         camera_frames=frames,
         camera_fps=frames / wall_time,
         camera_fps_sim=frames / sim_time,
@@ -190,8 +192,12 @@ def format_table(result: SitlBenchResult) -> str:
         ("step settle time (±5 cm)", f"{s.settle_time_s:.2f}", "s (target ≤ 3)"),
         ("hover RMS error", f"{r.hover_rms_m * 100:.1f}", "cm (target ≤ 5)"),
         ("hover max error", f"{r.hover_max_m * 100:.1f}", "cm"),
-        (f"camera {r.camera} {r.camera_resolution}", f"{r.camera_fps:.0f}",
-         f"frames per wall second ({r.camera_frames} frames, {r.camera_fps_sim:.1f}/sim s)"),
     ]
+    if r.camera is None:
+        rows.append(("camera", "off", ""))
+    else:
+        rows.append((f"camera {r.camera} {r.camera_resolution}", f"{r.camera_fps:.0f}",
+                     f"frames per wall second ({r.camera_frames} frames, "
+                     f"{r.camera_fps_sim:.1f}/sim s)"))
     width = max(len(name) for name, _, _ in rows)
     return "\n".join(f"{name:<{width}}  {value:>10}  {unit}" for name, value, unit in rows)

@@ -44,7 +44,8 @@ class BallDetectorSettings:
     min_fill_ratio: float = 0.75
     max_axis_ratio: float = 1.6  # major/minor beyond what a sphere off-axis can produce
     min_polygon_vertices: int = 8  # of the outline simplified to 2 % of its length
-    min_edge_arc: float = 0.75  # merged blobs: longest unbroken arc of outline on the circle
+    min_edge_arc: float = 0.75  # merged blobs: fraction of the circle the outline follows ...
+    max_edge_gaps: int = 2  # ... broken in at most this many places
 
 
 @dataclass(frozen=True, slots=True)
@@ -196,8 +197,8 @@ class BallDetector:
             circle = self._circle_around(pts, px + x - 2.0, py + y - 2.0, r_in + 0.5)
             if circle is None:
                 continue
-            cu, cv_, radius, arc = circle
-            if arc < s.min_edge_arc or radius > s.max_radius_px:
+            cu, cv_, radius, arc, gaps = circle
+            if arc < s.min_edge_arc or gaps > s.max_edge_gaps or radius > s.max_radius_px:
                 continue
             cut = cu - radius < 0 or cv_ - radius < 0 or cu + radius > width - 1 or \
                 cv_ + radius > height - 1
@@ -207,11 +208,12 @@ class BallDetector:
 
     @staticmethod
     def _circle_around(pts: np.ndarray, cu: float, cv_: float,
-                       radius: float) -> tuple[float, float, float, float] | None:
+                       radius: float) -> tuple[float, float, float, float, int] | None:
         """Refit a circle to the outline points near a starting circle; its centre, radius,
-        and the longest unbroken arc of it that outline points follow (fraction of the circle,
-        in 10° sectors). Something touching a ball hides one stretch of its outline; a
-        polygon's inscribed circle meets the outline in several short stretches."""
+        the fraction of it that outline points follow (in 10° sectors) and in how many places
+        that is broken. Something touching a ball hides one stretch of its outline, a pole
+        across it two; a polygon's inscribed circle meets the outline in several short
+        stretches."""
         for tolerance in (2.0, 1.2, 1.0):
             near = np.abs(np.hypot(pts[:, 0] - cu, pts[:, 1] - cv_) - radius) < \
                 max(tolerance, 0.08 * radius)
@@ -224,7 +226,7 @@ class BallDetector:
         covered = np.zeros(36, dtype=bool)
         covered[((angles + math.pi) / (2.0 * math.pi) * 36).astype(int) % 36] = True
         # outline points are pixel centres, half a pixel inside the edge
-        return cu, cv_, radius + 0.5, _longest_circular_run(covered) / 36.0
+        return cu, cv_, radius + 0.5, float(covered.mean()), _circular_gaps(covered)
 
     def _window(self, image_bgr: np.ndarray, centre: Sequence[float],
                 radius_px: float | None) -> tuple[int, int, int, int] | None:
@@ -275,15 +277,9 @@ class BallDetector:
         )
 
 
-def _longest_circular_run(flags: np.ndarray) -> int:
-    if flags.all():
-        return len(flags)
-    doubled = np.concatenate((flags, flags))
-    best = run = 0
-    for flag in doubled:
-        run = run + 1 if flag else 0
-        best = max(best, run)
-    return min(best, len(flags))
+def _circular_gaps(flags: np.ndarray) -> int:
+    """How many runs of False a circular sequence of flags has."""
+    return int(np.count_nonzero(~flags & np.roll(flags, 1))) if flags.any() else 1
 
 
 def _inside(c: BallCandidate, window: tuple[int, int, int, int], width: int,

@@ -278,6 +278,7 @@ class SimDriver(Vehicle):
                 if deadline is not None:
                     target = min(target, max(deadline, sim.time_s + sim.dt))
                 outputs = self._batch(target)
+                await clock.jobs_done(sim.time_s)
                 clock.advance(sim.time_s)
                 self._publish(outputs)
         except asyncio.CancelledError:

@@ -130,3 +130,53 @@ def test_lockstep_wait_for_times_out_on_simulated_time():
         drive.cancel()
 
     asyncio.run(main())
+
+
+@pytest.mark.parametrize("job_wall_s", [0.0, 0.2])
+def test_lockstep_budgeted_job_takes_exactly_its_budget(job_wall_s):
+    """A job with a budget lets time move on while it runs, delivers its result exactly at
+    start + budget however long it really took, and time does not pass that instant before it
+    has finished."""
+    import threading
+
+    async def main():
+        clock = LockstepClock()
+        release = threading.Event()
+        results = []
+
+        def work():
+            release.wait(job_wall_s)  # a job that really takes job_wall_s of wall time
+            return 42
+
+        async def job():
+            results.append((await clock.run_blocking(work, budget_s=0.05), clock.now()))
+
+        async def stepper():  # a simulator stepping in 10 ms batches
+            while clock.now() < 1.2:
+                await clock.settle()
+                deadline = clock.next_deadline()
+                target = min(deadline if deadline is not None else 1.0, clock.now() + 0.01)
+                stepped.append(target)
+                await clock.jobs_done(target)
+                clock.advance(target)
+
+        stepped: list[float] = []
+        clock.advance(1.0)
+        task = asyncio.ensure_future(job())
+        drive = asyncio.ensure_future(stepper())
+        await task
+        assert results == [(42, pytest.approx(1.05))]
+        # time moved on while the job ran, in steps, and stopped at its deadline
+        assert any(1.0 < t < 1.05 for t in stepped)
+        assert pytest.approx(1.05) in stepped
+        drive.cancel()
+
+    asyncio.run(main())
+
+
+def test_lockstep_budget_must_not_be_negative():
+    async def main():
+        with pytest.raises(ValueError, match="budget_s"):
+            await LockstepClock().run_blocking(lambda: None, budget_s=-1.0)
+
+    asyncio.run(main())

@@ -1,0 +1,32 @@
+"""Process-wide settings for the autopilot's hot loop."""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import sys
+
+# glibc mallopt() parameters (malloc.h)
+_M_TRIM_THRESHOLD = -1
+_M_MMAP_THRESHOLD = -3
+
+
+def keep_large_buffers_in_heap(mmap_threshold_b: int = 16 << 20,
+                               trim_threshold_b: int = 128 << 20) -> bool:
+    """Stop glibc from giving every image-sized buffer its own fresh ``mmap``.
+
+    A 640×480 frame, its HSV copy and each mask are 0.3–0.9 MB: above glibc's default mmap
+    threshold, so each is mapped on allocation and unmapped on free, and every first touch of
+    every 4 kB page is a page fault. That made OpenCV's colour conversion and morphology on a
+    full frame twice as slow as the arithmetic (2.7 ms instead of 1.3 ms here). With the
+    thresholds raised, such buffers are recycled from the heap; the price is that up to
+    ``trim_threshold_b`` of freed memory stays with the process. Returns whether it applied
+    (glibc only; elsewhere nothing changes).
+    """
+    if not sys.platform.startswith("linux"):
+        return False
+    with contextlib.suppress(OSError, AttributeError):
+        libc = ctypes.CDLL("libc.so.6")
+        return bool(libc.mallopt(_M_MMAP_THRESHOLD, mmap_threshold_b)
+                    and libc.mallopt(_M_TRIM_THRESHOLD, trim_threshold_b))
+    return False
