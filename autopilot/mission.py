@@ -171,12 +171,27 @@ def load_mission(name_or_path: str, overrides: list[str] = (),
     path = find_mission(name_or_path)
     mission_overrides, config_overrides = split_overrides(list(overrides))
     located = apply_overrides(load_yaml(path), mission_overrides)
-    mission = validate(Mission, located)
-    steps = _validate_steps(mission, located)
+    # every problem at once: the mission, its steps, and the configuration it flies with
+    problems: list[Problem] = []
 
+    def collect(check: Callable[[], Any]) -> Any:
+        try:
+            return check()
+        except ConfigError as exc:
+            problems.extend(exc.problems)
+            return None
+
+    mission = collect(lambda: validate(Mission, located))
+    raw_steps = located.data.get("steps") if isinstance(located.data, dict) else None
+    steps = None
+    if isinstance(raw_steps, list) and all(isinstance(raw, dict) for raw in raw_steps):
+        steps = collect(lambda: _validate_steps(raw_steps, located))
     base = load_yaml(config_path or default_config_path())
-    merged = _merge_located(base, located, ("config",))
-    config = validate(AppConfig, apply_overrides(merged, config_overrides))
+    config = collect(lambda: validate(AppConfig, apply_overrides(
+        _merge_located(base, located, ("config",)), config_overrides)))
+    if problems:
+        problems.sort(key=lambda p: (p.source == "--set", p.source, p.line or 0))
+        raise ConfigError(problems)
     return MissionPlan(mission, steps, config, path)
 
 
@@ -185,9 +200,9 @@ def is_mission_file(path: str | Path) -> bool:
     return isinstance(data, dict) and "steps" in data
 
 
-def _validate_steps(mission: Mission, located: Located) -> tuple[Step, ...]:
+def _validate_steps(raw_steps: list[dict[str, Any]], located: Located) -> tuple[Step, ...]:
     steps, problems = [], []
-    for i, raw in enumerate(mission.steps):
+    for i, raw in enumerate(raw_steps):
         where = ("steps", i)
         if len(raw) != 1:
             source, line = located.locate(where)
@@ -222,8 +237,8 @@ def _merge_located(base: Located, other: Located, prefix: tuple[str, ...]) -> Lo
     section: Any = other.data
     for key in prefix:
         section = section.get(key) if isinstance(section, dict) else None
-    if not section:
-        return base
+    if not section or not isinstance(section, Mapping):
+        return base  # (a section that is not a mapping is reported by the mission's model)
 
     def merge(into: dict, new: Mapping) -> None:
         for key, value in new.items():

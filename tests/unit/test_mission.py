@@ -130,6 +130,19 @@ def test_empty_steps(tmp_path):
     assert re.search(r"mission.yaml:\d+: steps: .*at least 1", _error(tmp_path, text))
 
 
+def test_every_problem_is_reported_at_once_in_line_order(tmp_path):
+    text = (GOOD.replace("path: circle", "path: spiral")
+            .replace("altitude_m: 2.0", "altitude_m: -4")
+            .replace("standoff_m: 2.5", "standoff_m: -1"))
+    lines = _error(tmp_path, text, "control.follow.mode=sideways").splitlines()
+    assert [line.split(": ")[0:2] for line in lines] == [
+        [f"mission.yaml:{_line(text, '-4')}", "steps[0].takeoff.altitude_m"],
+        [f"mission.yaml:{_line(text, 'spiral')}", "scenario.ball.path"],
+        [f"mission.yaml:{_line(text, 'standoff_m')}", "control.follow.standoff_m"],
+        ["--set", "control.follow.mode"],
+    ]
+
+
 def test_command_line_overrides(tmp_path):
     path = str(_write(tmp_path, GOOD))
     plan = load_mission(path, ["steps.1.follow_ball.duration_s=12", "scenario.ball.speed_mps=2",
