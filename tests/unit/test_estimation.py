@@ -14,16 +14,9 @@ from autopilot.estimation.target import (
     camera_measurement,
     process_noise,
 )
-from drivers.base import (
-    Battery,
-    CameraInfo,
-    CameraIntrinsics,
-    FlightMode,
-    Health,
-    LandedState,
-    VehicleState,
-)
 from drivers.geometry import quat_from_euler
+
+from ..factories import front_camera, vehicle_state
 
 SETTINGS = TargetFilterSettings(accel_noise_m_s2=2.0, gate_chi2=16.3, stale_after_s=1.0,
                                 initial_velocity_std_m_s=2.0, max_extrapolation_s=1.0,
@@ -109,18 +102,11 @@ def test_process_noise_matches_filterpy(dt):
     assert np.allclose(process_noise(dt, 2.0), expected)
 
 
-def _camera() -> CameraInfo:
-    # forward camera, level, at the body origin
-    rot = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
-    return CameraInfo("front", CameraIntrinsics(640, 480, 320.0, 320.0, 319.5, 239.5), rot,
-                      np.zeros(3), 30.0)
-
-
 def test_camera_measurement_geometry_and_covariance():
     from autopilot.estimation.pose_history import Pose
 
     pose = Pose(0.0, np.array([1.0, 2.0, -3.0]), quat_from_euler(0.0, 0.0, math.pi / 2))
-    meas = camera_measurement(np.array([0.0, 0.0, 4.0]), 4.0, 16.0, _camera(), pose, SETTINGS,
+    meas = camera_measurement(np.array([0.0, 0.0, 4.0]), 4.0, 16.0, front_camera(), pose, SETTINGS,
                               0.0)
     # 4 m straight ahead of a vehicle facing east
     assert np.allclose(meas.position_ned_m, [1.0, 6.0, -3.0])
@@ -132,9 +118,7 @@ def test_camera_measurement_geometry_and_covariance():
 
 
 def _state(t, north, yaw):
-    return VehicleState(t, (north, 0.0, -2.0), (1.0, 0.0, 0.0), quat_from_euler(0, 0, yaw),
-                        (0, 0, 0), True, FlightMode.OFFBOARD, LandedState.IN_AIR, 2.0,
-                        Battery(16.0, 10.0, 0.9), Health())
+    return vehicle_state(t, (north, 0.0, -2.0), (1.0, 0.0, 0.0), yaw)
 
 
 def test_pose_history_interpolates_and_extrapolates():

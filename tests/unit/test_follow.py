@@ -10,18 +10,9 @@ from autopilot.behaviors.base import BehaviorInputs, RequestKind, Status
 from autopilot.behaviors.follow_ball import FollowBall, FollowBallParams, LostTargetSettings
 from autopilot.control.follow import FollowController, FollowSettings, camera_depression_rad
 from autopilot.estimation.target import TargetEstimate
-from drivers.base import (
-    Battery,
-    CameraInfo,
-    CameraIntrinsics,
-    FlightMode,
-    Health,
-    LandedState,
-    SetpointFrame,
-    VehicleState,
-)
-from drivers.geometry import quat_from_euler
-from drivers.sim.model import camera_rotation_body
+from drivers.base import SetpointFrame
+
+from ..factories import front_camera, vehicle_state
 
 
 def _settings(mode="yaw", **kw):
@@ -32,14 +23,10 @@ def _settings(mode="yaw", **kw):
     return FollowSettings(**base)
 
 
-CAMERA = CameraInfo("front", CameraIntrinsics(640, 480, 320.0, 320.0, 319.5, 239.5),
-                    camera_rotation_body(-5.0, 0.0), np.zeros(3), 30.0)
+CAMERA = front_camera(pitch_down_deg=5.0)
 
 
-def _state(t=0.0, pos=(0.0, 0.0, -2.0), vel=(0.0, 0.0, 0.0), yaw=0.0):
-    return VehicleState(t, pos, vel, quat_from_euler(0, 0, yaw), (0, 0, 0), True,
-                        FlightMode.OFFBOARD, LandedState.IN_AIR, 2.0,
-                        Battery(16.0, 10.0, 0.9), Health())
+_state = vehicle_state
 
 
 def _target(t, pos, vel=(0.0, 0.0, 0.0), age=0.0, stale=False):

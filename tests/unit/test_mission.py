@@ -1,7 +1,6 @@
 """Mission files: one test per kind of validation error (each names file, line and key path),
 the shipped missions, and the executor's sequencing, fallback and abort."""
 
-import math
 import re
 
 import numpy as np
@@ -18,7 +17,9 @@ from autopilot.behaviors.base import (
 from autopilot.cli import main
 from autopilot.config import ConfigError
 from autopilot.mission import MissionExecutor, load_mission, shipped_missions
-from drivers.base import Battery, FlightMode, Health, LandedState, VehicleState
+from drivers.base import FlightMode
+
+from ..factories import vehicle_state
 
 GOOD = """\
 name: test_mission
@@ -181,10 +182,7 @@ def test_cli_lists_and_validates_missions(capsys):
 
 
 def _inputs(t=0.0, armed=True, in_air=True):
-    state = VehicleState(t, (0, 0, -2.0), (0, 0, 0), (1, 0, 0, 0), (0, 0, 0), armed,
-                         FlightMode.HOLD, LandedState.IN_AIR if in_air else LandedState.ON_GROUND,
-                         math.nan, Battery(16, 10, 0.9), Health())
-    return BehaviorInputs(t, state)
+    return BehaviorInputs(t, vehicle_state(t, armed=armed, mode=FlightMode.HOLD, in_air=in_air))
 
 
 class _Scripted(Behavior):
