@@ -10,7 +10,7 @@ from collections.abc import Sequence
 
 from autopilot import __version__
 from autopilot.config import ConfigError, load_config
-from autopilot.process import keep_large_buffers_in_heap
+from autopilot.process import configure_for_flight
 
 EXIT_OK = 0
 EXIT_FAILED = 1
@@ -68,7 +68,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if args.command in ("run", "bench"):
-        keep_large_buffers_in_heap()
+        configure_for_flight()
     try:
         if args.command == "run":
             return _run(args)

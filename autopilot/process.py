@@ -30,3 +30,18 @@ def keep_large_buffers_in_heap(mmap_threshold_b: int = 16 << 20,
         return bool(libc.mallopt(_M_MMAP_THRESHOLD, mmap_threshold_b)
                     and libc.mallopt(_M_TRIM_THRESHOLD, trim_threshold_b))
     return False
+
+
+#: How long a thread running Python may keep the GIL while another waits for it.
+GIL_SWITCH_INTERVAL_S = 0.001
+
+
+def configure_for_flight() -> None:
+    """Process settings for flying: image buffers kept in the heap (above), and a shorter GIL
+    switch interval. Python lets a thread that is running Python code keep the GIL for 5 ms
+    before handing it to a thread that wants it back (one returning from OpenCV, MuJoCo or a
+    socket); with the simulator's flight stack, the detector and the event loop in one
+    process, those waits land on the frame-to-setpoint path. 1 ms bounds them (measured on a
+    2-core machine in real time: latency p95 36.6–37.9 ms instead of 36.3–40.1 ms)."""
+    keep_large_buffers_in_heap()
+    sys.setswitchinterval(GIL_SWITCH_INTERVAL_S)

@@ -7,6 +7,12 @@ Mesa's llvmpipe rasterises on worker threads of its own); :meth:`CameraRig.finis
 image when the frame is due (capture time + camera latency). The image content is fixed at
 capture, so this changes nothing but speed, and lockstep runs stay deterministic.
 
+In real time, a render can also be held back (``render_gate``) until shortly before its frame
+is due. A real camera's exposure and readout cost the companion computer nothing; here the
+rendering takes both cores for a few milliseconds. Started at capture, it would land on the
+autopilot's processing of the previous frame (which is delivered 30 ms after its capture, 3 ms
+before the next capture); held back, it runs while the autopilot is idle between frames.
+
 The OpenGL context lives on the render thread, the only thread that touches it. That thread
 (and Mesa's rasteriser threads, which inherit it) runs at a lower CPU priority: on a real
 vehicle the camera is its own hardware, so rendering should not take the CPU from the
@@ -22,6 +28,7 @@ from __future__ import annotations
 import contextlib
 import os
 import threading
+from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 
@@ -78,6 +85,9 @@ class _CameraTarget:
 class CameraRig:
     def __init__(self, model: mujoco.MjModel) -> None:
         self._model = model
+        #: Called on the render thread with the time (simulator clock) at which a scheduled
+        #: frame may start rendering; returns when that time has come. None: render at once.
+        self.render_gate: Callable[[float], None] | None = None
         self._gl = None
         self._targets: dict[int, _CameraTarget] = {}
         self._option = mujoco.MjvOption()
@@ -86,8 +96,10 @@ class CameraRig:
         self._option.geomgroup[2:] = 0
         self._thread: ThreadPoolExecutor | None = None
 
-    def submit(self, data: mujoco.MjData, cam: SimCamera, time_s: float) -> PendingFrame:
-        """Capture what ``cam`` sees now; the image is collected by :meth:`finish`."""
+    def submit(self, data: mujoco.MjData, cam: SimCamera, time_s: float,
+               render_from_s: float | None = None) -> PendingFrame:
+        """Capture what ``cam`` sees now; the image is collected by :meth:`finish`. With a
+        ``render_gate``, rendering waits until ``render_from_s`` (if given)."""
         target = self._targets.get(cam.cam_id)
         if target is None:
             target = self._targets[cam.cam_id] = _CameraTarget(self._model, cam)
@@ -97,7 +109,8 @@ class CameraRig:
                                mujoco.mjtCatBit.mjCAT_ALL.value, target.scene)
         if self._thread is None:
             self._thread = ThreadPoolExecutor(max_workers=1, thread_name_prefix="render")
-        pending = PendingFrame(cam, time_s, cam.seq, self._thread.submit(self._render, target))
+        pending = PendingFrame(cam, time_s, cam.seq,
+                               self._thread.submit(self._render, target, render_from_s))
         cam.seq += 1
         cam.rendered += 1
         target.pending = pending
@@ -114,8 +127,10 @@ class CameraRig:
                 target.pending = None
         return pending.frame
 
-    def _render(self, target: _CameraTarget) -> np.ndarray:
+    def _render(self, target: _CameraTarget, render_from_s: float | None = None) -> np.ndarray:
         """On the render thread: draw the snapshot, read it back top-down BGR."""
+        if render_from_s is not None and self.render_gate is not None:
+            self.render_gate(render_from_s)
         if self._gl is None:
             lower_thread_priority()
             self._gl = _make_gl_context(self._model)

@@ -193,6 +193,8 @@ class SimConfig(_Model):
     ground_truth_rate_hz: Annotated[float, Field(gt=0, le=1000)]
     #: Longest physics batch in real-time mode (bounds how late a setpoint takes effect).
     realtime_batch_s: Annotated[float, Field(gt=0, le=0.1)]
+    #: Real-time mode: rendering of a frame starts no earlier than this before it is due.
+    realtime_render_lead_s: Annotated[float, Field(gt=0, le=1)]
     vehicle: VehicleConfig
     battery: BatteryConfig
     wind: WindConfig

@@ -105,6 +105,7 @@ class SimDriver(Vehicle):
                                                 initializer=lower_thread_priority)
             self._sim = await loop.run_in_executor(self._executor, self._build)
             self._clock.restart(self._sim.time_s)
+            self._sim.set_render_gate(self._wait_for_clock)
         self._wall_start = time.perf_counter()
         run = self._run_lockstep if self.lockstep else self._run_realtime
         self._task = loop.create_task(run(), name="sim-driver")
@@ -238,6 +239,12 @@ class SimDriver(Vehicle):
                 await self._clock.run_blocking(on_sim_thread, executor=self._executor)
         except CommandRejected as exc:
             raise CommandDenied(name, exc.reason) from None
+
+    def _wait_for_clock(self, time_s: float) -> None:
+        """Block this (non-loop) thread until the real-time clock reads ``time_s``."""
+        delay = time_s - self._clock.now()
+        if delay > 0.0:
+            time.sleep(delay)
 
     def _drain_inbox(self) -> None:
         """On the simulator thread: apply what the loop thread queued since the last batch."""

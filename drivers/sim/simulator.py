@@ -22,7 +22,7 @@ import heapq
 import itertools
 import logging
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -230,7 +230,10 @@ class Simulator:
             sched = self._cam_schedules[name]
             if k >= sched.next_step:
                 if cam.active:
-                    self._queue(t + cam.latency_s, "frame", self._rig.submit(self.data, cam, t))
+                    due = t + cam.latency_s
+                    pending = self._rig.submit(self.data, cam, t,
+                                               due - self.cfg.realtime_render_lead_s)
+                    self._queue(due, "frame", pending)
                 sched.advance(k)
         self._update_next_capture()
 
@@ -395,6 +398,11 @@ class Simulator:
         """Render a camera now, synchronously (whether or not it is active)."""
         cam = self.cameras[camera]
         return self._rig.finish(self._rig.submit(self.data, cam, self.time_s))
+
+    def set_render_gate(self, gate: Callable[[float], None] | None) -> None:
+        """Hold each scheduled frame's rendering until ``gate(t)`` returns, where ``t`` is
+        ``realtime_render_lead_s`` before the frame is due (real-time mode; see camera.py)."""
+        self._rig.render_gate = gate
 
     def camera_infos(self) -> dict[str, CameraInfo]:
         return {name: cam.info for name, cam in self.cameras.items()}

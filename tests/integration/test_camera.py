@@ -104,6 +104,22 @@ def test_frames_are_stamped_with_capture_time(sim_config):
         assert arrived - frame.time_s == pytest.approx(cam.latency_s, abs=step + 1e-9)
 
 
+def test_render_gate_holds_rendering_until_shortly_before_the_frame_is_due(sim_config):
+    """Real time: each scheduled frame's rendering waits for the gate, which is asked for the
+    instant ``realtime_render_lead_s`` before the frame is due; the frame is unchanged."""
+    cam = sim_config.cameras["front"]
+    sim = Simulator(sim_config)
+    asked = []
+    sim.set_render_gate(asked.append)
+    sim.set_camera_active("front", True)
+    frames = []
+    while len(frames) < 5:
+        frames += [out.payload for out in sim.advance_to(sim.time_s + 0.01) if out.kind == "frame"]
+    sim.close()
+    due = [f.time_s + cam.latency_s for f in frames]
+    assert asked[:5] == pytest.approx([t - sim_config.realtime_render_lead_s for t in due])
+
+
 def test_cameras_render_only_while_watched(sim_config):
     async def main():
         async with simulator(sim_config) as drv:
