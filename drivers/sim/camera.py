@@ -13,11 +13,14 @@ rendering takes both cores for a few milliseconds. Started at capture, it would 
 autopilot's processing of the previous frame (which is delivered 30 ms after its capture, 3 ms
 before the next capture); held back, it runs while the autopilot is idle between frames.
 
-The OpenGL context lives on the render thread, the only thread that touches it. That thread
-(and Mesa's rasteriser threads, which inherit it) runs at a lower CPU priority: on a real
-vehicle the camera is its own hardware, so rendering should not take the CPU from the
-autopilot's detector when both are busy (it changes nothing in lockstep). Each camera has
-its own MuJoCo render context (offscreen framebuffer) and scene. Pixels are read back as BGRA
+The OpenGL context lives on the render thread, the only thread that touches it. In real time
+that thread (and Mesa's rasteriser threads, which inherit it) runs at a lower CPU priority
+(``background``): on a real vehicle the camera is its own hardware, so rendering should not
+take the CPU from the autopilot's detector when both are busy. In lockstep it keeps normal
+priority: there the render is what the simulation waits for, while the physics stepping
+alongside it has time to spare (lowered, it cost 10-15 % of the real-time factor). Each camera
+has its own MuJoCo render context (offscreen framebuffer) and scene; :meth:`CameraRig.prepare`
+makes them before flight. Pixels are read back as BGRA
 (llvmpipe's native layout, cheaper than MuJoCo's RGB read-back); wherever nothing was drawn
 (alpha 0: MuJoCo clears to transparent black) the sky is painted in the world's haze colour.
 Frames are delivered top-down BGR, as OpenCV expects.
@@ -28,7 +31,7 @@ from __future__ import annotations
 import contextlib
 import os
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 
@@ -88,6 +91,8 @@ class CameraRig:
         #: Called on the render thread with the time (simulator clock) at which a scheduled
         #: frame may start rendering; returns when that time has come. None: render at once.
         self.render_gate: Callable[[float], None] | None = None
+        #: Render at a lower CPU priority (set before the first render; see the module notes).
+        self.background = False
         self._gl = None
         self._targets: dict[int, _CameraTarget] = {}
         self._option = mujoco.MjvOption()
@@ -96,10 +101,27 @@ class CameraRig:
         self._option.geomgroup[2:] = 0
         self._thread: ThreadPoolExecutor | None = None
 
+    def prepare(self, data: mujoco.MjData, cams: Iterable[SimCamera]) -> None:
+        """Make the OpenGL and render contexts of ``cams`` now and draw each once, so that a
+        missing OpenGL fails before flight (:class:`RenderingUnavailable`) and the first frames
+        do not pay for context creation and Mesa's shader compilation (about 0.3 s)."""
+        for cam in cams:
+            self._executor().submit(self._render, self._snapshot(data, cam)).result()
+
     def submit(self, data: mujoco.MjData, cam: SimCamera, time_s: float,
                render_from_s: float | None = None) -> PendingFrame:
         """Capture what ``cam`` sees now; the image is collected by :meth:`finish`. With a
         ``render_gate``, rendering waits until ``render_from_s`` (if given)."""
+        target = self._snapshot(data, cam)
+        pending = PendingFrame(cam, time_s, cam.seq,
+                               self._executor().submit(self._render, target, render_from_s))
+        cam.seq += 1
+        cam.rendered += 1
+        target.pending = pending
+        return pending
+
+    def _snapshot(self, data: mujoco.MjData, cam: SimCamera) -> _CameraTarget:
+        """Update ``cam``'s scene from ``data`` (after collecting a frame still rendering it)."""
         target = self._targets.get(cam.cam_id)
         if target is None:
             target = self._targets[cam.cam_id] = _CameraTarget(self._model, cam)
@@ -107,14 +129,12 @@ class CameraRig:
             self.finish(target.pending)
         mujoco.mjv_updateScene(self._model, data, self._option, None, target.camera,
                                mujoco.mjtCatBit.mjCAT_ALL.value, target.scene)
+        return target
+
+    def _executor(self) -> ThreadPoolExecutor:
         if self._thread is None:
             self._thread = ThreadPoolExecutor(max_workers=1, thread_name_prefix="render")
-        pending = PendingFrame(cam, time_s, cam.seq,
-                               self._thread.submit(self._render, target, render_from_s))
-        cam.seq += 1
-        cam.rendered += 1
-        target.pending = pending
-        return pending
+        return self._thread
 
     def finish(self, pending: PendingFrame) -> Frame:
         """The captured frame (waits for the render if it is not done; once per frame)."""
@@ -132,7 +152,8 @@ class CameraRig:
         if render_from_s is not None and self.render_gate is not None:
             self.render_gate(render_from_s)
         if self._gl is None:
-            lower_thread_priority()
+            if self.background:
+                lower_thread_priority()
             self._gl = _make_gl_context(self._model)
         if target.context is None:
             try:

@@ -39,7 +39,7 @@ from drivers.base import (
     VehicleState,
 )
 from drivers.clock import Clock, LockstepClock, MonotonicClock
-from drivers.sim.camera import lower_thread_priority
+from drivers.sim.camera import RenderingUnavailable, lower_thread_priority
 from drivers.sim.config import SimConfig
 from drivers.sim.flight.flight_stack import CommandRejected
 from drivers.sim.model import camera_intrinsics, camera_rotation_body
@@ -98,14 +98,18 @@ class SimDriver(Vehicle):
         if self._task is not None:
             return
         loop = asyncio.get_running_loop()
-        if self.lockstep:
-            self._sim = self._build()
-        else:
-            self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="simulator",
-                                                initializer=lower_thread_priority)
-            self._sim = await loop.run_in_executor(self._executor, self._build)
-            self._clock.restart(self._sim.time_s)
-            self._sim.set_render_gate(self._wait_for_clock)
+        try:
+            if self.lockstep:
+                self._sim = self._build()
+            else:
+                self._executor = ThreadPoolExecutor(max_workers=1,
+                                                    thread_name_prefix="simulator",
+                                                    initializer=lower_thread_priority)
+                self._sim = await loop.run_in_executor(self._executor, self._build)
+                self._clock.restart(self._sim.time_s)
+        except RenderingUnavailable as exc:
+            await self.close()
+            raise ConnectionLost(f"simulator cameras: {exc}") from exc
         self._wall_start = time.perf_counter()
         run = self._run_lockstep if self.lockstep else self._run_realtime
         self._task = loop.create_task(run(), name="sim-driver")
@@ -209,7 +213,16 @@ class SimDriver(Vehicle):
     # ------------------------------------------------------------------------------------
 
     def _build(self) -> Simulator:
-        return Simulator(self.config, self._scenario, self._seed)
+        """The simulator, with its cameras ready to render (as a vehicle boots its cameras)."""
+        sim = Simulator(self.config, self._scenario, self._seed)
+        try:
+            if not self.lockstep:
+                sim.set_realtime_rendering(self._wait_for_clock)
+            sim.prepare_cameras()
+        except BaseException:
+            sim.close()
+            raise
+        return sim
 
     def _require_sim(self) -> Simulator:
         if self._sim is None:

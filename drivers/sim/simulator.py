@@ -399,10 +399,16 @@ class Simulator:
         cam = self.cameras[camera]
         return self._rig.finish(self._rig.submit(self.data, cam, self.time_s))
 
-    def set_render_gate(self, gate: Callable[[float], None] | None) -> None:
-        """Hold each scheduled frame's rendering until ``gate(t)`` returns, where ``t`` is
-        ``realtime_render_lead_s`` before the frame is due (real-time mode; see camera.py)."""
+    def set_realtime_rendering(self, gate: Callable[[float], None] | None) -> None:
+        """Render as the real-time driver needs (see camera.py): at a lower CPU priority, and
+        each scheduled frame held until ``gate(t)`` returns, where ``t`` is
+        ``realtime_render_lead_s`` before the frame is due. Call before the first render."""
         self._rig.render_gate = gate
+        self._rig.background = True
+
+    def prepare_cameras(self) -> None:
+        """Make every camera's render context now (see :meth:`CameraRig.prepare`)."""
+        self._rig.prepare(self.data, self.cameras.values())
 
     def camera_infos(self) -> dict[str, CameraInfo]:
         return {name: cam.info for name, cam in self.cameras.items()}

@@ -8,7 +8,10 @@ import cv2
 import numpy as np
 import pytest
 
+from drivers.base import ConnectionLost
 from drivers.geometry import quat_from_euler, quat_to_matrix
+from drivers.sim import camera
+from drivers.sim.driver import SimDriver
 from drivers.sim.scenario import Geom, MocapBody, Static
 from drivers.sim.simulator import Simulator
 
@@ -110,7 +113,7 @@ def test_render_gate_holds_rendering_until_shortly_before_the_frame_is_due(sim_c
     cam = sim_config.cameras["front"]
     sim = Simulator(sim_config)
     asked = []
-    sim.set_render_gate(asked.append)
+    sim.set_realtime_rendering(asked.append)
     sim.set_camera_active("front", True)
     frames = []
     while len(frames) < 5:
@@ -144,3 +147,25 @@ def test_unknown_camera_is_a_clear_error(sim_config):
                 drv.frames("rear")
 
     run(main())
+
+
+def test_render_contexts_are_made_at_connect_and_missing_opengl_fails_it(sim_config,
+                                                                       monkeypatch):
+    """The cameras are ready before flight; without OpenGL, connecting fails with a clear
+    error instead of the first frame failing in the air."""
+    async def connects():
+        async with simulator(sim_config) as drv:
+            rig = drv.simulator._rig
+            assert {t.context is not None for t in rig._targets.values()} == {True}
+            assert len(rig._targets) == len(drv.cameras) == 2
+            assert all(cam.rendered == 0 for cam in drv.simulator.cameras.values())
+
+    run(connects())
+
+    def no_gl(model):
+        raise camera.RenderingUnavailable("cannot render headless with MUJOCO_GL='egl': "
+                                          "no EGL display")
+
+    monkeypatch.setattr(camera, "_make_gl_context", no_gl)
+    with pytest.raises(ConnectionLost, match="simulator cameras: cannot render headless"):
+        run(SimDriver(sim_config).connect())
