@@ -110,7 +110,7 @@ def _run(args: argparse.Namespace) -> int:
     lines = [f"status: {summary['status']}" + (f" ({summary['reason']})" if summary["reason"]
                                                 else ""),
              f"simulated {summary['sim_time_s']:.1f} s in {summary['wall_time_s']:.1f} s "
-             f"(× {summary['metrics']['sim']['real_time_factor']:.1f})"]
+             f"(× {summary['metrics']['sim']['real_time_factor']:.1f})" + _steal(summary)]
     if follow:
         lines.append("follow: " + ", ".join(
             f"{k}={_fmt(follow[k])}" for k in ("detection_rate", "rms_range_error_m",
@@ -121,6 +121,11 @@ def _run(args: argparse.Namespace) -> int:
     lines.append(f"wrote {out / 'summary.json'} and {out / 'flight.mcap'}")
     print("\n".join(lines))
     return {"completed": EXIT_OK, "aborted": 130}.get(summary["status"], EXIT_FAILED)
+
+
+def _steal(summary: dict) -> str:
+    steal = summary["metrics"]["sim"].get("cpu_steal_pct")
+    return "" if steal is None else f"; hypervisor steal {steal:.1f} % of CPU time"
 
 
 def _fmt(value) -> str:

@@ -45,3 +45,33 @@ def configure_for_flight() -> None:
     2-core machine in real time: latency p95 36.6–37.9 ms instead of 36.3–40.1 ms)."""
     keep_large_buffers_in_heap()
     sys.setswitchinterval(GIL_SWITCH_INTERVAL_S)
+
+
+class StealMeter:
+    """Share of the machine's CPU time taken by the hypervisor (``steal`` in ``/proc/stat``)
+    since this meter was made. On a shared virtual machine, speed and latency figures drop
+    with steal, so benchmarks report it next to their numbers. None where there is no
+    ``/proc/stat`` (not Linux)."""
+
+    def __init__(self) -> None:
+        self._start = _cpu_ticks()
+
+    def percent(self) -> float | None:
+        end = _cpu_ticks()
+        if self._start is None or end is None or end[0] <= self._start[0]:
+            return None
+        return 100.0 * (end[1] - self._start[1]) / (end[0] - self._start[0])
+
+
+def _cpu_ticks() -> tuple[int, int] | None:
+    """(all CPU time, stolen time) in clock ticks, summed over the machine's CPUs."""
+    try:
+        with open("/proc/stat", encoding="ascii") as f:
+            fields = f.readline().split()
+    except OSError:
+        return None
+    if not fields or fields[0] != "cpu" or len(fields) < 9:
+        return None
+    # user nice system idle iowait irq softirq steal [guest guest_nice: already in user/nice]
+    ticks = [int(v) for v in fields[1:9]]
+    return sum(ticks), ticks[7]

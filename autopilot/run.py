@@ -16,6 +16,7 @@ from autopilot.flightlog.log import FlightLog
 from autopilot.flightlog.metrics import follow_metrics, latency_metrics
 from autopilot.flightlog.records import clean
 from autopilot.mission import MissionPlan
+from autopilot.process import StealMeter
 from autopilot.runtime import Runtime
 from autopilot.scenario import build_world
 from drivers.sim.driver import SimDriver
@@ -45,6 +46,7 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
     vehicle = SimDriver(sim_config, scenario=objects, lockstep=not realtime)
     log = FlightLog(out_dir / "flight.mcap" if out_dir is not None else None)
     wall_start = time.perf_counter()
+    steal = StealMeter()
     runtime: Runtime | None = None
     loop = asyncio.get_running_loop()
     signals = (signal.SIGINT, signal.SIGTERM)
@@ -91,7 +93,8 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
         "wall_time_s": wall_time,
         "metrics": {
             "follow": follow_metrics(log.records),
-            "sim": {"real_time_factor": sim_time / wall_time if wall_time > 0 else None},
+            "sim": {"real_time_factor": sim_time / wall_time if wall_time > 0 else None,
+                    "cpu_steal_pct": steal.percent()},
             "latency_ms": latency_metrics(log.records),
         },
         "stats": vars(runtime.stats) if runtime is not None else {},

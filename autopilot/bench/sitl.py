@@ -15,6 +15,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from autopilot.flight_ops import stream_setpoints, wait_for_state
+from autopilot.process import StealMeter
 from drivers.base import FlightMode, Setpoint
 from drivers.sim.config import SimConfig
 from drivers.sim.driver import SimDriver
@@ -51,6 +52,7 @@ class SitlBenchResult:
     camera_fps_sim: float  # frames per simulated second (the camera's own rate)
     physics_rate_hz: int
     seed: int
+    cpu_steal_pct: float | None  # CPU time the hypervisor took during the run (None: unknown)
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -90,6 +92,7 @@ def step_response(times_s: np.ndarray, along_m: np.ndarray, step_m: float,
 
 async def run_sitl_bench(config: SimConfig, *, lockstep: bool = True,
                          log=lambda message: None) -> SitlBenchResult:
+    steal = StealMeter()
     driver = SimDriver(config, lockstep=lockstep)
     await driver.connect()
     clock = driver.clock
@@ -177,6 +180,7 @@ async def run_sitl_bench(config: SimConfig, *, lockstep: bool = True,
         camera_fps_sim=frames / sim_time,
         physics_rate_hz=config.physics_rate_hz,
         seed=config.seed,
+        cpu_steal_pct=steal.percent(),
     )
 
 
@@ -199,5 +203,8 @@ def format_table(result: SitlBenchResult) -> str:
         rows.append((f"camera {r.camera} {r.camera_resolution}", f"{r.camera_fps:.0f}",
                      f"frames per wall second ({r.camera_frames} frames, "
                      f"{r.camera_fps_sim:.1f}/sim s)"))
+    if r.cpu_steal_pct is not None:
+        rows.append(("hypervisor steal", f"{r.cpu_steal_pct:.1f}",
+                     "% of CPU time (speed figures drop when this is above ~2 %)"))
     width = max(len(name) for name, _, _ in rows)
     return "\n".join(f"{name:<{width}}  {value:>10}  {unit}" for name, value, unit in rows)
