@@ -42,6 +42,14 @@ def build_parser() -> argparse.ArgumentParser:
                      help="run against the wall clock instead of lockstep")
     _add_config_options(run)
 
+    sim = commands.add_parser(
+        "sim", help="run the simulator in real time as a MAVLink vehicle (like PX4 SITL)")
+    sim.add_argument("--mission", metavar="NAME|FILE",
+                     help="put this mission's scenario (e.g. the moving ball) in the world")
+    sim.add_argument("--instance", type=int, default=0, metavar="N",
+                     help="PX4 SITL instance number: ports 14580+N, 18570+N (default 0)")
+    _add_config_options(sim)
+
     commands.add_parser("missions", help="list the shipped missions")
 
     bench = commands.add_parser("bench", help="run a benchmark")
@@ -67,11 +75,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    if args.command in ("run", "bench"):
+    if args.command in ("run", "bench", "sim"):
         configure_for_flight()
     try:
         if args.command == "run":
             return _run(args)
+        if args.command == "sim":
+            return _sim(args)
         if args.command == "missions":
             return _missions()
         if args.command == "bench":
@@ -121,6 +131,25 @@ def _run(args: argparse.Namespace) -> int:
     lines.append(f"wrote {out / 'summary.json'} and {out / 'flight.mcap'}")
     print("\n".join(lines))
     return {"completed": EXIT_OK, "aborted": 130}.get(summary["status"], EXIT_FAILED)
+
+
+def _sim(args: argparse.Namespace) -> int:
+    from autopilot.sim_server import serve
+
+    if args.mission:
+        from autopilot.mission import load_mission
+
+        plan = load_mission(args.mission, args.overrides, args.config)
+        config, scenario = plan.config, plan.mission.scenario
+    else:
+        config, scenario = load_config(args.config, args.overrides), None
+    try:
+        asyncio.run(serve(config, scenario, instance=args.instance,
+                          log=lambda line: print(line, file=sys.stderr, flush=True)))
+    except OSError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_FAILED
+    return EXIT_OK
 
 
 def _steal(summary: dict) -> str:

@@ -1,0 +1,79 @@
+"""``autopilot sim``: the simulator as a stand-alone vehicle that speaks MAVLink like PX4 SITL.
+
+Runs the MuJoCo simulator in real time, with a mission's scenario in its world if one is
+given, behind :class:`~drivers.mavlink.face.MavlinkFace`. It runs until Ctrl-C / SIGTERM; if
+a client is still flying it, the vehicle is landed first (as stopping PX4 SITL would not do,
+but as a safe state demands).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import signal
+from collections.abc import Callable
+
+from autopilot.config import AppConfig
+from autopilot.mission import Scenario
+from autopilot.scenario import build_world
+from drivers.base import FlightMode, VehicleError
+from drivers.mavlink.face import MavlinkFace
+from drivers.sim.driver import SimDriver
+
+LAND_ON_EXIT_TIMEOUT_S = 60.0
+
+
+async def serve(config: AppConfig, scenario: Scenario | None, *, instance: int = 0,
+                log: Callable[[str], None] = print,
+                stop: asyncio.Event | None = None) -> None:
+    """Serve the simulated vehicle until ``stop`` is set (or SIGINT / SIGTERM when None)."""
+    sim_config, objects = build_world(scenario, config.sim)
+    vehicle = SimDriver(sim_config, scenario=objects, lockstep=False)
+    await vehicle.connect()
+    face = MavlinkFace(vehicle, instance=instance, events=vehicle.events(),
+                       takeoff_altitude_m=sim_config.flight_stack.commander.takeoff_altitude_m)
+    loop = asyncio.get_running_loop()
+    handle_signals = stop is None
+    stop = stop or asyncio.Event()
+    try:
+        await face.start()
+        if handle_signals:
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                loop.add_signal_handler(sig, stop.set)
+        offboard, gcs = face.ports["offboard"], face.ports["gcs"]
+        log(f"PX4-compatible simulated vehicle (sysid 1, compid 1, MAVLink 2): offboard API on "
+            f"udp {offboard[0]} → {offboard[1][0]}:{offboard[1][1]} "
+            f"(MAVSDK: udpin://0.0.0.0:{offboard[1][1]}), ground station on udp {gcs[0]} → "
+            f"{gcs[1][0]}:{gcs[1][1]}; Ctrl-C to stop")
+        await stop.wait()
+        log("stopping")
+        await _land_if_flying(vehicle, log)
+    finally:
+        if handle_signals:
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                loop.remove_signal_handler(sig)
+        await face.close()
+        await vehicle.close()
+
+
+async def _land_if_flying(vehicle: SimDriver, log: Callable[[str], None]) -> None:
+    state = vehicle.latest_state
+    if state is None or not state.armed:
+        return
+    log("vehicle still armed: landing before exit")
+    with contextlib.suppress(VehicleError):
+        if state.in_air and state.mode is not FlightMode.LAND:
+            await vehicle.land()
+
+    async def disarmed() -> None:
+        async with contextlib.aclosing(vehicle.telemetry()) as samples:
+            async for s in samples:
+                if not s.armed:
+                    return
+
+    try:
+        await vehicle.clock.wait_for(disarmed(), LAND_ON_EXIT_TIMEOUT_S)
+    except TimeoutError:
+        log(f"not disarmed within {LAND_ON_EXIT_TIMEOUT_S:g} s; stopping the motors")
+        with contextlib.suppress(VehicleError):
+            await vehicle.disarm(force=True)

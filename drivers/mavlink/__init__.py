@@ -1,0 +1,1 @@
+"""MAVLink: PX4 conventions, the simulator's MAVLink face, and (later) the MAVLink drivers."""
