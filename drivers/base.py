@@ -88,15 +88,16 @@ class Health:
     mag_ok: bool = True
     local_position_ok: bool = True
     battery_ok: bool = True
+    #: The vehicle's own pre-arm checks as a whole (MAVLink SYS_STATUS PREARM_CHECK bit).
+    prearm_ok: bool = True
 
     @property
     def armable(self) -> bool:
-        return all(
-            (self.gyro_ok, self.accel_ok, self.mag_ok, self.local_position_ok, self.battery_ok)
-        )
+        return all((self.gyro_ok, self.accel_ok, self.mag_ok, self.local_position_ok,
+                    self.battery_ok, self.prearm_ok))
 
     def problems(self) -> list[str]:
-        names = ("gyro_ok", "accel_ok", "mag_ok", "local_position_ok", "battery_ok")
+        names = ("gyro_ok", "accel_ok", "mag_ok", "local_position_ok", "battery_ok", "prearm_ok")
         return [n.removesuffix("_ok") for n in names if not getattr(self, n)]
 
 

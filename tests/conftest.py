@@ -28,3 +28,10 @@ def sim_with(sim_config, **changes):
             target = target[part]
         target[last] = value
     return type(sim_config).model_validate(data)
+
+
+@pytest.fixture(scope="session")
+def no_camera_config(sim_config):
+    """The simulator configuration with both cameras disabled (nothing renders)."""
+    cams = {k: v.model_copy(update={"enabled": False}) for k, v in sim_config.cameras.items()}
+    return sim_config.model_copy(update={"cameras": cams})

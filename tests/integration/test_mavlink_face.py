@@ -8,7 +8,6 @@ not fail, as long as it keeps up with real time.
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import math
 import socket
 
@@ -17,30 +16,8 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from drivers.base import FlightMode
 from drivers.mavlink import px4
-from drivers.mavlink.face import MavlinkFace
-from drivers.sim.driver import SimDriver
 
-INSTANCE = 7  # ports 14587 / 18577 and client port 14547: clear of a running SITL
-
-
-@pytest.fixture
-def no_camera_config(sim_config):
-    cams = {k: v.model_copy(update={"enabled": False}) for k, v in sim_config.cameras.items()}
-    return sim_config.model_copy(update={"cameras": cams})
-
-
-@contextlib.asynccontextmanager
-async def served(config, **kwargs):
-    vehicle = SimDriver(config, lockstep=False)
-    await vehicle.connect()
-    face = MavlinkFace(vehicle, instance=INSTANCE, gcs_port=14557 + INSTANCE,
-                       events=vehicle.events(), **kwargs)
-    try:
-        await face.start()
-        yield vehicle, face
-    finally:
-        await face.close()
-        await vehicle.close()
+from .mavtools import INSTANCE, served
 
 
 async def _first(gen, predicate, what: str, timeout_s: float = 30.0):

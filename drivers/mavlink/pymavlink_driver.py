@@ -1,0 +1,441 @@
+"""A :class:`~drivers.base.Vehicle` over plain MAVLink (pymavlink's message set), for PX4 and
+ArduPilot Copter.
+
+Everything runs on the event loop: one UDP link (:mod:`drivers.mavlink.link`), messages parsed
+as they arrive, commands sent as COMMAND_LONG and matched to their COMMAND_ACK (re-sent up to
+``command_retries`` times, as MAVSDK does). Telemetry is assembled from HEARTBEAT, attitude,
+LOCAL_POSITION_NED, EXTENDED_SYS_STATE, SYS_STATUS, BATTERY_STATUS and DISTANCE_SENSOR; a
+:class:`~drivers.base.VehicleState` is published on every LOCAL_POSITION_NED, stamped with its
+capture time mapped from the vehicle's ``time_boot_ms`` onto the local monotonic clock.
+
+Mode semantics by autopilot (from HEARTBEAT):
+
+* PX4: DO_SET_MODE with PX4 custom main/sub modes; takeoff sets ``MIS_TAKEOFF_ALT`` and sends
+  NAV_TAKEOFF with NaN altitude, as MAVSDK does; offboard is PX4 OFFBOARD.
+* ArduPilot Copter: DO_SET_MODE with Copter mode numbers; takeoff switches to GUIDED and sends
+  NAV_TAKEOFF with the relative altitude; offboard is GUIDED; hold is BRAKE (or LOITER).
+
+Setpoints go out one SET_POSITION_TARGET_LOCAL_NED per :meth:`send_setpoint`, never re-sent:
+if the caller stalls or dies, the stream stops and the vehicle's failsafe acts.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import math
+from collections import deque
+from collections.abc import AsyncIterator, Mapping
+
+import numpy as np
+from pymavlink.dialects.v20 import common as mavlink
+
+from drivers.base import (
+    Battery,
+    CameraInfo,
+    CommandDenied,
+    CommandTimeout,
+    ConnectionLost,
+    FlightMode,
+    Frame,
+    Health,
+    LandedState,
+    Setpoint,
+    Vehicle,
+    VehicleState,
+)
+from drivers.clock import MonotonicClock
+from drivers.geometry import quat_from_euler
+from drivers.mavlink import ardupilot, px4
+from drivers.mavlink.link import BootTimeMapper, MavlinkUdp
+from drivers.slots import Broadcast
+
+log = logging.getLogger(__name__)
+
+MAV_AUTOPILOT_ARDUPILOTMEGA = 3
+MAV_AUTOPILOT_INVALID = 8
+RESULT_NAMES = {0: "accepted", 1: "temporarily rejected", 2: "denied", 3: "unsupported",
+                4: "failed", 5: "in progress", 6: "cancelled"}
+#: Streams asked for on connect (message id → Hz).
+STREAM_RATES_HZ = {
+    mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 30.0,
+    mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: 50.0,
+    mavlink.MAVLINK_MSG_ID_ATTITUDE: 50.0,
+    mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: 5.0,
+    mavlink.MAVLINK_MSG_ID_SYS_STATUS: 2.0,
+    mavlink.MAVLINK_MSG_ID_DISTANCE_SENSOR: 10.0,
+}
+
+
+class PymavlinkDriver(Vehicle):
+    def __init__(self, url: str = "udpin://0.0.0.0:14540", *,
+                 cameras: Mapping[str, object] | None = None,
+                 heartbeat_timeout_s: float = 3.0, command_timeout_s: float = 0.5,
+                 command_retries: int = 3,
+                 ardupilot_hold: ardupilot.CopterMode = ardupilot.CopterMode.BRAKE) -> None:
+        self.url = url
+        self._clock = MonotonicClock()
+        self._video = dict(cameras or {})  # name → a video source with .info and .frames()
+        self.heartbeat_timeout_s = heartbeat_timeout_s
+        self.command_timeout_s = command_timeout_s
+        self.command_retries = command_retries
+        self.ardupilot_hold = ardupilot_hold
+        self._link: MavlinkUdp | None = None
+        self._target: tuple[int, int] | None = None  # (system, component) of the autopilot
+        self.autopilot: int | None = None  # MAV_AUTOPILOT of the vehicle
+        self._boot = BootTimeMapper()
+        self._telemetry: Broadcast[VehicleState] = Broadcast()
+        self._acks: dict[int, asyncio.Future] = {}
+        self._params: dict[str, asyncio.Future] = {}
+        self._statustext: deque[str] = deque(maxlen=8)
+        self._heard = asyncio.Event()
+        self._last_heartbeat_s = -math.inf
+        self._tasks: list[asyncio.Task] = []
+        self._closed_error: ConnectionLost | None = None
+        # the newest of each piece of telemetry
+        self._armed = False
+        self._mode = FlightMode.UNKNOWN
+        self._q = np.array([1.0, 0.0, 0.0, 0.0])
+        self._rates = np.zeros(3)
+        self._landed = LandedState.UNKNOWN
+        self._range_m = math.nan
+        self._battery = Battery(math.nan, math.nan, math.nan)
+        self._health = Health(local_position_ok=False)
+        self._failsafe = False
+        #: The newest telemetry sample (None before the first).
+        self.latest_state: VehicleState | None = None
+
+    # ------------------------------------------------------------------------------------
+    # Vehicle interface
+    # ------------------------------------------------------------------------------------
+
+    @property
+    def clock(self) -> MonotonicClock:
+        return self._clock
+
+    @property
+    def cameras(self) -> Mapping[str, CameraInfo]:
+        return {name: source.info for name, source in self._video.items()}
+
+    @property
+    def is_px4(self) -> bool:
+        return self.autopilot == px4.MAV_AUTOPILOT_PX4
+
+    @property
+    def is_ardupilot(self) -> bool:
+        return self.autopilot == MAV_AUTOPILOT_ARDUPILOTMEGA
+
+    async def connect(self, timeout_s: float = 10.0) -> None:
+        if self._link is not None:
+            return
+        self._link = await MavlinkUdp.open(self.url, self._receive)
+        loop = asyncio.get_running_loop()
+        self._tasks = [loop.create_task(self._heartbeats(), name="mavlink-gcs-heartbeat"),
+                       loop.create_task(self._watchdog(), name="mavlink-watchdog")]
+        try:
+            await asyncio.wait_for(self._heard.wait(), timeout_s)
+        except TimeoutError:
+            await self.close()
+            raise ConnectionLost(f"no autopilot heartbeat on {self.url} within "
+                                 f"{timeout_s:g} s") from None
+        for msg_id, rate in STREAM_RATES_HZ.items():
+            self._send(self._command_long_msg(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL,
+                                              msg_id, 1e6 / rate))
+        # as a real link: connected once a telemetry sample has arrived
+        async with contextlib.aclosing(self.telemetry()) as samples:
+            try:
+                await asyncio.wait_for(anext(samples), timeout_s)
+            except (TimeoutError, StopAsyncIteration):
+                await self.close()
+                raise ConnectionLost(f"no LOCAL_POSITION_NED from the vehicle on {self.url} "
+                                     f"within {timeout_s:g} s") from None
+
+    async def arm(self) -> None:
+        await self._command("arm", mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1)
+
+    async def disarm(self, *, force: bool = False) -> None:
+        await self._command("disarm", mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0,
+                            21196 if force else 0)
+
+    async def takeoff(self, altitude_m: float | None = None) -> None:
+        if self.is_ardupilot:
+            await self._set_mode(FlightMode.TAKEOFF)
+            alt = 2.5 if altitude_m is None else altitude_m
+            await self._command("takeoff", mavlink.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, math.nan, 0,
+                                0, alt)
+            return
+        if altitude_m is not None:
+            await self.set_param("MIS_TAKEOFF_ALT", altitude_m)
+        await self._command("takeoff", mavlink.MAV_CMD_NAV_TAKEOFF, *[math.nan] * 7)
+
+    async def land(self) -> None:
+        if self.is_ardupilot:
+            await self._set_mode(FlightMode.LAND)
+        else:
+            await self._command("land", mavlink.MAV_CMD_NAV_LAND, *[math.nan] * 7)
+
+    async def hold(self) -> None:
+        await self._set_mode(FlightMode.HOLD)
+
+    async def start_offboard(self) -> None:
+        await self._set_mode(FlightMode.OFFBOARD)
+
+    async def stop_offboard(self) -> None:
+        await self._set_mode(FlightMode.HOLD)
+
+    async def send_setpoint(self, setpoint: Setpoint) -> None:
+        self._check_alive()
+        frame, mask, pos, vel, yaw, rate = px4.setpoint_to_mavlink(setpoint)
+        system, component = self._require_target()
+        self._send(self._link.mav.set_position_target_local_ned_encode(
+            self._boot_ms(), system, component, frame, mask, *pos, *vel, 0.0, 0.0, 0.0, yaw,
+            rate))
+
+    def telemetry(self, buffer: int = 1) -> AsyncIterator[VehicleState]:
+        return self._telemetry.subscribe(buffer)
+
+    def frames(self, camera: str) -> AsyncIterator[Frame]:
+        if camera not in self._video:
+            raise ValueError(f"no camera {camera!r}; this vehicle has {sorted(self._video)}")
+        return self._video[camera].frames()
+
+    async def close(self) -> None:
+        for task in self._tasks:
+            task.cancel()
+        for task in self._tasks:
+            with contextlib.suppress(asyncio.CancelledError):
+                await task
+        self._tasks = []
+        for source in self._video.values():
+            await source.close()
+        if self._link is not None:
+            self._link.close()
+            self._link = None
+        self._telemetry.close(self._closed_error)
+
+    # ------------------------------------------------------------------------------------
+    # Extras
+    # ------------------------------------------------------------------------------------
+
+    async def set_param(self, name: str, value: float, timeout_s: float = 2.0) -> None:
+        """PARAM_SET (REAL32) and wait for the vehicle's PARAM_VALUE echo."""
+        system, component = self._require_target()
+        loop = asyncio.get_running_loop()
+        for _ in range(self.command_retries):
+            future = self._params[name] = loop.create_future()
+            self._send(self._link.mav.param_set_encode(system, component, name.encode(),
+                                                       float(value),
+                                                       mavlink.MAV_PARAM_TYPE_REAL32))
+            try:
+                echoed = await asyncio.wait_for(future, timeout_s / self.command_retries)
+            except TimeoutError:
+                continue
+            if not math.isclose(echoed, value, rel_tol=1e-6, abs_tol=1e-6):
+                raise CommandDenied(f"set {name}", f"vehicle kept {echoed}")
+            return
+        raise CommandTimeout(f"set {name}", timeout_s)
+
+    # ------------------------------------------------------------------------------------
+    # Internals: sending
+    # ------------------------------------------------------------------------------------
+
+    def _check_alive(self) -> None:
+        if self._closed_error is not None:
+            raise self._closed_error
+        if self._link is None:
+            raise ConnectionLost("not connected: call connect() first")
+
+    def _require_target(self) -> tuple[int, int]:
+        self._check_alive()
+        if self._target is None:
+            raise ConnectionLost("no autopilot heard yet")
+        return self._target
+
+    def _send(self, msg) -> None:
+        if self._link is not None:
+            self._link.send(msg)
+
+    def _boot_ms(self) -> int:
+        return int(self._clock.now() * 1000.0) & 0xFFFFFFFF
+
+    def _command_long_msg(self, command: int, *params: float, confirmation: int = 0):
+        system, component = self._target or (1, 1)
+        p = [float(v) for v in params] + [0.0] * (7 - len(params))
+        return self._link.mav.command_long_encode(system, component, command, confirmation, *p)
+
+    async def _command(self, name: str, command: int, *params: float) -> None:
+        self._require_target()
+        loop = asyncio.get_running_loop()
+        future = self._acks[command] = loop.create_future()
+        try:
+            for attempt in range(self.command_retries):
+                self._send(self._command_long_msg(command, *params, confirmation=attempt))
+                with contextlib.suppress(TimeoutError):
+                    await asyncio.wait_for(asyncio.shield(future), self.command_timeout_s)
+                    break
+            if not future.done():
+                raise CommandTimeout(name, self.command_timeout_s * self.command_retries)
+            result = future.result()
+            if result == mavlink.MAV_RESULT_IN_PROGRESS:  # wait for the final answer
+                future = self._acks[command] = loop.create_future()
+                try:
+                    result = await asyncio.wait_for(future, 10.0 * self.command_timeout_s)
+                except TimeoutError:
+                    raise CommandTimeout(name, 10.0 * self.command_timeout_s) from None
+            if result == mavlink.MAV_RESULT_ACCEPTED:
+                return
+            reason = RESULT_NAMES.get(result, f"result {result}")
+            if self._statustext:
+                reason += f" ({self._statustext[-1]})"
+            raise CommandDenied(name, reason)
+        finally:
+            if self._acks.get(command) is future:
+                del self._acks[command]
+
+    async def _set_mode(self, mode: FlightMode) -> None:
+        name = f"set mode {mode.value}"
+        if self.is_ardupilot:
+            target = ardupilot.copter_mode(mode, self.ardupilot_hold)
+            await self._command(name, mavlink.MAV_CMD_DO_SET_MODE,
+                                px4.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, int(target))
+            return
+        main, sub = px4.PX4_MODES[mode]
+        base = px4.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (px4.MAV_MODE_FLAG_SAFETY_ARMED
+                                                        if self._armed else 0)
+        await self._command(name, mavlink.MAV_CMD_DO_SET_MODE, base, main, sub)
+
+    async def _heartbeats(self) -> None:
+        """A companion computer's heartbeat at 1 Hz (MAV_TYPE_ONBOARD_CONTROLLER)."""
+        while True:
+            if self._link is not None:
+                self._send(self._link.mav.heartbeat_encode(18, MAV_AUTOPILOT_INVALID, 0, 0, 4))
+            await asyncio.sleep(1.0)
+
+    async def _watchdog(self) -> None:
+        """The link is lost when heartbeats stop for ``heartbeat_timeout_s``."""
+        while True:
+            await asyncio.sleep(0.25)
+            if self._heard.is_set() and \
+                    self._clock.now() - self._last_heartbeat_s > self.heartbeat_timeout_s:
+                self._closed_error = ConnectionLost(
+                    f"no heartbeat from the vehicle for {self.heartbeat_timeout_s:g} s")
+                self._telemetry.close(self._closed_error)
+                for future in (*self._acks.values(), *self._params.values()):
+                    if not future.done():
+                        future.set_exception(self._closed_error)
+                return
+
+    # ------------------------------------------------------------------------------------
+    # Internals: receiving
+    # ------------------------------------------------------------------------------------
+
+    def _receive(self, msg) -> None:
+        src = (msg.get_srcSystem(), msg.get_srcComponent())
+        kind = msg.get_type()
+        if kind == "HEARTBEAT":
+            if msg.autopilot == MAV_AUTOPILOT_INVALID or msg.type in (6, 18):
+                return  # a ground station or companion computer, not the autopilot
+            if self._target is None:
+                self._target = src
+                self.autopilot = msg.autopilot
+                log.info("autopilot %s at sysid %d compid %d", msg.autopilot, *src)
+            if src != self._target:
+                return
+            self._last_heartbeat_s = self._clock.now()
+            self._armed = bool(msg.base_mode & px4.MAV_MODE_FLAG_SAFETY_ARMED)
+            self._mode = (ardupilot.flight_mode(msg.custom_mode) if self.is_ardupilot
+                          else px4.px4_flight_mode(msg.custom_mode))
+            self._failsafe = msg.system_status == px4.MAV_STATE_CRITICAL
+            self._heard.set()
+            return
+        if src != self._target:
+            return
+        handler = _HANDLERS.get(kind)
+        if handler is not None:
+            handler(self, msg)
+
+    def _on_ack(self, msg) -> None:
+        future = self._acks.get(msg.command)
+        if future is not None and not future.done():
+            future.set_result(msg.result)
+
+    def _on_param(self, msg) -> None:
+        name = msg.param_id.rstrip("\x00") if isinstance(msg.param_id, str) \
+            else msg.param_id.decode(errors="replace").rstrip("\x00")
+        future = self._params.get(name)
+        if future is not None and not future.done():
+            future.set_result(float(msg.param_value))
+
+    def _on_statustext(self, msg) -> None:
+        text = msg.text if isinstance(msg.text, str) else msg.text.decode(errors="replace")
+        self._statustext.append(text.rstrip("\x00"))
+
+    def _on_attitude_quaternion(self, msg) -> None:
+        self._q = np.array([msg.q1, msg.q2, msg.q3, msg.q4])
+        self._rates = np.array([msg.rollspeed, msg.pitchspeed, msg.yawspeed])
+
+    def _on_attitude(self, msg) -> None:
+        if self.is_px4:
+            return  # PX4 sends the quaternion; ATTITUDE is derived from it
+        self._q = quat_from_euler(msg.roll, msg.pitch, msg.yaw)
+        self._rates = np.array([msg.rollspeed, msg.pitchspeed, msg.yawspeed])
+
+    def _on_extended_sys_state(self, msg) -> None:
+        self._landed = px4.landed_state(msg.landed_state)
+
+    def _on_sys_status(self, msg) -> None:
+        present, enabled, healthy = (msg.onboard_control_sensors_present,
+                                     msg.onboard_control_sensors_enabled,
+                                     msg.onboard_control_sensors_health)
+
+        def ok(bit: int) -> bool:  # a sensor not present or not enabled does not block
+            return not (present & enabled & bit) or bool(healthy & bit)
+
+        self._health = Health(gyro_ok=ok(px4.SENSOR_GYRO), accel_ok=ok(px4.SENSOR_ACCEL),
+                              mag_ok=ok(px4.SENSOR_MAG), local_position_ok=ok(px4.SENSOR_GPS),
+                              battery_ok=ok(px4.SENSOR_BATTERY),
+                              prearm_ok=ok(px4.SENSOR_PREARM_CHECK))
+        remaining = msg.battery_remaining / 100.0 if msg.battery_remaining >= 0 else math.nan
+        self._battery = Battery(msg.voltage_battery / 1000.0, msg.current_battery / 100.0,
+                                remaining)
+
+    def _on_distance_sensor(self, msg) -> None:
+        if msg.orientation != 25:  # MAV_SENSOR_ROTATION_PITCH_270: facing down
+            return
+        cm = msg.current_distance
+        in_range = msg.min_distance <= cm <= msg.max_distance
+        self._range_m = cm / 100.0 if in_range else math.nan
+
+    def _on_local_position(self, msg) -> None:
+        vehicle_s = msg.time_boot_ms / 1000.0
+        self._boot.observe(vehicle_s, self._clock.now())
+        state = VehicleState(
+            time_s=self._boot.to_local(vehicle_s),
+            position_ned_m=(msg.x, msg.y, msg.z),
+            velocity_ned_m_s=(msg.vx, msg.vy, msg.vz),
+            attitude_q=self._q,
+            angular_velocity_frd_rad_s=self._rates,
+            armed=self._armed,
+            mode=self._mode,
+            landed_state=self._landed,
+            distance_to_ground_m=self._range_m,
+            battery=self._battery,
+            health=self._health,
+            failsafe=self._failsafe,
+        )
+        self.latest_state = state
+        self._telemetry.publish(state)
+
+
+_HANDLERS = {
+    "COMMAND_ACK": PymavlinkDriver._on_ack,
+    "PARAM_VALUE": PymavlinkDriver._on_param,
+    "STATUSTEXT": PymavlinkDriver._on_statustext,
+    "ATTITUDE_QUATERNION": PymavlinkDriver._on_attitude_quaternion,
+    "ATTITUDE": PymavlinkDriver._on_attitude,
+    "EXTENDED_SYS_STATE": PymavlinkDriver._on_extended_sys_state,
+    "SYS_STATUS": PymavlinkDriver._on_sys_status,
+    "DISTANCE_SENSOR": PymavlinkDriver._on_distance_sensor,
+    "LOCAL_POSITION_NED": PymavlinkDriver._on_local_position,
+}
