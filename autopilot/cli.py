@@ -40,6 +40,14 @@ def build_parser() -> argparse.ArgumentParser:
                      "(default: a new folder under runs/)")
     run.add_argument("--realtime", action="store_true",
                      help="run against the wall clock instead of lockstep")
+    run.add_argument("--driver", choices=("sim", "pymavlink"),
+                     help="the vehicle driver (default: the configuration's 'driver')")
+    run.add_argument("--connect", metavar="URL",
+                     help="MAVLink connection for MAVLink drivers (default "
+                     "udpin://0.0.0.0:14540)")
+    run.add_argument("--video", metavar="URL",
+                     help="the forward camera's video stream for MAVLink drivers (default "
+                     "udp://@:5600)")
     _add_config_options(run)
 
     sim = commands.add_parser(
@@ -48,6 +56,10 @@ def build_parser() -> argparse.ArgumentParser:
                      help="put this mission's scenario (e.g. the moving ball) in the world")
     sim.add_argument("--instance", type=int, default=0, metavar="N",
                      help="PX4 SITL instance number: ports 14580+N, 18570+N (default 0)")
+    sim.add_argument("--video", default="udp://127.0.0.1:5600", metavar="URL",
+                     help="where the forward camera streams (H.264 in MPEG-TS; "
+                     "default udp://127.0.0.1:5600)")
+    sim.add_argument("--no-video", action="store_true", help="do not stream the camera")
     _add_config_options(sim)
 
     commands.add_parser("missions", help="list the shipped missions")
@@ -103,7 +115,8 @@ def _run(args: argparse.Namespace) -> int:
     from autopilot.mission import load_mission
     from autopilot.run import default_out_dir, fly
 
-    plan = load_mission(args.mission, args.overrides, args.config)
+    overrides = [*args.overrides, *([f"driver={args.driver}"] if args.driver else [])]
+    plan = load_mission(args.mission, overrides, args.config)
     out = Path(args.out) if args.out else default_out_dir(plan)
 
     def progress(line: str) -> None:
@@ -113,14 +126,15 @@ def _run(args: argparse.Namespace) -> int:
 
     print(f"mission {plan.mission.name} ({plan.source}); log in {out}", file=sys.stderr)
     summary = asyncio.run(fly(plan, out, realtime=args.realtime, progress=progress,
-                              handle_signals=True))
+                              handle_signals=True, connect=args.connect, video=args.video))
     if sys.stderr.isatty():
         sys.stderr.write("\n")
     follow = summary["metrics"]["follow"]
+    rtf = summary["metrics"]["sim"].get("real_time_factor")
+    timing = (f"simulated {summary['sim_time_s']:.1f} s in {summary['wall_time_s']:.1f} s "
+              f"(× {rtf:.1f})" if rtf else f"flew for {summary['wall_time_s']:.1f} s")
     lines = [f"status: {summary['status']}" + (f" ({summary['reason']})" if summary["reason"]
-                                                else ""),
-             f"simulated {summary['sim_time_s']:.1f} s in {summary['wall_time_s']:.1f} s "
-             f"(× {summary['metrics']['sim']['real_time_factor']:.1f})" + _steal(summary)]
+                                                else ""), timing + _steal(summary)]
     if follow:
         lines.append("follow: " + ", ".join(
             f"{k}={_fmt(follow[k])}" for k in ("detection_rate", "rms_range_error_m",
@@ -145,6 +159,7 @@ def _sim(args: argparse.Namespace) -> int:
         config, scenario = load_config(args.config, args.overrides), None
     try:
         asyncio.run(serve(config, scenario, instance=args.instance,
+                          video_url=None if args.no_video else args.video,
                           log=lambda line: print(line, file=sys.stderr, flush=True)))
     except OSError as exc:
         print(f"error: {exc}", file=sys.stderr)

@@ -19,6 +19,7 @@ from autopilot.mission import MissionPlan
 from autopilot.process import StealMeter
 from autopilot.runtime import Runtime
 from autopilot.scenario import build_world
+from drivers.base import Vehicle
 from drivers.sim.driver import SimDriver
 
 
@@ -32,18 +33,43 @@ def default_out_dir(plan: MissionPlan, root: Path = Path("runs")) -> Path:
     return path
 
 
+DEFAULT_CONNECT = "udpin://0.0.0.0:14540"
+DEFAULT_VIDEO = "udp://@:5600"
+
+
+def make_vehicle(plan: MissionPlan, *, realtime: bool = False, connect: str | None = None,
+                 video: str | None = None) -> tuple[Vehicle, int | None]:
+    """The vehicle the configuration's ``driver`` names, and the simulator's seed (if any).
+
+    MAVLink drivers get the mission's cameras as network video streams, described (intrinsics,
+    mounting) by the configuration's camera sections."""
+    driver = plan.config.driver
+    if driver == "sim":
+        sim_config, objects = build_world(plan.mission.scenario, plan.config.sim)
+        return SimDriver(sim_config, scenario=objects, lockstep=not realtime), sim_config.seed
+    if driver == "pymavlink":
+        from drivers.mavlink.pymavlink_driver import PymavlinkDriver
+        from drivers.sim.model import camera_info
+        from drivers.video import VideoSource
+
+        vehicle = PymavlinkDriver(connect or DEFAULT_CONNECT)
+        cam = plan.config.sim.cameras["front"]
+        vehicle.add_camera(VideoSource(video or DEFAULT_VIDEO, camera_info("front", cam),
+                                       to_local=vehicle.vehicle_time_to_local))
+        return vehicle, None
+    raise ConfigError([Problem("config", None, "driver",
+                               f"the {driver!r} driver is not available yet "
+                               "(this version has 'sim' and 'pymavlink')")])
+
+
 async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False,
               progress: Callable[[str], None] | None = None,
-              handle_signals: bool = False) -> dict:
+              handle_signals: bool = False, connect: str | None = None,
+              video: str | None = None) -> dict:
     """Fly ``plan`` and return its summary (also written to ``out_dir/summary.json``)."""
-    if plan.config.driver != "sim":
-        raise ConfigError([Problem("config", None, "driver",
-                                   f"the {plan.config.driver!r} driver is not available yet "
-                                   "(only 'sim' in this version)")])
+    vehicle, seed = make_vehicle(plan, realtime=realtime, connect=connect, video=video)
     if out_dir is not None:
         await asyncio.to_thread(out_dir.mkdir, parents=True, exist_ok=True)
-    sim_config, objects = build_world(plan.mission.scenario, plan.config.sim)
-    vehicle = SimDriver(sim_config, scenario=objects, lockstep=not realtime)
     log = FlightLog(out_dir / "flight.mcap" if out_dir is not None else None)
     wall_start = time.perf_counter()
     steal = StealMeter()
@@ -76,7 +102,7 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
         if handle_signals:
             for sig in signals:
                 loop.remove_signal_handler(sig)
-        sim_time = vehicle.sim_time_s
+        sim_time = getattr(vehicle, "sim_time_s", None)
         wall_time = time.perf_counter() - wall_start
         await vehicle.close()
         log.close()
@@ -87,13 +113,14 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
         "mission": plan.mission.name,
         "source": str(plan.source),
         "driver": plan.config.driver,
-        "clock": "realtime" if realtime else "lockstep",
-        "seed": sim_config.seed,
+        "clock": "lockstep" if vehicle.clock.lockstep else "realtime",
+        "seed": seed,
         "sim_time_s": sim_time,
         "wall_time_s": wall_time,
         "metrics": {
             "follow": follow_metrics(log.records),
-            "sim": {"real_time_factor": sim_time / wall_time if wall_time > 0 else None,
+            "sim": {"real_time_factor": sim_time / wall_time if sim_time and wall_time > 0
+                    else None,
                     "cpu_steal_pct": steal.percent()},
             "latency_ms": latency_metrics(log.records),
         },

@@ -12,6 +12,7 @@ import asyncio
 import contextlib
 import signal
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 
 from autopilot.config import AppConfig
 from autopilot.mission import Scenario
@@ -19,14 +20,21 @@ from autopilot.scenario import build_world
 from drivers.base import FlightMode, VehicleError
 from drivers.mavlink.face import MavlinkFace
 from drivers.sim.driver import SimDriver
+from drivers.video import VideoSender
 
 LAND_ON_EXIT_TIMEOUT_S = 60.0
 
 
+DEFAULT_VIDEO_URL = "udp://127.0.0.1:5600"
+VIDEO_CAMERA = "front"
+
+
 async def serve(config: AppConfig, scenario: Scenario | None, *, instance: int = 0,
+                video_url: str | None = DEFAULT_VIDEO_URL,
                 log: Callable[[str], None] = print,
                 stop: asyncio.Event | None = None) -> None:
-    """Serve the simulated vehicle until ``stop`` is set (or SIGINT / SIGTERM when None)."""
+    """Serve the simulated vehicle until ``stop`` is set (or SIGINT / SIGTERM when None),
+    streaming the forward camera to ``video_url`` (None: no video)."""
     sim_config, objects = build_world(scenario, config.sim)
     vehicle = SimDriver(sim_config, scenario=objects, lockstep=False)
     await vehicle.connect()
@@ -35,8 +43,14 @@ async def serve(config: AppConfig, scenario: Scenario | None, *, instance: int =
     loop = asyncio.get_running_loop()
     handle_signals = stop is None
     stop = stop or asyncio.Event()
+    video: asyncio.Task | None = None
     try:
         await face.start()
+        if video_url is not None and VIDEO_CAMERA in vehicle.cameras:
+            video = loop.create_task(stream_video(vehicle, VIDEO_CAMERA, video_url, log),
+                                     name="video")
+            log(f"{VIDEO_CAMERA} camera: H.264 in MPEG-TS to {video_url} "
+                "(each frame's PTS is its capture time on the vehicle's boot clock)")
         if handle_signals:
             for sig in (signal.SIGINT, signal.SIGTERM):
                 loop.add_signal_handler(sig, stop.set)
@@ -52,8 +66,37 @@ async def serve(config: AppConfig, scenario: Scenario | None, *, instance: int =
         if handle_signals:
             for sig in (signal.SIGINT, signal.SIGTERM):
                 loop.remove_signal_handler(sig)
+        if video is not None:
+            video.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await video
         await face.close()
         await vehicle.close()
+
+
+async def stream_video(vehicle: SimDriver, camera: str, url: str,
+                       log: Callable[[str], None]) -> None:
+    """Encode and send ``camera``'s frames as they come; a frame that arrives while the
+    previous one is still encoding replaces any older waiting one (newest only)."""
+    loop = asyncio.get_running_loop()
+    info = vehicle.cameras[camera]
+    executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="video-encode")
+    intr = info.intrinsics
+    sender: VideoSender | None = None
+    try:
+        sender = await loop.run_in_executor(
+            executor, lambda: VideoSender(url, intr.width_px, intr.height_px, info.rate_hz))
+        async with contextlib.aclosing(vehicle.frames(camera)) as frames:
+            async for frame in frames:
+                await loop.run_in_executor(executor, sender.send, frame.image, frame.time_s)
+    except VehicleError:
+        return
+    except Exception as exc:  # the vehicle flies on without video
+        log(f"video stream stopped: {type(exc).__name__}: {exc}")
+    finally:
+        if sender is not None:
+            await asyncio.shield(loop.run_in_executor(executor, sender.close))
+        executor.shutdown(wait=False)
 
 
 async def _land_if_flying(vehicle: SimDriver, log: Callable[[str], None]) -> None:

@@ -218,6 +218,15 @@ class PymavlinkDriver(Vehicle):
     # Extras
     # ------------------------------------------------------------------------------------
 
+    def add_camera(self, source) -> None:
+        """Attach a camera (a :class:`~drivers.video.VideoSource`), by its ``info.name``."""
+        self._video[source.info.name] = source
+
+    def vehicle_time_to_local(self, vehicle_s: float) -> float:
+        """A time on the vehicle's boot clock (``time_boot_ms``, and the simulator's video
+        stamps) on our clock; +inf until telemetry has fixed the mapping."""
+        return self._boot.to_local(vehicle_s) if self._boot.ready else math.inf
+
     async def set_param(self, name: str, value: float, timeout_s: float = 2.0) -> None:
         """PARAM_SET (REAL32) and wait for the vehicle's PARAM_VALUE echo."""
         system, component = self._require_target()

@@ -42,7 +42,7 @@ from drivers.clock import Clock, LockstepClock, MonotonicClock
 from drivers.sim.camera import RenderingUnavailable, lower_thread_priority
 from drivers.sim.config import SimConfig
 from drivers.sim.flight.flight_stack import CommandRejected
-from drivers.sim.model import camera_intrinsics, camera_rotation_body
+from drivers.sim.model import camera_info
 from drivers.sim.scenario import ScenarioObject
 from drivers.sim.simulator import GroundTruth, SimOutput, Simulator
 from drivers.slots import Broadcast
@@ -57,12 +57,8 @@ class SimDriver(Vehicle):
         self.lockstep = lockstep
         self._clock: LockstepClock | MonotonicClock = LockstepClock() if lockstep \
             else MonotonicClock()
-        self._cameras = {
-            name: CameraInfo(name=name, intrinsics=camera_intrinsics(cam),
-                             rotation_body_cam=camera_rotation_body(cam.pitch_deg, cam.yaw_deg),
-                             position_body_m=cam.position_frd_m, rate_hz=cam.rate_hz)
-            for name, cam in config.cameras.items() if cam.enabled
-        }
+        self._cameras = {name: camera_info(name, cam)
+                         for name, cam in config.cameras.items() if cam.enabled}
         self._executor: ThreadPoolExecutor | None = None
         self._sim: Simulator | None = None
         self._task: asyncio.Task[None] | None = None

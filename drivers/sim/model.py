@@ -45,6 +45,13 @@ def camera_rotation_body(pitch_deg: float, yaw_deg: float) -> np.ndarray:
     return np.column_stack((x, yv, z))
 
 
+def camera_info(name: str, cfg: CameraConfig) -> CameraInfo:
+    """The camera a configuration section describes: intrinsics and mounting."""
+    return CameraInfo(name=name, intrinsics=camera_intrinsics(cfg),
+                      rotation_body_cam=camera_rotation_body(cfg.pitch_deg, cfg.yaw_deg),
+                      position_body_m=cfg.position_frd_m, rate_hz=cfg.rate_hz)
+
+
 def camera_intrinsics(cfg: CameraConfig) -> CameraIntrinsics:
     """Ideal pinhole matching MuJoCo's rendering (square pixels, principal point centred;
     OpenCV puts pixel centres at integer coordinates, hence the half-pixel)."""
