@@ -49,8 +49,8 @@ async def serve(config: AppConfig, scenario: Scenario | None, *, instance: int =
         if video_url is not None and VIDEO_CAMERA in vehicle.cameras:
             video = loop.create_task(stream_video(vehicle, VIDEO_CAMERA, video_url, log),
                                      name="video")
-            log(f"{VIDEO_CAMERA} camera: H.264 in MPEG-TS to {video_url} "
-                "(each frame's PTS is its capture time on the vehicle's boot clock)")
+            log(f"{VIDEO_CAMERA} camera: H.264 over RTP to {video_url} "
+                "(RTP timestamps are capture times on the vehicle's boot clock)")
         if handle_signals:
             for sig in (signal.SIGINT, signal.SIGTERM):
                 loop.add_signal_handler(sig, stop.set)

@@ -17,7 +17,8 @@ they would fly PX4 SITL. What it copies from PX4 (see ``shared/reference/px4-mav
 * offboard: SET_POSITION_TARGET_LOCAL_NED (LOCAL_NED, BODY_NED) goes to the vehicle one by one,
   never re-sent: the vehicle's own setpoint-loss failsafe acts when a client stops;
 * parameters (PARAM_REQUEST_LIST / _READ / PARAM_SET, REAL32) and empty mission, fence and rally
-  lists, as QGroundControl asks for them on connect.
+  lists, as QGroundControl asks for them on connect;
+* TIMESYNC answered with the vehicle's boot time (the clock of every ``time_boot_ms``).
 
 Malformed, unknown and foreign-targeted messages are ignored (counted in :attr:`stats`).
 """
@@ -512,6 +513,12 @@ class MavlinkFace:
         link.send(link.mav.mission_count_encode(msg.get_srcSystem(), msg.get_srcComponent(), 0,
                                                 getattr(msg, "mission_type", 0)))
 
+    def _on_timesync(self, link: _Link, msg) -> None:
+        """MAVLink time synchronisation: answer a request (tc1 = 0) with our boot time."""
+        if msg.tc1 == 0:
+            now_ns = int(self.vehicle.clock.now() * 1e9)
+            link.send(link.mav.timesync_encode(now_ns, msg.ts1))
+
     def _ignore(self, link: _Link, msg) -> None:
         pass
 
@@ -523,6 +530,7 @@ class MavlinkFace:
         "PARAM_REQUEST_READ": _on_param_request_read,
         "PARAM_SET": _on_param_set,
         "MISSION_REQUEST_LIST": _on_mission_request_list,
+        "TIMESYNC": _on_timesync,
         "HEARTBEAT": _ignore,
     }
 

@@ -101,10 +101,13 @@ class MavlinkUdp(asyncio.DatagramProtocol):
 class BootTimeMapper:
     """Maps the vehicle's boot-time stamps (``time_boot_ms``) onto the local clock.
 
-    The offset local − vehicle is estimated as the smallest seen over recent samples: the
-    sample that travelled fastest bounds it best (the lower envelope of transport delay). The
-    estimate may creep up by ``drift_per_s`` per second so that clock drift and a rebooted
-    vehicle are followed; it is reset when the vehicle's time jumps back.
+    Best from MAVLink TIMESYNC round trips (:meth:`observe_sync`): the offset local − vehicle
+    from the exchange with the shortest round trip seen recently, which assumes only that the
+    way there and back take equally long. Until a round trip has been measured, telemetry
+    stamps give an upper bound (:meth:`observe`: the smallest local − vehicle seen, which still
+    contains the vehicle's own telemetry latency). Either estimate may creep by
+    ``drift_per_s`` per second to follow clock drift, and is reset when the vehicle's time
+    jumps back (a reboot).
     """
 
     def __init__(self, drift_per_s: float = 1e-4) -> None:
@@ -112,19 +115,43 @@ class BootTimeMapper:
         self._offset = math.nan
         self._last_local = math.nan
         self._last_vehicle = math.nan
+        self._synced = False
+        self._rtt = math.inf
+        self._sync_at = 0.0
 
     @property
     def ready(self) -> bool:
         return math.isfinite(self._offset)
 
     def observe(self, vehicle_s: float, local_s: float) -> None:
-        sample = local_s - vehicle_s
-        if not self.ready or vehicle_s < self._last_vehicle - 1.0:
-            self._offset = sample
-        else:
-            crept = self._offset + self._drift * max(0.0, local_s - self._last_local)
-            self._offset = min(crept, sample)
+        """A telemetry sample stamped ``vehicle_s`` arrived at ``local_s``."""
+        if vehicle_s < self._last_vehicle - 1.0:  # the vehicle rebooted
+            self._offset, self._synced, self._rtt = math.nan, False, math.inf
+        if not self._synced:
+            sample = local_s - vehicle_s
+            if not self.ready:
+                self._offset = sample
+            else:
+                crept = self._offset + self._drift * max(0.0, local_s - self._last_local)
+                self._offset = min(crept, sample)
         self._last_local, self._last_vehicle = local_s, vehicle_s
+
+    def observe_sync(self, sent_local_s: float, vehicle_s: float, received_local_s: float) -> None:
+        """A TIMESYNC exchange: sent at ``sent_local_s``, answered with the vehicle's time
+        ``vehicle_s``, the answer received at ``received_local_s``."""
+        rtt = received_local_s - sent_local_s
+        if rtt < 0.0:
+            return
+        # older round trips count for less as time passes (drift): inflate them slowly
+        aged = self._rtt + 2.0 * self._drift * max(0.0, received_local_s - self._sync_at)
+        if not self._synced or rtt <= aged:
+            self._offset = (sent_local_s + received_local_s) / 2.0 - vehicle_s
+            self._rtt, self._sync_at, self._synced = rtt, received_local_s, True
+
+    @property
+    def round_trip_s(self) -> float:
+        """The round trip of the exchange the offset comes from (inf before any)."""
+        return self._rtt
 
     def to_local(self, vehicle_s: float) -> float:
         return vehicle_s + self._offset

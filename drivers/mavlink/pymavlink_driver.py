@@ -132,7 +132,8 @@ class PymavlinkDriver(Vehicle):
         self._link = await MavlinkUdp.open(self.url, self._receive)
         loop = asyncio.get_running_loop()
         self._tasks = [loop.create_task(self._heartbeats(), name="mavlink-gcs-heartbeat"),
-                       loop.create_task(self._watchdog(), name="mavlink-watchdog")]
+                       loop.create_task(self._watchdog(), name="mavlink-watchdog"),
+                       loop.create_task(self._timesync(), name="mavlink-timesync")]
         try:
             await asyncio.wait_for(self._heard.wait(), timeout_s)
         except TimeoutError:
@@ -321,6 +322,15 @@ class PymavlinkDriver(Vehicle):
                 self._send(self._link.mav.heartbeat_encode(18, MAV_AUTOPILOT_INVALID, 0, 0, 4))
             await asyncio.sleep(1.0)
 
+    async def _timesync(self) -> None:
+        """TIMESYNC requests: ten a second for the first two seconds, then one a second."""
+        count = 0
+        while True:
+            if self._link is not None and self._target is not None:
+                self._send(self._link.mav.timesync_encode(0, int(self._clock.now() * 1e9)))
+            count += 1
+            await asyncio.sleep(0.1 if count < 20 else 1.0)
+
     async def _watchdog(self) -> None:
         """The link is lost when heartbeats stop for ``heartbeat_timeout_s``."""
         while True:
@@ -375,6 +385,10 @@ class PymavlinkDriver(Vehicle):
         future = self._params.get(name)
         if future is not None and not future.done():
             future.set_result(float(msg.param_value))
+
+    def _on_timesync(self, msg) -> None:
+        if msg.tc1 != 0:  # an answer to one of our requests (ts1 is our time, echoed)
+            self._boot.observe_sync(msg.ts1 / 1e9, msg.tc1 / 1e9, self._clock.now())
 
     def _on_statustext(self, msg) -> None:
         text = msg.text if isinstance(msg.text, str) else msg.text.decode(errors="replace")
@@ -441,6 +455,7 @@ _HANDLERS = {
     "COMMAND_ACK": PymavlinkDriver._on_ack,
     "PARAM_VALUE": PymavlinkDriver._on_param,
     "STATUSTEXT": PymavlinkDriver._on_statustext,
+    "TIMESYNC": PymavlinkDriver._on_timesync,
     "ATTITUDE_QUATERNION": PymavlinkDriver._on_attitude_quaternion,
     "ATTITUDE": PymavlinkDriver._on_attitude,
     "EXTENDED_SYS_STATE": PymavlinkDriver._on_extended_sys_state,
