@@ -40,7 +40,7 @@ def build_parser() -> argparse.ArgumentParser:
                      "(default: a new folder under runs/)")
     run.add_argument("--realtime", action="store_true",
                      help="run against the wall clock instead of lockstep")
-    run.add_argument("--driver", choices=("sim", "pymavlink"),
+    run.add_argument("--driver", choices=("sim", "mavsdk", "pymavlink"),
                      help="the vehicle driver (default: the configuration's 'driver')")
     run.add_argument("--connect", metavar="URL",
                      help="MAVLink connection for MAVLink drivers (default "

@@ -47,19 +47,21 @@ def make_vehicle(plan: MissionPlan, *, realtime: bool = False, connect: str | No
     if driver == "sim":
         sim_config, objects = build_world(plan.mission.scenario, plan.config.sim)
         return SimDriver(sim_config, scenario=objects, lockstep=not realtime), sim_config.seed
-    if driver == "pymavlink":
-        from drivers.mavlink.pymavlink_driver import PymavlinkDriver
+    if driver in ("pymavlink", "mavsdk"):
         from drivers.sim.model import camera_info
         from drivers.video import VideoSource
 
-        vehicle = PymavlinkDriver(connect or DEFAULT_CONNECT)
+        if driver == "mavsdk":
+            from drivers.mavlink.mavsdk_driver import MavsdkDriver as Driver
+        else:
+            from drivers.mavlink.pymavlink_driver import PymavlinkDriver as Driver
+        vehicle = Driver(connect or DEFAULT_CONNECT)
         cam = plan.config.sim.cameras["front"]
         vehicle.add_camera(VideoSource(video or DEFAULT_VIDEO, camera_info("front", cam),
                                        to_local=vehicle.vehicle_time_to_local))
         return vehicle, None
     raise ConfigError([Problem("config", None, "driver",
-                               f"the {driver!r} driver is not available yet "
-                               "(this version has 'sim' and 'pymavlink')")])
+                               f"unknown driver {driver!r} (sim, mavsdk, pymavlink)")])
 
 
 async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False,

@@ -11,6 +11,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import signal
+import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 
@@ -44,6 +45,15 @@ async def serve(config: AppConfig, scenario: Scenario | None, *, instance: int =
     handle_signals = stop is None
     stop = stop or asyncio.Event()
     video: asyncio.Task | None = None
+
+    async def log_events() -> None:  # the vehicle's console, as PX4's shell prints it
+        async with contextlib.aclosing(vehicle.events()) as events:
+            async for time_s, text in events:
+                wall = time.time()  # to line up with other processes' logs
+                stamp = time.strftime("%H:%M:%S", time.localtime(wall)) + f"{wall % 1:.3f}"[1:]
+                log(f"[{time_s:8.2f} s | {stamp}] {text}")
+
+    events = loop.create_task(log_events(), name="sim-events")
     try:
         await face.start()
         if video_url is not None and VIDEO_CAMERA in vehicle.cameras:
@@ -66,10 +76,11 @@ async def serve(config: AppConfig, scenario: Scenario | None, *, instance: int =
         if handle_signals:
             for sig in (signal.SIGINT, signal.SIGTERM):
                 loop.remove_signal_handler(sig)
-        if video is not None:
-            video.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await video
+        for task in (video, events):
+            if task is not None:
+                task.cancel()
+                with contextlib.suppress(asyncio.CancelledError):
+                    await task
         await face.close()
         await vehicle.close()
 

@@ -26,29 +26,26 @@ import contextlib
 import logging
 import math
 from collections import deque
-from collections.abc import AsyncIterator, Mapping
+from collections.abc import AsyncIterator
 
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
 from drivers.base import (
     Battery,
-    CameraInfo,
     CommandDenied,
     CommandTimeout,
     ConnectionLost,
     FlightMode,
-    Frame,
     Health,
     LandedState,
     Setpoint,
-    Vehicle,
     VehicleState,
 )
-from drivers.clock import MonotonicClock
 from drivers.geometry import quat_from_euler
 from drivers.mavlink import ardupilot, px4
-from drivers.mavlink.link import BootTimeMapper, MavlinkUdp
+from drivers.mavlink.common import MavlinkVehicle
+from drivers.mavlink.link import MavlinkUdp
 from drivers.slots import Broadcast
 
 log = logging.getLogger(__name__)
@@ -68,15 +65,13 @@ STREAM_RATES_HZ = {
 }
 
 
-class PymavlinkDriver(Vehicle):
+class PymavlinkDriver(MavlinkVehicle):
     def __init__(self, url: str = "udpin://0.0.0.0:14540", *,
-                 cameras: Mapping[str, object] | None = None,
                  heartbeat_timeout_s: float = 3.0, command_timeout_s: float = 0.5,
                  command_retries: int = 3,
                  ardupilot_hold: ardupilot.CopterMode = ardupilot.CopterMode.BRAKE) -> None:
+        super().__init__()
         self.url = url
-        self._clock = MonotonicClock()
-        self._video = dict(cameras or {})  # name → a video source with .info and .frames()
         self.heartbeat_timeout_s = heartbeat_timeout_s
         self.command_timeout_s = command_timeout_s
         self.command_retries = command_retries
@@ -84,7 +79,6 @@ class PymavlinkDriver(Vehicle):
         self._link: MavlinkUdp | None = None
         self._target: tuple[int, int] | None = None  # (system, component) of the autopilot
         self.autopilot: int | None = None  # MAV_AUTOPILOT of the vehicle
-        self._boot = BootTimeMapper()
         self._telemetry: Broadcast[VehicleState] = Broadcast()
         self._acks: dict[int, asyncio.Future] = {}
         self._params: dict[str, asyncio.Future] = {}
@@ -109,14 +103,6 @@ class PymavlinkDriver(Vehicle):
     # ------------------------------------------------------------------------------------
     # Vehicle interface
     # ------------------------------------------------------------------------------------
-
-    @property
-    def clock(self) -> MonotonicClock:
-        return self._clock
-
-    @property
-    def cameras(self) -> Mapping[str, CameraInfo]:
-        return {name: source.info for name, source in self._video.items()}
 
     @property
     def is_px4(self) -> bool:
@@ -196,11 +182,6 @@ class PymavlinkDriver(Vehicle):
     def telemetry(self, buffer: int = 1) -> AsyncIterator[VehicleState]:
         return self._telemetry.subscribe(buffer)
 
-    def frames(self, camera: str) -> AsyncIterator[Frame]:
-        if camera not in self._video:
-            raise ValueError(f"no camera {camera!r}; this vehicle has {sorted(self._video)}")
-        return self._video[camera].frames()
-
     async def close(self) -> None:
         for task in self._tasks:
             task.cancel()
@@ -208,8 +189,7 @@ class PymavlinkDriver(Vehicle):
             with contextlib.suppress(asyncio.CancelledError):
                 await task
         self._tasks = []
-        for source in self._video.values():
-            await source.close()
+        await self._close_cameras()
         if self._link is not None:
             self._link.close()
             self._link = None
@@ -219,14 +199,6 @@ class PymavlinkDriver(Vehicle):
     # Extras
     # ------------------------------------------------------------------------------------
 
-    def add_camera(self, source) -> None:
-        """Attach a camera (a :class:`~drivers.video.VideoSource`), by its ``info.name``."""
-        self._video[source.info.name] = source
-
-    def vehicle_time_to_local(self, vehicle_s: float) -> float:
-        """A time on the vehicle's boot clock (``time_boot_ms``, and the simulator's video
-        stamps) on our clock; +inf until telemetry has fixed the mapping."""
-        return self._boot.to_local(vehicle_s) if self._boot.ready else math.inf
 
     async def set_param(self, name: str, value: float, timeout_s: float = 2.0) -> None:
         """PARAM_SET (REAL32) and wait for the vehicle's PARAM_VALUE echo."""
