@@ -60,6 +60,15 @@ def build_parser() -> argparse.ArgumentParser:
                      help="where the forward camera streams (H.264 in MPEG-TS; "
                      "default udp://127.0.0.1:5600)")
     sim.add_argument("--no-video", action="store_true", help="do not stream the camera")
+    sim.add_argument("--out", metavar="DIR", help="record ground truth into DIR/truth.mcap "
+                     "(for 'autopilot score')")
+
+    scorer = commands.add_parser(
+        "score", help="score a run flown through a MAVLink driver against the ground truth "
+        "'autopilot sim --out' recorded")
+    scorer.add_argument("run_dir", metavar="RUN_DIR")
+    scorer.add_argument("--truth", required=True, metavar="FILE",
+                        help="the simulator's truth.mcap")
     _add_config_options(sim)
 
     commands.add_parser("missions", help="list the shipped missions")
@@ -94,6 +103,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _run(args)
         if args.command == "sim":
             return _sim(args)
+        if args.command == "score":
+            return _score(args)
         if args.command == "missions":
             return _missions()
         if args.command == "bench":
@@ -148,6 +159,8 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _sim(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
     from autopilot.sim_server import serve
 
     if args.mission:
@@ -160,10 +173,29 @@ def _sim(args: argparse.Namespace) -> int:
     try:
         asyncio.run(serve(config, scenario, instance=args.instance,
                           video_url=None if args.no_video else args.video,
+                          out_dir=Path(args.out) if args.out else None,
                           log=lambda line: print(line, file=sys.stderr, flush=True)))
     except OSError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_FAILED
+    return EXIT_OK
+
+
+def _score(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from autopilot.score import ScoreError, score
+
+    try:
+        metrics = score(Path(args.run_dir), Path(args.truth))
+    except ScoreError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    if not metrics:
+        print("no follow_ball step in this run, or no truth overlapping it", file=sys.stderr)
+        return EXIT_FAILED
+    print("follow: " + ", ".join(f"{k}={_fmt(v)}" for k, v in metrics.items()))
+    print(f"updated {Path(args.run_dir) / 'summary.json'}")
     return EXIT_OK
 
 

@@ -12,6 +12,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from autopilot.config import ConfigError, Problem
+from autopilot.flightlog import records as ch
 from autopilot.flightlog.log import FlightLog
 from autopilot.flightlog.metrics import follow_metrics, latency_metrics
 from autopilot.flightlog.records import clean
@@ -104,6 +105,10 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
         if handle_signals:
             for sig in signals:
                 loop.remove_signal_handler(sig)
+        if hasattr(vehicle, "vehicle_to_local_s"):  # MAVLink: for scoring against the sim
+            log.write(ch.TIME_SYNC, vehicle.clock.now(), {
+                "time_s": vehicle.clock.now(), "vehicle_to_local_s": vehicle.vehicle_to_local_s,
+                "round_trip_s": vehicle.time_sync_round_trip_s})
         sim_time = getattr(vehicle, "sim_time_s", None)
         wall_time = time.perf_counter() - wall_start
         await vehicle.close()

@@ -14,8 +14,11 @@ import signal
 import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
 
 from autopilot.config import AppConfig
+from autopilot.flightlog import records as ch
+from autopilot.flightlog.log import FlightLog
 from autopilot.mission import Scenario
 from autopilot.scenario import build_world
 from drivers.base import FlightMode, VehicleError
@@ -27,11 +30,12 @@ LAND_ON_EXIT_TIMEOUT_S = 60.0
 
 
 DEFAULT_VIDEO_URL = "udp://127.0.0.1:5600"
+TRUTH_LOG = "truth.mcap"
 VIDEO_CAMERA = "front"
 
 
 async def serve(config: AppConfig, scenario: Scenario | None, *, instance: int = 0,
-                video_url: str | None = DEFAULT_VIDEO_URL,
+                video_url: str | None = DEFAULT_VIDEO_URL, out_dir: Path | None = None,
                 log: Callable[[str], None] = print,
                 stop: asyncio.Event | None = None) -> None:
     """Serve the simulated vehicle until ``stop`` is set (or SIGINT / SIGTERM when None),
@@ -54,6 +58,19 @@ async def serve(config: AppConfig, scenario: Scenario | None, *, instance: int =
                 log(f"[{time_s:8.2f} s | {stamp}] {text}")
 
     events = loop.create_task(log_events(), name="sim-events")
+    truth_log: FlightLog | None = None
+    truth: asyncio.Task | None = None
+    if out_dir is not None:  # ground truth, on the vehicle's boot clock, for `autopilot score`
+        await asyncio.to_thread(out_dir.mkdir, parents=True, exist_ok=True)
+        truth_log = FlightLog(out_dir / TRUTH_LOG)
+
+        async def log_truth() -> None:
+            async with contextlib.aclosing(vehicle.ground_truth()) as samples:
+                async for gt in samples:
+                    truth_log.write(ch.GROUND_TRUTH, gt.time_s, ch.ground_truth_record(gt))
+
+        truth = loop.create_task(log_truth(), name="sim-truth")
+        log(f"ground truth → {out_dir / TRUTH_LOG}")
     try:
         await face.start()
         if video_url is not None and VIDEO_CAMERA in vehicle.cameras:
@@ -76,13 +93,15 @@ async def serve(config: AppConfig, scenario: Scenario | None, *, instance: int =
         if handle_signals:
             for sig in (signal.SIGINT, signal.SIGTERM):
                 loop.remove_signal_handler(sig)
-        for task in (video, events):
+        for task in (video, events, truth):
             if task is not None:
                 task.cancel()
                 with contextlib.suppress(asyncio.CancelledError):
                     await task
         await face.close()
         await vehicle.close()
+        if truth_log is not None:
+            truth_log.close()
 
 
 async def stream_video(vehicle: SimDriver, camera: str, url: str,

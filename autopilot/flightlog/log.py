@@ -10,6 +10,7 @@ lockstep), in nanoseconds.
 from __future__ import annotations
 
 import json
+import struct
 from collections import defaultdict
 from pathlib import Path
 from typing import IO
@@ -18,6 +19,8 @@ import orjson
 from mcap.writer import Writer
 
 from autopilot.flightlog.records import SCHEMAS
+
+CHUNK_SIZE_B = 64 * 1024
 
 
 def encode(record: dict) -> bytes:
@@ -35,7 +38,9 @@ class FlightLog:
         self._seq = 0
         if path is not None:
             self._file = open(path, "wb")  # noqa: SIM115 - closed in close()
-            self._writer = Writer(self._file)
+            # small chunks: a run that crashes loses at most the unfinished chunk (about a
+            # second of records), not the megabyte a default chunk holds
+            self._writer = Writer(self._file, chunk_size=CHUNK_SIZE_B)
             self._writer.start(profile="", library="autopilot")
             for topic, schema in SCHEMAS.items():
                 schema_id = self._writer.register_schema(
@@ -59,3 +64,26 @@ class FlightLog:
         if self._file is not None:
             self._file.close()
             self._file = None
+
+
+def read_log(path: Path) -> dict[str, list[dict]]:
+    """The records of a ``.mcap`` flight log by channel, in log order (as :class:`FlightLog`
+    holds them in memory). A log cut short (a crashed run) yields what was written."""
+    from mcap.exceptions import McapError
+    from mcap.records import Channel, Message
+    from mcap.stream_reader import StreamReader
+
+    records: dict[str, list[dict]] = defaultdict(list)
+    topics: dict[int, str] = {}
+    with open(path, "rb") as f:
+        # front to back, record by record: a file cut short has no footer or summary to seek
+        stream = StreamReader(f, validate_crcs=False)
+        try:
+            for record in stream.records:
+                if isinstance(record, Channel):
+                    topics[record.id] = record.topic
+                elif isinstance(record, Message) and record.channel_id in topics:
+                    records[topics[record.channel_id]].append(json.loads(record.data))
+        except (McapError, EOFError, ValueError, struct.error):
+            pass  # truncated: keep what was read
+    return records

@@ -23,6 +23,7 @@ SETPOINTS = "/control/setpoint"
 MISSION_EVENTS = "/mission/events"
 MISSION_PLAN = "/mission/plan"
 GROUND_TRUTH = "/sim/ground_truth"
+TIME_SYNC = "/vehicle/time_sync"
 
 _NUM = {"type": ["number", "null"]}
 _INT = {"type": "integer"}
@@ -66,6 +67,7 @@ SCHEMAS: dict[str, dict] = {
     MISSION_PLAN: _obj("MissionPlan", mission=_STR, source=_STR, steps={"type": "array"},
                        standoff_m=_NUM, camera=_STR, ball_diameter_m=_NUM, driver=_STR,
                        scenario={"type": ["object", "null"]}),
+    TIME_SYNC: _obj("TimeSync", time_s=_NUM, vehicle_to_local_s=_NUM, round_trip_s=_NUM),
     GROUND_TRUTH: _obj("GroundTruth", time_s=_NUM, vehicle_position_ned_m=_vec(3),
                        vehicle_velocity_ned_m_s=_vec(3), vehicle_attitude_q=_vec(4),
                        wind_ned_m_s=_vec(3), bodies={"type": "object"}),

@@ -44,3 +44,12 @@ class MavlinkVehicle(Vehicle):
         """A time on the vehicle's boot clock (``time_boot_ms``, and the simulator's video
         stamps) on our clock; +inf until telemetry or TIMESYNC has fixed the mapping."""
         return self._boot.to_local(vehicle_s) if self._boot.ready else math.inf
+
+    @property
+    def vehicle_to_local_s(self) -> float:
+        """local time − vehicle boot time (NaN until known)."""
+        return self._boot.to_local(0.0) if self._boot.ready else math.nan
+
+    @property
+    def time_sync_round_trip_s(self) -> float:
+        return self._boot.round_trip_s

@@ -1,0 +1,51 @@
+"""``autopilot score RUN_DIR --truth TRUTH``: score a flight flown through a MAVLink driver
+against the ground truth that ``autopilot sim --out DIR`` recorded.
+
+The autopilot never sees ground truth; the simulator never sees detections. This joins the
+two logs after the fact: the run's log holds its detections and setpoints on its own clock,
+and the time mapping its driver measured (TIMESYNC: local − vehicle boot time); the
+simulator's log holds ground truth on the vehicle's boot clock. Truth is shifted onto the
+run's clock and the run's follow metrics are computed as for an in-process run.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+from autopilot.flightlog import records as ch
+from autopilot.flightlog.log import read_log
+from autopilot.flightlog.metrics import follow_metrics
+
+
+class ScoreError(Exception):
+    pass
+
+
+def score(run_dir: Path, truth_path: Path) -> dict:
+    """Follow metrics of the run in ``run_dir``; also written into its ``summary.json``."""
+    log_path = run_dir / "flight.mcap"
+    for path in (log_path, truth_path):
+        if not path.is_file():
+            raise ScoreError(f"{path}: no such file")
+    records = read_log(log_path)
+    syncs = [r for r in records.get(ch.TIME_SYNC, [])
+             if r.get("vehicle_to_local_s") is not None
+             and math.isfinite(r["vehicle_to_local_s"])]
+    if not syncs:
+        raise ScoreError(f"{log_path}: no time mapping to the vehicle's clock (channel "
+                         f"{ch.TIME_SYNC}); was it flown through a MAVLink driver?")
+    offset = syncs[-1]["vehicle_to_local_s"]
+    truth = read_log(truth_path).get(ch.GROUND_TRUTH, [])
+    if not truth:
+        raise ScoreError(f"{truth_path}: no ground truth (channel {ch.GROUND_TRUTH})")
+    records[ch.GROUND_TRUTH] = [{**r, "time_s": r["time_s"] + offset} for r in truth]
+    metrics = ch.clean(follow_metrics(records))
+    summary_path = run_dir / "summary.json"
+    if summary_path.is_file():
+        summary = json.loads(summary_path.read_text())
+        summary.setdefault("metrics", {})["follow"] = metrics
+        summary["scored_against"] = str(truth_path)
+        summary_path.write_text(json.dumps(summary, indent=2) + "\n")
+    return metrics
