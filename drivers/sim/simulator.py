@@ -2,7 +2,8 @@
 
 One physics step (``1 / physics_rate_hz``):
 
-1. scenario objects move (mocap), ``mj_step1`` computes kinematics for time *t*;
+1. scenario objects move (mocap; their scripted time starts when the vehicle first arms),
+   ``mj_step1`` computes kinematics for time *t*;
 2. every ``physics_rate_hz / rate_loop_hz`` steps the flight stack runs on the estimator's
    output and sets new rotor speed commands, and wind/drag forces are updated;
 3. rotor speeds follow their commands with a first-order lag; thrust = T_max·(ω/ω_max)²;
@@ -135,6 +136,9 @@ class Simulator:
         self._moving = [obj for obj in self.scenario if obj.moves]
 
         self._step = 0
+        #: Scripted motion starts when the vehicle first arms (None until then), so that a
+        #: scenario unfolds the same however long a client took to connect and arm.
+        self._scenario_t0: float | None = None
         self._failures: set[str] = set()
         self._outbox: list[tuple[float, int, SimOutput]] = []
         self._seq = itertools.count()
@@ -197,12 +201,23 @@ class Simulator:
             candidates.append(self._truth.next_step * dt)
         return max(min(candidates), self.time_s + dt)
 
+    @property
+    def scenario_start_s(self) -> float | None:
+        """When scripted motion started (the first arming), None before."""
+        return self._scenario_t0
+
+    def _scenario_time(self, time_s: float) -> float:
+        """Where scripted motion is at simulator time ``time_s`` (0 until the first arming)."""
+        return time_s - self._scenario_t0 if self._scenario_t0 is not None else 0.0
+
     def _step_once(self) -> None:
         m, d = self.model, self.data
         k = self._step
         control = k % self._rate_div == 0
         if self._moving and (control or k >= self._next_capture):
-            t = k * self.dt
+            if self._scenario_t0 is None and self.flight.armed:
+                self._scenario_t0 = k * self.dt
+            t = self._scenario_time(k * self.dt)
             for obj in self._moving:
                 obj.update(t, d)
         mujoco.mj_step1(m, d)
@@ -353,7 +368,8 @@ class Simulator:
             angular_velocity_frd_rad_s=rates,
             rotor_thrust_n=self.rotor_thrust_n.copy(),
             wind_ned_m_s=self.wind.velocity_ned_m_s.copy(),
-            bodies={obj.name: obj.truth(t, self.data) for obj in self.scenario},
+            bodies={obj.name: obj.truth(self._scenario_time(t), self.data)
+                    for obj in self.scenario},
         )
 
     # ------------------------------------------------------------------------------------

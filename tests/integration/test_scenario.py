@@ -10,7 +10,7 @@ import pytest
 
 from drivers.sim.scenario import Circle, Geom, MocapBody
 
-from .simtools import run, simulator
+from .simtools import armable, run, simulator
 
 
 def test_circling_body_moves_on_script_and_is_seen(sim_config):
@@ -19,17 +19,24 @@ def test_circling_body_moves_on_script_and_is_seen(sim_config):
 
     async def main():
         async with simulator(sim_config, scenario=[ball]) as drv:
+            await armable(drv)
+            still = await anext(drv.ground_truth())
+            await drv.arm()  # scripted motion starts when the vehicle arms
             seen = []
             async with contextlib.aclosing(drv.frames("front")) as frames:
                 async for frame in frames:
-                    seen.append(frame)
-                    if frame.time_s >= math.pi / 2:  # a quarter lap (1 rad/s)
+                    start = drv.simulator.scenario_start_s
+                    if start is not None and frame.time_s >= start:
+                        seen.append(frame)
+                    if seen and frame.time_s >= start + math.pi / 2:  # a quarter lap
                         break
             truth = await anext(drv.ground_truth())
-            return seen, truth
+            return still, start, seen, truth
 
-    frames, truth = run(main())
-    pos, vel, _ = path(truth.time_s)
+    still, start, frames, truth = run(main())
+    assert start is not None
+    assert np.allclose(still.bodies["ball"].position_ned_m, path(0.0)[0])  # waits for arming
+    pos, vel, _ = path(truth.time_s - start)
     assert np.allclose(truth.bodies["ball"].position_ned_m, pos)
     assert np.allclose(truth.bodies["ball"].velocity_ned_m_s, vel)
     assert np.linalg.norm(vel) == pytest.approx(1.0)
