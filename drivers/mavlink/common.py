@@ -1,14 +1,40 @@
-"""What every MAVLink driver shares: the monotonic clock, the vehicle-time mapping, and
-cameras that arrive as network video streams."""
+"""What every MAVLink driver shares: the monotonic clock, the vehicle-time mapping, the
+telemetry assembled from several MAVLink messages, and cameras that arrive as network video
+streams."""
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import math
-from collections.abc import AsyncIterator, Mapping
+from collections.abc import AsyncIterator, Iterable, Mapping
 
-from drivers.base import CameraInfo, Frame, Vehicle
+import numpy as np
+
+from drivers.base import (
+    Battery,
+    CameraInfo,
+    FlightMode,
+    Frame,
+    Health,
+    LandedState,
+    Vehicle,
+    VehicleError,
+    VehicleState,
+)
 from drivers.clock import MonotonicClock
 from drivers.mavlink.link import BootTimeMapper
+from drivers.slots import Broadcast
+
+
+async def cancel_all(tasks: Iterable[asyncio.Task]) -> None:
+    """Cancel ``tasks`` and wait for them to end (their errors are not ours any more)."""
+    tasks = list(tasks)
+    for task in tasks:
+        task.cancel()
+    for task in tasks:
+        with contextlib.suppress(asyncio.CancelledError, Exception):
+            await task
 
 
 class MavlinkVehicle(Vehicle):
@@ -18,6 +44,38 @@ class MavlinkVehicle(Vehicle):
         self._clock = MonotonicClock()
         self._boot = BootTimeMapper()
         self._video: dict[str, object] = {}  # name → VideoSource
+        self._telemetry: Broadcast[VehicleState] = Broadcast()
+        # the newest of each piece of telemetry, from whichever message carries it
+        self._armed = False
+        self._mode = FlightMode.UNKNOWN
+        self._q = np.array([1.0, 0.0, 0.0, 0.0])
+        self._rates = np.zeros(3)
+        self._landed = LandedState.UNKNOWN
+        self._range_m = math.nan
+        self._battery = Battery(math.nan, math.nan, math.nan)
+        self._health = Health(local_position_ok=False)
+        self._failsafe = False
+        #: The newest telemetry sample (None before the first).
+        self.latest_state: VehicleState | None = None
+
+    def telemetry(self, buffer: int = 1) -> AsyncIterator[VehicleState]:
+        return self._telemetry.subscribe(buffer)
+
+    def _publish_position(self, vehicle_s: float, position_ned_m, velocity_ned_m_s) -> None:
+        """A LOCAL_POSITION_NED stamped ``vehicle_s`` (boot time) arrived: publish a sample
+        made of it and the newest of everything else."""
+        self._boot.observe(vehicle_s, self._clock.now())
+        state = VehicleState(
+            time_s=self._boot.to_local(vehicle_s), position_ned_m=position_ned_m,
+            velocity_ned_m_s=velocity_ned_m_s, attitude_q=self._q,
+            angular_velocity_frd_rad_s=self._rates, armed=self._armed, mode=self._mode,
+            landed_state=self._landed, distance_to_ground_m=self._range_m,
+            battery=self._battery, health=self._health, failsafe=self._failsafe)
+        self.latest_state = state
+        self._telemetry.publish(state)
+
+    def _end_telemetry(self, error: VehicleError | None) -> None:
+        self._telemetry.close(error)
 
     @property
     def clock(self) -> MonotonicClock:

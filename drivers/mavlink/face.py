@@ -39,6 +39,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from drivers.base import CommandDenied, FlightMode, Vehicle, VehicleError, VehicleState
 from drivers.geometry import euler_from_quat
 from drivers.mavlink import px4
+from drivers.mavlink.common import cancel_all
 
 log = logging.getLogger(__name__)
 
@@ -202,11 +203,7 @@ class MavlinkFace:
             self._tasks.append(loop.create_task(self._statustext(), name="mavlink-events"))
 
     async def close(self) -> None:
-        for task in self._tasks:
-            task.cancel()
-        for task in self._tasks:
-            with contextlib.suppress(asyncio.CancelledError, Exception):
-                await task
+        await cancel_all(self._tasks)
         self._tasks = []
         for link in self.links.values():
             if link.transport is not None:

@@ -33,11 +33,9 @@ from drivers.base import (
     Health,
     LandedState,
     Setpoint,
-    VehicleState,
 )
 from drivers.mavlink import px4
-from drivers.mavlink.common import MavlinkVehicle
-from drivers.slots import Broadcast
+from drivers.mavlink.common import MavlinkVehicle, cancel_all
 
 log = logging.getLogger(__name__)
 
@@ -63,21 +61,10 @@ class MavsdkDriver(MavlinkVehicle):
         self._action = None
         self._telemetry_plugin = None
         self._direct = None
-        self._telemetry: Broadcast[VehicleState] = Broadcast()
         self._tasks: list[asyncio.Task] = []
         self._error: ConnectionLost | None = None
         self._last_sample_s = -math.inf
-        self._armed = False
-        self._mode = FlightMode.UNKNOWN
-        self._q = np.array([1.0, 0.0, 0.0, 0.0])
-        self._rates = np.zeros(3)
-        self._landed = LandedState.UNKNOWN
-        self._range_m = math.nan
-        self._battery = Battery(math.nan, math.nan, math.nan)
-        self._health = Health(local_position_ok=False)
         self._status_text: tuple[float, str] = (-math.inf, "")
-        #: The newest telemetry sample (None before the first).
-        self.latest_state: VehicleState | None = None
 
     # ------------------------------------------------------------------------------------
     # Vehicle interface
@@ -163,22 +150,15 @@ class MavsdkDriver(MavlinkVehicle):
             message_name="SET_POSITION_TARGET_LOCAL_NED", target_system_id=1,
             target_component_id=1, fields_json=json.dumps(fields)))
 
-    def telemetry(self, buffer: int = 1):
-        return self._telemetry.subscribe(buffer)
-
     async def close(self) -> None:
-        for task in self._tasks:
-            task.cancel()
-        for task in self._tasks:
-            with contextlib.suppress(asyncio.CancelledError, Exception):
-                await task
+        await cancel_all(self._tasks)
         self._tasks = []
         await self._close_cameras()
         if self._mavsdk is not None:
             mavsdk, self._mavsdk = self._mavsdk, None
             with contextlib.suppress(Exception):
                 await mavsdk.__aexit__(None, None, None)
-        self._telemetry.close(self._error)
+        self._end_telemetry(self._error)
 
     # ------------------------------------------------------------------------------------
     # Commands
@@ -241,19 +221,9 @@ class MavsdkDriver(MavlinkVehicle):
     async def _positions(self) -> None:
         async for msg in self._direct.subscribe_message("LOCAL_POSITION_NED"):
             f = json.loads(msg.fields_json)
-            vehicle_s = f["time_boot_ms"] / 1000.0
-            now = self._clock.now()
-            self._boot.observe(vehicle_s, now)
-            self._last_sample_s = now
-            state = VehicleState(
-                time_s=self._boot.to_local(vehicle_s),
-                position_ned_m=(f["x"], f["y"], f["z"]),
-                velocity_ned_m_s=(f["vx"], f["vy"], f["vz"]),
-                attitude_q=self._q, angular_velocity_frd_rad_s=self._rates, armed=self._armed,
-                mode=self._mode, landed_state=self._landed, distance_to_ground_m=self._range_m,
-                battery=self._battery, health=self._health)
-            self.latest_state = state
-            self._telemetry.publish(state)
+            self._last_sample_s = self._clock.now()
+            self._publish_position(f["time_boot_ms"] / 1000.0, (f["x"], f["y"], f["z"]),
+                                   (f["vx"], f["vy"], f["vz"]))
 
     async def _timesync(self) -> None:
         from mavsdk.asyncio.plugins.mavlink_direct import MavlinkMessage
@@ -283,7 +253,7 @@ class MavsdkDriver(MavlinkVehicle):
                     self._clock.now() - self._last_sample_s > self.telemetry_timeout_s:
                 self._error = ConnectionLost(
                     f"no telemetry from the vehicle for {self.telemetry_timeout_s:g} s")
-                self._telemetry.close(self._error)
+                self._end_telemetry(self._error)
                 return
 
     async def _status_texts(self) -> None:

@@ -26,7 +26,6 @@ import contextlib
 import logging
 import math
 from collections import deque
-from collections.abc import AsyncIterator
 
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
@@ -38,15 +37,12 @@ from drivers.base import (
     ConnectionLost,
     FlightMode,
     Health,
-    LandedState,
     Setpoint,
-    VehicleState,
 )
 from drivers.geometry import quat_from_euler
 from drivers.mavlink import ardupilot, px4
-from drivers.mavlink.common import MavlinkVehicle
+from drivers.mavlink.common import MavlinkVehicle, cancel_all
 from drivers.mavlink.link import MavlinkUdp
-from drivers.slots import Broadcast
 
 log = logging.getLogger(__name__)
 
@@ -79,7 +75,6 @@ class PymavlinkDriver(MavlinkVehicle):
         self._link: MavlinkUdp | None = None
         self._target: tuple[int, int] | None = None  # (system, component) of the autopilot
         self.autopilot: int | None = None  # MAV_AUTOPILOT of the vehicle
-        self._telemetry: Broadcast[VehicleState] = Broadcast()
         self._acks: dict[int, asyncio.Future] = {}
         self._params: dict[str, asyncio.Future] = {}
         self._statustext: deque[str] = deque(maxlen=8)
@@ -87,18 +82,6 @@ class PymavlinkDriver(MavlinkVehicle):
         self._last_heartbeat_s = -math.inf
         self._tasks: list[asyncio.Task] = []
         self._closed_error: ConnectionLost | None = None
-        # the newest of each piece of telemetry
-        self._armed = False
-        self._mode = FlightMode.UNKNOWN
-        self._q = np.array([1.0, 0.0, 0.0, 0.0])
-        self._rates = np.zeros(3)
-        self._landed = LandedState.UNKNOWN
-        self._range_m = math.nan
-        self._battery = Battery(math.nan, math.nan, math.nan)
-        self._health = Health(local_position_ok=False)
-        self._failsafe = False
-        #: The newest telemetry sample (None before the first).
-        self.latest_state: VehicleState | None = None
 
     # ------------------------------------------------------------------------------------
     # Vehicle interface
@@ -179,21 +162,14 @@ class PymavlinkDriver(MavlinkVehicle):
             self._boot_ms(), system, component, frame, mask, *pos, *vel, 0.0, 0.0, 0.0, yaw,
             rate))
 
-    def telemetry(self, buffer: int = 1) -> AsyncIterator[VehicleState]:
-        return self._telemetry.subscribe(buffer)
-
     async def close(self) -> None:
-        for task in self._tasks:
-            task.cancel()
-        for task in self._tasks:
-            with contextlib.suppress(asyncio.CancelledError):
-                await task
+        await cancel_all(self._tasks)
         self._tasks = []
         await self._close_cameras()
         if self._link is not None:
             self._link.close()
             self._link = None
-        self._telemetry.close(self._closed_error)
+        self._end_telemetry(self._closed_error)
 
     # ------------------------------------------------------------------------------------
     # Extras
@@ -311,7 +287,7 @@ class PymavlinkDriver(MavlinkVehicle):
                     self._clock.now() - self._last_heartbeat_s > self.heartbeat_timeout_s:
                 self._closed_error = ConnectionLost(
                     f"no heartbeat from the vehicle for {self.heartbeat_timeout_s:g} s")
-                self._telemetry.close(self._closed_error)
+                self._end_telemetry(self._closed_error)
                 for future in (*self._acks.values(), *self._params.values()):
                     if not future.done():
                         future.set_exception(self._closed_error)
@@ -403,24 +379,8 @@ class PymavlinkDriver(MavlinkVehicle):
         self._range_m = cm / 100.0 if in_range else math.nan
 
     def _on_local_position(self, msg) -> None:
-        vehicle_s = msg.time_boot_ms / 1000.0
-        self._boot.observe(vehicle_s, self._clock.now())
-        state = VehicleState(
-            time_s=self._boot.to_local(vehicle_s),
-            position_ned_m=(msg.x, msg.y, msg.z),
-            velocity_ned_m_s=(msg.vx, msg.vy, msg.vz),
-            attitude_q=self._q,
-            angular_velocity_frd_rad_s=self._rates,
-            armed=self._armed,
-            mode=self._mode,
-            landed_state=self._landed,
-            distance_to_ground_m=self._range_m,
-            battery=self._battery,
-            health=self._health,
-            failsafe=self._failsafe,
-        )
-        self.latest_state = state
-        self._telemetry.publish(state)
+        self._publish_position(msg.time_boot_ms / 1000.0, (msg.x, msg.y, msg.z),
+                               (msg.vx, msg.vy, msg.vz))
 
 
 _HANDLERS = {
