@@ -255,7 +255,7 @@ class MavlinkFace:
         async with contextlib.aclosing(self._events) as events:
             async for _, text in events:
                 self._send_all(lambda mav, text=text: mav.statustext_encode(
-                    6, text.encode()[:50]))  # MAV_SEVERITY_INFO
+                    6, _statustext(text)))  # MAV_SEVERITY_INFO
 
     def _message(self, msg_id: int, mav, s: VehicleState | None):
         """Encode message ``msg_id`` from telemetry sample ``s`` (None if not possible)."""
@@ -313,7 +313,7 @@ class MavlinkFace:
         present = (px4.SENSOR_GYRO | px4.SENSOR_ACCEL | px4.SENSOR_MAG | px4.SENSOR_ABS_PRESSURE
                    | px4.SENSOR_GPS | px4.SENSOR_MOTOR_OUTPUTS | px4.SENSOR_BATTERY
                    | px4.SENSOR_PREARM_CHECK)
-        healthy = 0
+        healthy = px4.SENSOR_GEOFENCE  # no fence, so never breached (MAVProxy reads this bit)
         for ok, bit in ((h.gyro_ok, px4.SENSOR_GYRO), (h.accel_ok, px4.SENSOR_ACCEL),
                         (h.mag_ok, px4.SENSOR_MAG), (True, px4.SENSOR_ABS_PRESSURE),
                         (h.local_position_ok, px4.SENSOR_GPS), (True, px4.SENSOR_MOTOR_OUTPUTS),
@@ -378,7 +378,7 @@ class MavlinkFace:
             result = await self._execute(link, command, params)
         except CommandDenied as exc:
             log.info("command %d denied: %s", command, exc.reason)
-            link.send(link.mav.statustext_encode(4, exc.reason.encode()[:50]))
+            link.send(link.mav.statustext_encode(4, _statustext(exc.reason)))
             result = DENIED
         except VehicleError as exc:
             log.warning("command %d failed: %s", command, exc)
@@ -530,6 +530,11 @@ class MavlinkFace:
         "TIMESYNC": _on_timesync,
         "HEARTBEAT": _ignore,
     }
+
+
+def _statustext(text: str) -> bytes:
+    """STATUSTEXT's 50 characters, in ASCII (ground stations show other bytes as garbage)."""
+    return text.replace("→", "->").encode("ascii", "replace")[:50]
 
 
 def _param_name(raw) -> str:
