@@ -48,6 +48,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--video", metavar="URL",
                      help="the forward camera's video stream for MAVLink drivers (default "
                      "udp://@:5600)")
+    run.add_argument("--calibration", metavar="FILE",
+                     help="the video camera's intrinsics (OpenCV or ROS calibration YAML); "
+                     "default: the configuration's camera section")
     _add_config_options(run)
 
     sim = commands.add_parser(
@@ -137,7 +140,8 @@ def _run(args: argparse.Namespace) -> int:
 
     print(f"mission {plan.mission.name} ({plan.source}); log in {out}", file=sys.stderr)
     summary = asyncio.run(fly(plan, out, realtime=args.realtime, progress=progress,
-                              handle_signals=True, connect=args.connect, video=args.video))
+                              handle_signals=True, connect=args.connect, video=args.video,
+                              calibration=Path(args.calibration) if args.calibration else None))
     if sys.stderr.isatty():
         sys.stderr.write("\n")
     follow = summary["metrics"]["follow"]

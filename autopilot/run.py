@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import dataclasses
 import datetime as dt
 import json
 import signal
@@ -39,11 +40,13 @@ DEFAULT_VIDEO = "udp://@:5600"
 
 
 def make_vehicle(plan: MissionPlan, *, realtime: bool = False, connect: str | None = None,
-                 video: str | None = None) -> tuple[Vehicle, int | None]:
+                 video: str | None = None,
+                 calibration: Path | None = None) -> tuple[Vehicle, int | None]:
     """The vehicle the configuration's ``driver`` names, and the simulator's seed (if any).
 
-    MAVLink drivers get the mission's cameras as network video streams, described (intrinsics,
-    mounting) by the configuration's camera sections."""
+    MAVLink drivers get the forward camera as a network video stream; its intrinsics come from
+    ``calibration`` (an OpenCV or ROS calibration file) if given, else from the configuration's
+    camera section, which also gives its mounting."""
     driver = plan.config.driver
     if driver == "sim":
         sim_config, objects = build_world(plan.mission.scenario, plan.config.sim)
@@ -57,8 +60,18 @@ def make_vehicle(plan: MissionPlan, *, realtime: bool = False, connect: str | No
         else:
             from drivers.mavlink.pymavlink_driver import PymavlinkDriver as Driver
         vehicle = Driver(connect or DEFAULT_CONNECT)
-        cam = plan.config.sim.cameras["front"]
-        vehicle.add_camera(VideoSource(video or DEFAULT_VIDEO, camera_info("front", cam),
+        info = camera_info("front", plan.config.sim.cameras["front"])
+        if calibration is not None:
+            from drivers.calibration import CalibrationError, load_calibration
+
+            try:
+                intrinsics = load_calibration(calibration)
+            except CalibrationError as exc:
+                message = str(exc).removeprefix(f"{calibration}: ")
+                raise ConfigError([Problem(str(calibration), None, "calibration",
+                                           message)]) from None
+            info = dataclasses.replace(info, intrinsics=intrinsics)
+        vehicle.add_camera(VideoSource(video or DEFAULT_VIDEO, info,
                                        to_local=vehicle.vehicle_time_to_local))
         return vehicle, None
     raise ConfigError([Problem("config", None, "driver",
@@ -68,9 +81,10 @@ def make_vehicle(plan: MissionPlan, *, realtime: bool = False, connect: str | No
 async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False,
               progress: Callable[[str], None] | None = None,
               handle_signals: bool = False, connect: str | None = None,
-              video: str | None = None) -> dict:
+              video: str | None = None, calibration: Path | None = None) -> dict:
     """Fly ``plan`` and return its summary (also written to ``out_dir/summary.json``)."""
-    vehicle, seed = make_vehicle(plan, realtime=realtime, connect=connect, video=video)
+    vehicle, seed = make_vehicle(plan, realtime=realtime, connect=connect, video=video,
+                                 calibration=calibration)
     if out_dir is not None:
         await asyncio.to_thread(out_dir.mkdir, parents=True, exist_ok=True)
     log = FlightLog(out_dir / "flight.mcap" if out_dir is not None else None)

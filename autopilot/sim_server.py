@@ -22,6 +22,7 @@ from autopilot.flightlog.log import FlightLog
 from autopilot.mission import Scenario
 from autopilot.scenario import build_world
 from drivers.base import FlightMode, VehicleError
+from drivers.calibration import write_calibration
 from drivers.mavlink.face import MavlinkFace
 from drivers.sim.driver import SimDriver
 from drivers.video import VideoSender
@@ -71,6 +72,10 @@ async def serve(config: AppConfig, scenario: Scenario | None, *, instance: int =
 
         truth = loop.create_task(log_truth(), name="sim-truth")
         log(f"ground truth → {out_dir / TRUTH_LOG}")
+        if VIDEO_CAMERA in vehicle.cameras:
+            calibration = out_dir / f"{VIDEO_CAMERA}_calibration.yaml"
+            write_calibration(calibration, vehicle.cameras[VIDEO_CAMERA].intrinsics)
+            log(f"{VIDEO_CAMERA} camera calibration → {calibration}")
     try:
         await face.start()
         if video_url is not None and VIDEO_CAMERA in vehicle.cameras:

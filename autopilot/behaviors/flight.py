@@ -27,7 +27,8 @@ class TakeoffParams(Params):
 
 class Takeoff(Behavior):
     """Wait until the vehicle is armable, arm, and climb to ``altitude_m`` above the arming
-    point with the vehicle's TAKEOFF mode; done once it holds there."""
+    point with the vehicle's takeoff command; done once it holds there (PX4: HOLD after
+    TAKEOFF; ArduPilot: GUIDED)."""
 
     name = "takeoff"
 
@@ -57,7 +58,10 @@ class Takeoff(Behavior):
             return BehaviorOutput(Status.RUNNING, phase="climbing", requests=(
                 VehicleRequest(RequestKind.ARM),
                 VehicleRequest(RequestKind.TAKEOFF, altitude_m=self.params.altitude_m)))
-        if (s.in_air and s.mode is FlightMode.HOLD
+        # PX4 climbs in TAKEOFF and then HOLDs; ArduPilot climbs and stays in GUIDED (our
+        # OFFBOARD). Either way: out of TAKEOFF, in the air, at the altitude asked for. (Modes
+        # arrive with the 1 Hz HEARTBEAT, so the altitude is what says the climb is over.)
+        if (s.in_air and s.mode in (FlightMode.HOLD, FlightMode.OFFBOARD)
                 and abs(s.altitude_m - self._target_altitude) < _ALTITUDE_TOLERANCE_M):
             return BehaviorOutput(Status.SUCCEEDED, phase="climbing")
         return BehaviorOutput(Status.RUNNING, phase="climbing")
