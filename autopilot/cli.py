@@ -10,7 +10,7 @@ from collections.abc import Sequence
 
 from autopilot import __version__
 from autopilot.config import ConfigError, load_config
-from autopilot.process import configure_for_flight
+from autopilot.process import configure_for_flight, yield_cpu_to_other_processes
 
 EXIT_OK = 0
 EXIT_FAILED = 1
@@ -174,6 +174,7 @@ def _sim(args: argparse.Namespace) -> int:
         config, scenario = plan.config, plan.mission.scenario
     else:
         config, scenario = load_config(args.config, args.overrides), None
+    yield_cpu_to_other_processes()  # the vehicle's own hardware would not share our CPU
     try:
         asyncio.run(serve(config, scenario, instance=args.instance,
                           video_url=None if args.no_video else args.video,
