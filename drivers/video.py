@@ -330,20 +330,28 @@ class VideoSource:
     def _decode_ffmpeg(self) -> None:
         import av
 
-        options = {"fflags": "nobuffer", "flags": "low_delay", "probesize": "65536",
-                   "analyzeduration": "500000"}
+        options = {"flags": "low_delay", "probesize": "65536", "analyzeduration": "500000"}
+        if "://" in self.url:  # a live stream: no input buffering ("nobuffer" breaks files)
+            options["fflags"] = "nobuffer"
         if self.url.startswith("rtsp:"):
             options["timeout"] = str(int(self._open_timeout_s * 1e6))
+        live = "://" in self.url
         with av.open(self.url, options=options) as container:
             stream = container.streams.video[0]
             stream.thread_type = "SLICE"
+            started: tuple[float, float] | None = None  # (local, stream) time of the first frame
             for frame in container.decode(stream):
                 if self._stop_flag.is_set():
                     return
-                arrived = self._clock()
                 sent_s = float(frame.pts * frame.time_base) if frame.pts is not None else None
+                if not live and sent_s is not None:  # a file plays at its own pace
+                    if started is None:
+                        started = (self._clock(), sent_s)
+                    self._stop_flag.wait(max(0.0, started[0] + sent_s - started[1]
+                                             - self._clock()))
+                    sent_s = None  # a file's timestamps are not capture times: stamp arrival
                 self.decoded += 1
-                self._deliver(frame.to_ndarray(format="bgr24"), sent_s, arrived)
+                self._deliver(frame.to_ndarray(format="bgr24"), sent_s, self._clock())
             if os.path.isfile(self.url):
                 self._stop_flag.wait()  # a file ends: no more frames
 

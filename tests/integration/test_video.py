@@ -82,3 +82,42 @@ def test_frames_arrive_decoded_with_their_capture_times():
         assert stamps == sorted(stamps)
 
     asyncio.run(main())
+
+
+def test_a_video_file_plays_through_ffmpeg(tmp_path):
+    import av
+
+    path = tmp_path / "clip.mp4"
+    with av.open(str(path), "w") as container:
+        stream = container.add_stream("libx264", rate=30)
+        stream.width, stream.height, stream.pix_fmt = W, H, "yuv420p"
+        for k in range(20):
+            frame = av.VideoFrame.from_ndarray(_image(k), format="bgr24")
+            for packet in stream.encode(frame):
+                container.mux(packet)
+        for packet in stream.encode(None):
+            container.mux(packet)
+
+    async def main():
+        source = VideoSource(str(path), _info())  # no stamp mapping: arrival times
+        got = []
+        try:
+            async with contextlib.aclosing(source.frames()) as frames:
+                async with asyncio.timeout(20.0):
+                    async for frame in frames:
+                        got.append(frame)
+                        if source.decoded >= 20:
+                            break
+        finally:
+            await source.close()
+        return got, source.decoded
+
+    started = time.monotonic()
+    got, decoded = asyncio.run(main())
+    assert decoded == 20
+    assert time.monotonic() - started >= 19 / 30  # played at the file's own 30 fps
+    assert got  # newest-only hand-over: the frames the loop was there to take
+    last = got[-1]
+    k = 10 + round((_square_x(last.image) - 10) / 4)  # which frame this is, from its square
+    assert 0 <= (k - 10) <= 19
+    assert [f.seq for f in got] == sorted(f.seq for f in got)
