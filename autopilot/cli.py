@@ -40,6 +40,8 @@ def build_parser() -> argparse.ArgumentParser:
                      "(default: a new folder under runs/)")
     run.add_argument("--realtime", action="store_true",
                      help="run against the wall clock instead of lockstep")
+    run.add_argument("--report", action="store_true",
+                     help="write DIR/report.html (plots of the flight) at the end")
     run.add_argument("--driver", choices=("sim", "mavsdk", "pymavlink"),
                      help="the vehicle driver (default: the configuration's 'driver')")
     run.add_argument("--connect", metavar="URL",
@@ -65,6 +67,10 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--no-video", action="store_true", help="do not stream the camera")
     sim.add_argument("--out", metavar="DIR", help="record ground truth into DIR/truth.mcap "
                      "(for 'autopilot score')")
+
+    report = commands.add_parser(
+        "report", help="write DIR/report.html (plots of the flight) from DIR/flight.mcap")
+    report.add_argument("run_dir", metavar="DIR")
 
     scorer = commands.add_parser(
         "score", help="score a run flown through a MAVLink driver against the ground truth "
@@ -106,6 +112,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _run(args)
         if args.command == "sim":
             return _sim(args)
+        if args.command == "report":
+            return _report(args)
         if args.command == "score":
             return _score(args)
         if args.command == "missions":
@@ -158,6 +166,10 @@ def _run(args: argparse.Namespace) -> int:
     if lat["samples"]:
         lines.append(f"latency: p50 {lat['p50']:.1f} ms, p95 {lat['p95']:.1f} ms")
     lines.append(f"wrote {out / 'summary.json'} and {out / 'flight.mcap'}")
+    if args.report:
+        from autopilot.report.html import write_report
+
+        lines.append(f"wrote {write_report(out)}")
     print("\n".join(lines))
     return {"completed": EXIT_OK, "aborted": 130}.get(summary["status"], EXIT_FAILED)
 
@@ -183,6 +195,19 @@ def _sim(args: argparse.Namespace) -> int:
     except OSError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_FAILED
+    return EXIT_OK
+
+
+def _report(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from autopilot.report.html import write_report
+
+    log = Path(args.run_dir) / "flight.mcap"
+    if not log.is_file():
+        print(f"error: {log}: no such file", file=sys.stderr)
+        return EXIT_USAGE
+    print(f"wrote {write_report(Path(args.run_dir))}")
     return EXIT_OK
 
 

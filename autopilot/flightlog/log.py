@@ -69,12 +69,18 @@ class FlightLog:
 def read_log(path: Path) -> dict[str, list[dict]]:
     """The records of a ``.mcap`` flight log by channel, in log order (as :class:`FlightLog`
     holds them in memory). A log cut short (a crashed run) yields what was written."""
+    return read_log_checked(path)[0]
+
+
+def read_log_checked(path: Path) -> tuple[dict[str, list[dict]], bool]:
+    """:func:`read_log`, and whether the log was complete (closed properly: it has its footer)."""
     from mcap.exceptions import McapError
-    from mcap.records import Channel, Message
+    from mcap.records import Channel, Footer, Message
     from mcap.stream_reader import StreamReader
 
     records: dict[str, list[dict]] = defaultdict(list)
     topics: dict[int, str] = {}
+    complete = False
     with open(path, "rb") as f:
         # front to back, record by record: a file cut short has no footer or summary to seek
         stream = StreamReader(f, validate_crcs=False)
@@ -84,6 +90,8 @@ def read_log(path: Path) -> dict[str, list[dict]]:
                     topics[record.id] = record.topic
                 elif isinstance(record, Message) and record.channel_id in topics:
                     records[topics[record.channel_id]].append(json.loads(record.data))
+                elif isinstance(record, Footer):
+                    complete = True
         except (McapError, EOFError, ValueError, struct.error):
             pass  # truncated: keep what was read
-    return records
+    return records, complete

@@ -1,0 +1,1 @@
+"""Flight reports: data extraction from a flight log (data.py) and the HTML page (html.py)."""

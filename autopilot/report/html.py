@@ -1,0 +1,198 @@
+"""``autopilot report DIR``: one self-contained HTML page (plots embedded as PNG) that shows
+what happened in a flight, from ``DIR/flight.mcap`` and ``DIR/summary.json``.
+
+Plots (matplotlib, headless): top-down and side trajectories of vehicle and target; standoff
+error over time; a detection timeline; target estimate against ground truth per axis with ±2σ;
+commanded against actual velocity; a latency histogram. Mission steps are shaded on every time
+axis. A log that was cut short (a run that crashed) gives the plots of what it holds and a
+banner that says so.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+import json
+import math
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from autopilot.flightlog.log import read_log_checked
+from autopilot.report import data
+
+_COLOURS = ["#e8eef7", "#f7efe3", "#e9f5e9", "#f5e8f0", "#eeeeee"]
+
+
+def write_report(run_dir: Path) -> Path:
+    records, complete = read_log_checked(run_dir / "flight.mcap")
+    summary_path = run_dir / "summary.json"
+    summary = json.loads(summary_path.read_text()) if summary_path.is_file() else None
+    out = run_dir / "report.html"
+    out.write_text(render(records, complete, summary, title=run_dir.name))
+    return out
+
+
+def render(records, complete: bool, summary: dict | None, title: str = "flight") -> str:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    phases = data.phases(records)
+    sections = []
+    for name, draw in PLOTS:
+        try:
+            image = _figure(lambda fig, draw=draw: draw(fig, records, phases))
+        except _NoData as exc:
+            sections.append(f"<h2>{html.escape(name)}</h2><p class='none'>{exc}</p>")
+            continue
+        sections.append(f"<h2>{html.escape(name)}</h2><img alt='{html.escape(name)}' "
+                        f"src='data:image/png;base64,{image}'>")
+    banner = "" if complete else (
+        "<p class='cut'>This log was cut short (the run did not close it, e.g. it crashed): "
+        "the plots show what was written before the cut.</p>")
+    table = _metrics_table(summary)
+    return (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{html.escape(title)}"
+            "</title><style>body{font-family:sans-serif;max-width:1100px;margin:auto}"
+            "img{max-width:100%}.cut{background:#fdd;padding:8px}.none{color:#888}"
+            "td,th{padding:2px 8px;text-align:left}</style></head><body>"
+            f"<h1>Flight report: {html.escape(title)}</h1>{banner}{table}"
+            + "".join(sections) + "</body></html>")
+
+
+class _NoData(Exception):
+    pass
+
+
+def _figure(draw: Callable) -> str:
+    import matplotlib.pyplot as plt
+
+    fig = plt.figure(figsize=(10, 4), dpi=90)
+    try:
+        draw(fig)
+        buf = io.BytesIO()
+        fig.savefig(buf, format="png", bbox_inches="tight")
+    finally:
+        plt.close(fig)
+    return base64.b64encode(buf.getvalue()).decode()
+
+
+def _shade(ax, phases) -> None:
+    for i, (a, b, step) in enumerate(phases):
+        ax.axvspan(a, b, color=_COLOURS[i % len(_COLOURS)], zorder=0)
+        ax.text(a, 1.0, f" {step}", transform=ax.get_xaxis_transform(), va="top", fontsize=8,
+                color="#555")
+
+
+def _trajectories(fig, records, phases) -> None:
+    tr = data.trajectories(records)
+    if not len(tr["vehicle"]) and not len(tr["vehicle_truth"]):
+        raise _NoData("no vehicle positions in this log")
+    top, side = fig.subplots(1, 2)
+    for key, label, style in (("vehicle_truth", "vehicle (truth)", "-"),
+                              ("vehicle", "vehicle (telemetry)", "--"),
+                              ("target_truth", "target (truth)", "-"),
+                              ("target_estimate", "target (estimate)", ":")):
+        p = tr[key]
+        if len(p):
+            top.plot(p[:, 1], p[:, 0], style, label=label, lw=1)
+            side.plot(tr[f"{key}_t"], -p[:, 2], style, label=label, lw=1)
+    top.set(xlabel="east (m)", ylabel="north (m)", title="top-down", aspect="equal")
+    side.set(xlabel="time (s)", ylabel="altitude (m)", title="side")
+    _shade(side, phases)
+    top.legend(fontsize=8)
+
+
+def _standoff(fig, records, phases) -> None:
+    s = data.standoff_error(records)
+    if not len(s["error_m"]) and not len(s["estimated_error_m"]):
+        raise _NoData("no target in this log")
+    ax = fig.subplots()
+    if len(s["error_m"]):
+        ax.plot(s["t"], s["error_m"], label="true distance − standoff", lw=1)
+    if len(s["estimated_error_m"]):
+        ax.plot(s["estimated_t"], s["estimated_error_m"], ":", label="as the autopilot saw it",
+                lw=1)
+    ax.axhline(0.0, color="k", lw=0.5)
+    ax.set(xlabel="time (s)", ylabel="standoff error (m)")
+    _shade(ax, phases)
+    ax.legend(fontsize=8)
+
+
+def _detections(fig, records, phases) -> None:
+    d = data.detection_timeline(records)
+    if not len(d["t"]):
+        raise _NoData("no frames were processed")
+    ax = fig.subplots()
+    ax.eventplot([d["t"][d["detected"]], d["t"][~d["detected"]]], lineoffsets=[1, 0],
+                 colors=["tab:green", "tab:red"], linelengths=0.8)
+    ax.set(yticks=[0, 1], yticklabels=["not detected", "detected"], xlabel="time (s)")
+    _shade(ax, phases)
+
+
+def _estimate(fig, records, phases) -> None:
+    e = data.estimate_vs_truth(records)
+    if not len(e["t"]):
+        raise _NoData("no target estimates in this log")
+    axes = fig.subplots(1, 3)
+    for i, (ax, axis) in enumerate(zip(axes, "NED", strict=True)):
+        ax.fill_between(e["t"], e["estimate"][:, i] - 2 * e["std"][:, i],
+                        e["estimate"][:, i] + 2 * e["std"][:, i], alpha=0.3, label="±2σ")
+        ax.plot(e["t"], e["estimate"][:, i], lw=1, label="estimate")
+        if np.isfinite(e["truth"][:, i]).any():
+            ax.plot(e["t"], e["truth"][:, i], "k", lw=0.8, label="truth")
+        ax.set(title=axis, xlabel="time (s)", ylabel="m" if i == 0 else None)
+        _shade(ax, phases)
+    axes[0].legend(fontsize=8)
+
+
+def _velocity(fig, records, phases) -> None:
+    v = data.velocity_tracking(records)
+    if not len(v["actual_t"]):
+        raise _NoData("no telemetry in this log")
+    axes = fig.subplots(1, 3)
+    for i, (ax, axis) in enumerate(zip(axes, "NED", strict=True)):
+        ax.plot(v["actual_t"], v["actual"][:, i], lw=1, label="actual")
+        if len(v["command_t"]):
+            ax.plot(v["command_t"], v["command"][:, i], lw=0.8, label="commanded")
+        ax.set(title=f"v{axis.lower()}", xlabel="time (s)", ylabel="m/s" if i == 0 else None)
+        _shade(ax, phases)
+    axes[0].legend(fontsize=8)
+
+
+def _latency(fig, records, phases) -> None:
+    lat = data.latencies_ms(records)
+    if not len(lat):
+        raise _NoData("no setpoint was computed from a frame")
+    ax = fig.subplots()
+    ax.hist(lat, bins=min(60, max(10, int(math.sqrt(len(lat))))))
+    for q, style in ((50, "--"), (95, ":")):
+        ax.axvline(np.percentile(lat, q), color="k", ls=style, label=f"p{q}")
+    ax.set(xlabel="frame capture → setpoint (ms)", ylabel="setpoints")
+    ax.legend(fontsize=8)
+
+
+PLOTS = [("Trajectories", _trajectories), ("Standoff error", _standoff),
+         ("Detections", _detections), ("Target estimate against truth", _estimate),
+         ("Commanded and actual velocity", _velocity), ("Latency", _latency)]
+
+
+def _metrics_table(summary: dict | None) -> str:
+    if not summary:
+        return "<p class='none'>no summary.json (the run did not finish)</p>"
+    rows = [("status", summary.get("status")), ("mission", summary.get("mission")),
+            ("driver", summary.get("driver")), ("sim time (s)", summary.get("sim_time_s")),
+            ("wall time (s)", summary.get("wall_time_s"))]
+    for group, values in (summary.get("metrics") or {}).items():
+        for key, value in (values or {}).items():
+            rows.append((f"{group}.{key}", value))
+    cells = "".join(f"<tr><th>{html.escape(str(k))}</th><td>{html.escape(_fmt(v))}</td></tr>"
+                    for k, v in rows)
+    return f"<h2>Summary</h2><table>{cells}</table>"
+
+
+def _fmt(value) -> str:
+    if isinstance(value, float):
+        return f"{value:.4g}"
+    return "—" if value is None else str(value)
