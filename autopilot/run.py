@@ -72,7 +72,8 @@ def make_vehicle(plan: MissionPlan, *, realtime: bool = False, connect: str | No
                                            message)]) from None
             info = dataclasses.replace(info, intrinsics=intrinsics)
         vehicle.add_camera(VideoSource(video or DEFAULT_VIDEO, info,
-                                       to_local=vehicle.vehicle_time_to_local))
+                                       to_local=vehicle.vehicle_time_to_local,
+                                       clock=vehicle.clock.now))
         return vehicle, None
     raise ConfigError([Problem("config", None, "driver",
                                f"unknown driver {driver!r} (sim, mavsdk, pymavlink)")])

@@ -23,6 +23,7 @@ from autopilot.mission import Scenario
 from autopilot.scenario import build_world
 from drivers.base import FlightMode, VehicleError
 from drivers.calibration import write_calibration
+from drivers.mavlink.common import cancel_all
 from drivers.mavlink.face import MavlinkFace
 from drivers.sim.driver import SimDriver
 from drivers.video import VideoSender
@@ -98,11 +99,7 @@ async def serve(config: AppConfig, scenario: Scenario | None, *, instance: int =
         if handle_signals:
             for sig in (signal.SIGINT, signal.SIGTERM):
                 loop.remove_signal_handler(sig)
-        for task in (video, events, truth):
-            if task is not None:
-                task.cancel()
-                with contextlib.suppress(asyncio.CancelledError):
-                    await task
+        await cancel_all(t for t in (video, events, truth) if t is not None)
         await face.close()
         await vehicle.close()
         if truth_log is not None:

@@ -259,28 +259,26 @@ class VideoSource:
         self._broadcast.close(None)
 
     def _start(self) -> None:
-        if self._thread is not None and self._thread.is_alive():
-            return
-        self._stop_flag.clear()
-        self._thread = threading.Thread(target=self._decode, name=f"video-{self.info.name}",
-                                        daemon=True)
+        self._stop_flag = threading.Event()  # its own: an old thread still ending keeps its
+        self._thread = threading.Thread(target=self._decode, args=(self._stop_flag,),
+                                        name=f"video-{self.info.name}", daemon=True)
         self._thread.start()
 
     def _stop(self) -> None:
         self._stop_flag.set()
 
-    def _decode(self) -> None:
+    def _decode(self, stop: threading.Event) -> None:
         rtp = _rtp_address(self.url, listen=True)
-        while not self._stop_flag.is_set():
+        while not stop.is_set():
             try:
                 if rtp is not None:
-                    self._decode_rtp(rtp)
+                    self._decode_rtp(rtp, stop)
                 else:
-                    self._decode_ffmpeg()
+                    self._decode_ffmpeg(stop)
             except Exception as exc:  # stream not there yet, or broken: retry
                 self.error = exc
                 log.debug("video %s: %s", self.url, exc)
-                self._stop_flag.wait(0.2)
+                stop.wait(0.2)
 
     def _deliver(self, image: np.ndarray, sent_s: float | None, arrived_s: float) -> None:
         stamp = arrived_s
@@ -292,7 +290,7 @@ class VideoSource:
         if self._loop is not None:
             self._loop.call_soon_threadsafe(self._broadcast.publish, frame)
 
-    def _decode_rtp(self, address: tuple[str, int]) -> None:
+    def _decode_rtp(self, address: tuple[str, int], stop: threading.Event) -> None:
         import av
 
         codec = av.CodecContext.create("h264", "r")
@@ -303,7 +301,7 @@ class VideoSource:
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 21)
             sock.bind(address)
             sock.settimeout(0.2)
-            while not self._stop_flag.is_set():
+            while not stop.is_set():
                 try:
                     datagram = sock.recv(65536)
                 except TimeoutError:
@@ -327,7 +325,7 @@ class VideoSource:
                     if not stale:
                         self._deliver(frame.to_ndarray(format="bgr24"), sent_s, self._clock())
 
-    def _decode_ffmpeg(self) -> None:
+    def _decode_ffmpeg(self, stop: threading.Event) -> None:
         import av
 
         options = {"flags": "low_delay", "probesize": "65536", "analyzeduration": "500000"}
@@ -341,19 +339,18 @@ class VideoSource:
             stream.thread_type = "SLICE"
             started: tuple[float, float] | None = None  # (local, stream) time of the first frame
             for frame in container.decode(stream):
-                if self._stop_flag.is_set():
+                if stop.is_set():
                     return
-                sent_s = float(frame.pts * frame.time_base) if frame.pts is not None else None
-                if not live and sent_s is not None:  # a file plays at its own pace
+                pts_s = float(frame.pts * frame.time_base) if frame.pts is not None else None
+                if not live and pts_s is not None:  # a file plays at its own pace
                     if started is None:
-                        started = (self._clock(), sent_s)
-                    self._stop_flag.wait(max(0.0, started[0] + sent_s - started[1]
-                                             - self._clock()))
-                    sent_s = None  # a file's timestamps are not capture times: stamp arrival
+                        started = (self._clock(), pts_s)
+                    stop.wait(max(0.0, started[0] + pts_s - started[1] - self._clock()))
                 self.decoded += 1
-                self._deliver(frame.to_ndarray(format="bgr24"), sent_s, self._clock())
+                # these timestamps are not capture times on the vehicle's clock: stamp arrival
+                self._deliver(frame.to_ndarray(format="bgr24"), None, self._clock())
             if os.path.isfile(self.url):
-                self._stop_flag.wait()  # a file ends: no more frames
+                stop.wait()  # a file ends: no more frames
 
 
 def _readable(sock: socket.socket) -> bool:

@@ -29,6 +29,7 @@ import asyncio
 import contextlib
 import logging
 import math
+import struct
 import time
 from collections.abc import AsyncIterator, Callable
 from dataclasses import dataclass, field
@@ -40,6 +41,7 @@ from drivers.base import CommandDenied, FlightMode, Vehicle, VehicleError, Vehic
 from drivers.geometry import euler_from_quat
 from drivers.mavlink import px4
 from drivers.mavlink.common import cancel_all
+from drivers.mavlink.link import pack
 
 log = logging.getLogger(__name__)
 
@@ -123,7 +125,7 @@ class _Link(asyncio.DatagramProtocol):
     def send(self, msg) -> None:
         if self.transport is None or self.transport.is_closing():
             return
-        self.transport.sendto(msg.pack(self.mav), self.peer)
+        self.transport.sendto(pack(self.mav, msg), self.peer)
 
 
 @dataclass
@@ -246,7 +248,13 @@ class MavlinkFace:
                     streams = self._streams[name]
                     for msg_id in streams.rates_hz:
                         if streams.due(msg_id, state.time_s):
-                            msg = self._message(msg_id, link.mav, state)
+                            try:
+                                msg = self._message(msg_id, link.mav, state)
+                            except (ValueError, OverflowError, struct.error):
+                                # a value MAVLink cannot carry (NaN, out of range): skip this
+                                # one message, never the stream
+                                log.debug("cannot encode message %d", msg_id, exc_info=True)
+                                continue
                             if msg is not None:
                                 link.send(msg)
 
@@ -383,11 +391,17 @@ class MavlinkFace:
         except VehicleError as exc:
             log.warning("command %d failed: %s", command, exc)
             result = FAILED
+        except Exception:  # a command we cannot read must still be answered
+            log.warning("command %d failed", command, exc_info=True)
+            result = FAILED
         link.send(link.mav.command_ack_encode(command, result, 0, 0, msg.get_srcSystem(),
                                               msg.get_srcComponent()))
 
     async def _execute(self, link: _Link, command: int, p: tuple[float, ...]) -> int:
+        """Carry out a command. MAVSDK sends NaN for parameters it does not use: those read
+        as 0 where a number is needed (the takeoff altitude keeps its NaN meaning)."""
         v = self.vehicle
+        p = tuple(x if math.isfinite(x) or i == 6 else 0.0 for i, x in enumerate(p))
         if command == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
             if p[0] >= 0.5:
                 await v.arm()

@@ -41,6 +41,14 @@ class Endpoint:
         return cls(listen, host, parts.port)
 
 
+def pack(mav, msg) -> bytes:
+    """Encode ``msg`` with ``mav``'s identity and next sequence number (``MAVLink.pack``
+    alone leaves the sequence at 0, which receivers count as lost packets)."""
+    data = msg.pack(mav)
+    mav.seq = (mav.seq + 1) % 256
+    return data
+
+
 class MavlinkUdp(asyncio.DatagramProtocol):
     """One UDP MAVLink link: parses datagrams into messages for ``on_message``."""
 
@@ -90,7 +98,7 @@ class MavlinkUdp(asyncio.DatagramProtocol):
         """Send if the peer is known (a listening link learns it from the first packet)."""
         if self.transport is None or self.transport.is_closing() or self.peer is None:
             return False
-        self.transport.sendto(msg.pack(self.mav), self.peer)
+        self.transport.sendto(pack(self.mav, msg), self.peer)
         return True
 
     def close(self) -> None:

@@ -225,6 +225,9 @@ class PymavlinkDriver(MavlinkVehicle):
     async def _command(self, name: str, command: int, *params: float) -> None:
         self._require_target()
         loop = asyncio.get_running_loop()
+        older = self._acks.get(command)
+        if older is not None and not older.done():  # its answer could not be told apart
+            older.set_exception(CommandDenied(name, "superseded by a newer command"))
         future = self._acks[command] = loop.create_future()
         try:
             for attempt in range(self.command_retries):

@@ -152,7 +152,12 @@ def test_arming_refused_while_unhealthy_is_denied_with_a_reason(no_camera_config
                 hb = await client.receive(
                     "HEARTBEAT", lambda m: m.base_mode & px4.MAV_MODE_FLAG_SAFETY_ARMED)
                 assert px4.px4_flight_mode(hb.custom_mode) is FlightMode.HOLD
-                assert await client.command(400, 0) == 0
+                # MAVSDK sends NaN for the parameters it does not use
+                assert await client.command(400, 0, math.nan) == 0
+                # every message carries the next sequence number
+                first = await client.receive("ATTITUDE")
+                second = await client.receive("ATTITUDE")
+                assert second.get_seq() != first.get_seq()
             finally:
                 client.close()
 
