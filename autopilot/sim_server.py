@@ -17,6 +17,7 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 from autopilot.config import AppConfig
+from autopilot.flight_ops import wait_for_state
 from autopilot.flightlog import records as ch
 from autopilot.flightlog.log import FlightLog
 from autopilot.mission import Scenario
@@ -140,14 +141,8 @@ async def _land_if_flying(vehicle: SimDriver, log: Callable[[str], None]) -> Non
         if state.in_air and state.mode is not FlightMode.LAND:
             await vehicle.land()
 
-    async def disarmed() -> None:
-        async with contextlib.aclosing(vehicle.telemetry()) as samples:
-            async for s in samples:
-                if not s.armed:
-                    return
-
     try:
-        await vehicle.clock.wait_for(disarmed(), LAND_ON_EXIT_TIMEOUT_S)
+        await wait_for_state(vehicle, lambda s: not s.armed, LAND_ON_EXIT_TIMEOUT_S, "disarm")
     except TimeoutError:
         log(f"not disarmed within {LAND_ON_EXIT_TIMEOUT_S:g} s; stopping the motors")
         with contextlib.suppress(VehicleError):

@@ -47,13 +47,13 @@ log = logging.getLogger(__name__)
 
 SYSTEM_ID = 1
 COMPONENT_ID = 1
-FORCE_DISARM_MAGIC = 21196
 #: PX4 SITL's default home (Zurich), for GLOBAL_POSITION_INT and HOME_POSITION.
 DEFAULT_HOME = (47.397742, 8.545594, 488.0)
 _EARTH_RADIUS_M = 6_378_137.0
 
 # MAV_RESULT
-ACCEPTED, TEMPORARILY_REJECTED, DENIED, UNSUPPORTED, FAILED = 0, 1, 2, 3, 4
+ACCEPTED, DENIED = px4.MAV_RESULT_ACCEPTED, px4.MAV_RESULT_DENIED
+UNSUPPORTED, FAILED = px4.MAV_RESULT_UNSUPPORTED, px4.MAV_RESULT_FAILED
 
 # MAVLink message ids we produce on request or at a rate
 _HEARTBEAT = mavlink.MAVLINK_MSG_ID_HEARTBEAT
@@ -406,7 +406,7 @@ class MavlinkFace:
             if p[0] >= 0.5:
                 await v.arm()
             else:
-                await v.disarm(force=round(p[1]) == FORCE_DISARM_MAGIC)
+                await v.disarm(force=round(p[1]) == px4.FORCE_DISARM_MAGIC)
             return ACCEPTED
         if command == mavlink.MAV_CMD_NAV_TAKEOFF:
             await v.takeoff(self._takeoff_altitude(p[6]))

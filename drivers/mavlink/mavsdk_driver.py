@@ -210,9 +210,8 @@ class MavsdkDriver(MavlinkVehicle):
         if result is None:
             raise CommandTimeout(name, 2.0)
         if result != 0:
-            names = {1: "temporarily rejected", 2: "denied", 3: "unsupported", 4: "failed"}
             await asyncio.sleep(0.05)  # the vehicle's reason may trail its answer
-            raise CommandDenied(name, self._reason(names.get(result, f"result {result}")))
+            raise CommandDenied(name, self._reason(px4.mav_result_name(result)))
 
     # ------------------------------------------------------------------------------------
     # Telemetry
@@ -242,7 +241,7 @@ class MavsdkDriver(MavlinkVehicle):
                 await self._direct.send_message(MavlinkMessage(
                     message_name="TIMESYNC", target_system_id=1, target_component_id=1,
                     fields_json=json.dumps(fields)))
-                await asyncio.sleep(0.1 if count < 20 else 1.0)
+                await asyncio.sleep(px4.timesync_period_s(count))
         finally:
             listener.cancel()
 

@@ -20,6 +20,26 @@ MAV_STATE_STANDBY = 3
 MAV_STATE_ACTIVE = 4
 MAV_STATE_CRITICAL = 5
 
+#: COMPONENT_ARM_DISARM param2 that disarms even in flight
+FORCE_DISARM_MAGIC = 21196
+
+# MAV_RESULT
+MAV_RESULT_ACCEPTED, MAV_RESULT_TEMPORARILY_REJECTED, MAV_RESULT_DENIED = 0, 1, 2
+MAV_RESULT_UNSUPPORTED, MAV_RESULT_FAILED, MAV_RESULT_IN_PROGRESS = 3, 4, 5
+MAV_RESULT_NAMES = {0: "accepted", 1: "temporarily rejected", 2: "denied", 3: "unsupported",
+                    4: "failed", 5: "in progress", 6: "cancelled"}
+
+
+def mav_result_name(result: int) -> str:
+    return MAV_RESULT_NAMES.get(result, f"result {result}")
+
+
+def timesync_period_s(requests_sent: int) -> float:
+    """When a driver sends its next TIMESYNC request: ten a second for the first two
+    seconds (to find a short round trip quickly), then one a second."""
+    return 0.1 if requests_sent < 20 else 1.0
+
+
 MAV_FRAME_LOCAL_NED = 1
 MAV_FRAME_BODY_NED = 8
 

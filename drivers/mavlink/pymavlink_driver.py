@@ -48,8 +48,6 @@ log = logging.getLogger(__name__)
 
 MAV_AUTOPILOT_ARDUPILOTMEGA = 3
 MAV_AUTOPILOT_INVALID = 8
-RESULT_NAMES = {0: "accepted", 1: "temporarily rejected", 2: "denied", 3: "unsupported",
-                4: "failed", 5: "in progress", 6: "cancelled"}
 #: Streams asked for on connect (message id → Hz).
 STREAM_RATES_HZ = {
     mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 30.0,
@@ -126,7 +124,7 @@ class PymavlinkDriver(MavlinkVehicle):
 
     async def disarm(self, *, force: bool = False) -> None:
         await self._command("disarm", mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0,
-                            21196 if force else 0)
+                            px4.FORCE_DISARM_MAGIC if force else 0)
 
     async def takeoff(self, altitude_m: float | None = None) -> None:
         if self.is_ardupilot:
@@ -246,7 +244,7 @@ class PymavlinkDriver(MavlinkVehicle):
                     raise CommandTimeout(name, 10.0 * self.command_timeout_s) from None
             if result == mavlink.MAV_RESULT_ACCEPTED:
                 return
-            reason = RESULT_NAMES.get(result, f"result {result}")
+            reason = px4.mav_result_name(result)
             if self._statustext:
                 reason += f" ({self._statustext[-1]})"
             raise CommandDenied(name, reason)
@@ -280,7 +278,7 @@ class PymavlinkDriver(MavlinkVehicle):
             if self._link is not None and self._target is not None:
                 self._send(self._link.mav.timesync_encode(0, int(self._clock.now() * 1e9)))
             count += 1
-            await asyncio.sleep(0.1 if count < 20 else 1.0)
+            await asyncio.sleep(px4.timesync_period_s(count))
 
     async def _watchdog(self) -> None:
         """The link is lost when heartbeats stop for ``heartbeat_timeout_s``."""
