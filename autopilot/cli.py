@@ -42,6 +42,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="run against the wall clock instead of lockstep")
     run.add_argument("--report", action="store_true",
                      help="write DIR/report.html (plots of the flight) at the end")
+    run.add_argument("--record-video", nargs="?", const="", metavar="CAMERA",
+                     help="log every frame of a camera (default: the followed one) and write "
+                     "DIR/onboard.mp4 with what the autopilot saw and decided drawn over it")
     run.add_argument("--driver", choices=("sim", "mavsdk", "pymavlink"),
                      help="the vehicle driver (default: the configuration's 'driver')")
     run.add_argument("--connect", metavar="URL",
@@ -71,6 +74,23 @@ def build_parser() -> argparse.ArgumentParser:
     report = commands.add_parser(
         "report", help="write DIR/report.html (plots of the flight) from DIR/flight.mcap")
     report.add_argument("run_dir", metavar="DIR")
+
+    replay = commands.add_parser(
+        "replay", help="re-run detection and estimation over a logged flight's frames and "
+        "telemetry (optionally with changed settings) and report their metrics")
+    replay.add_argument("run_dir", metavar="DIR")
+    replay.add_argument("--set", dest="overrides", action="append", default=[],
+                        metavar="KEY=VALUE", help="change a setting of the flight's "
+                        "configuration (e.g. perception.ball.min_circularity=0.7, "
+                        "estimation.target.accel_noise_m_s2=2); repeatable")
+    replay.add_argument("--json", action="store_true",
+                        help="print one JSON object on stdout (shaped like summary.json)")
+
+    video = commands.add_parser(
+        "video", help="write DIR/onboard.mp4: a camera's logged frames with overlays")
+    video.add_argument("run_dir", metavar="DIR")
+    video.add_argument("--camera", metavar="NAME",
+                       help="whose frames (default: the followed camera)")
 
     scorer = commands.add_parser(
         "score", help="score a run flown through a MAVLink driver against the ground truth "
@@ -114,6 +134,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _sim(args)
         if args.command == "report":
             return _report(args)
+        if args.command == "video":
+            return _video(args)
+        if args.command == "replay":
+            return _replay(args)
         if args.command == "score":
             return _score(args)
         if args.command == "missions":
@@ -149,7 +173,8 @@ def _run(args: argparse.Namespace) -> int:
     print(f"mission {plan.mission.name} ({plan.source}); log in {out}", file=sys.stderr)
     summary = asyncio.run(fly(plan, out, realtime=args.realtime, progress=progress,
                               handle_signals=True, connect=args.connect, video=args.video,
-                              calibration=Path(args.calibration) if args.calibration else None))
+                              calibration=Path(args.calibration) if args.calibration else None,
+                              record_video=args.record_video))
     if sys.stderr.isatty():
         sys.stderr.write("\n")
     follow = summary["metrics"]["follow"]
@@ -166,6 +191,14 @@ def _run(args: argparse.Namespace) -> int:
     if lat["samples"]:
         lines.append(f"latency: p50 {lat['p50']:.1f} ms, p95 {lat['p95']:.1f} ms")
     lines.append(f"wrote {out / 'summary.json'} and {out / 'flight.mcap'}")
+    if args.record_video is not None:
+        from autopilot.report.video import VideoError, write_video
+
+        try:
+            path, frames = write_video(out, args.record_video or None)
+            lines.append(f"wrote {path} ({frames} frames)")
+        except VideoError as exc:
+            lines.append(f"no video: {exc}")
     if args.report:
         from autopilot.report.html import write_report
 
@@ -208,6 +241,35 @@ def _report(args: argparse.Namespace) -> int:
         print(f"error: {log}: no such file", file=sys.stderr)
         return EXIT_USAGE
     print(f"wrote {write_report(Path(args.run_dir))}")
+    return EXIT_OK
+
+
+def _video(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from autopilot.report.video import VideoError, write_video
+
+    try:
+        path, frames = write_video(Path(args.run_dir), args.camera)
+    except VideoError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    print(f"wrote {path} ({frames} frames)")
+    return EXIT_OK
+
+
+def _replay(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from autopilot.flightlog.records import clean
+    from autopilot.replay import ReplayError, format_replay, replay
+
+    try:
+        result = replay(Path(args.run_dir), args.overrides)
+    except ReplayError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    print(json.dumps(clean(result)) if args.json else format_replay(result))
     return EXIT_OK
 
 

@@ -100,6 +100,16 @@ class ControlConfig(_Model):
     follow: FollowControlConfig
 
 
+class FrameLogConfig(_Model):
+    sim_rate_hz: NonNegative  # camera frames logged per second with the simulator; 0: none
+    vehicle_rate_hz: NonNegative  # ... with MAVLink drivers (a companion computer)
+    jpeg_quality: Annotated[int, Field(ge=10, le=100)]
+
+
+class LogConfig(_Model):
+    frames: FrameLogConfig
+
+
 class AppConfig(_Model):
     """The whole of ``config.yaml``."""
 
@@ -108,6 +118,7 @@ class AppConfig(_Model):
     perception: PerceptionConfig
     estimation: EstimationConfig
     control: ControlConfig
+    log: LogConfig
     sim: SimConfig
 
 

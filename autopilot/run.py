@@ -7,15 +7,16 @@ import contextlib
 import dataclasses
 import datetime as dt
 import json
+import math
 import signal
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 
 from autopilot.config import ConfigError, Problem
 from autopilot.flightlog import records as ch
 from autopilot.flightlog.log import FlightLog
-from autopilot.flightlog.metrics import follow_metrics, latency_metrics
+from autopilot.flightlog.metrics import estimation_metrics, follow_metrics, latency_metrics
 from autopilot.flightlog.records import clean
 from autopilot.mission import MissionPlan
 from autopilot.process import StealMeter
@@ -79,13 +80,37 @@ def make_vehicle(plan: MissionPlan, *, realtime: bool = False, connect: str | No
                                f"unknown driver {driver!r} (sim, mavsdk, pymavlink)")])
 
 
+def logged_cameras(plan: MissionPlan, video_camera: str,
+                   cameras: Mapping[str, object]) -> dict[str, float]:
+    """Frames logged per second by camera: the followed camera at the configured rate, and
+    every frame of the video's camera (``""``: the followed one)."""
+    cfg = plan.config
+    followed = cfg.perception.ball.camera
+    frames = cfg.log.frames
+    rates = {followed: frames.sim_rate_hz if cfg.driver == "sim" else frames.vehicle_rate_hz}
+    name = video_camera or followed
+    if name not in cameras:
+        raise ConfigError([Problem("--record-video", None, name,
+                                   f"no such camera on this vehicle (it has: "
+                                   f"{', '.join(sorted(cameras)) or 'none'})")])
+    rates[name] = math.inf
+    return rates
+
+
 async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False,
               progress: Callable[[str], None] | None = None,
               handle_signals: bool = False, connect: str | None = None,
-              video: str | None = None, calibration: Path | None = None) -> dict:
-    """Fly ``plan`` and return its summary (also written to ``out_dir/summary.json``)."""
+              video: str | None = None, calibration: Path | None = None,
+              record_video: str | None = None) -> dict:
+    """Fly ``plan`` and return its summary (also written to ``out_dir/summary.json``).
+
+    ``record_video`` names a camera whose every frame is logged (for ``onboard.mp4``; "" is
+    the followed camera)."""
     vehicle, seed = make_vehicle(plan, realtime=realtime, connect=connect, video=video,
                                  calibration=calibration)
+    log_cameras = None
+    if record_video is not None:
+        log_cameras = logged_cameras(plan, record_video, vehicle.cameras)
     if out_dir is not None:
         await asyncio.to_thread(out_dir.mkdir, parents=True, exist_ok=True)
     log = FlightLog(out_dir / "flight.mcap" if out_dir is not None else None)
@@ -106,7 +131,7 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
 
     try:
         await vehicle.connect()
-        runtime = Runtime(vehicle, plan, log, progress=progress)
+        runtime = Runtime(vehicle, plan, log, progress=progress, log_cameras=log_cameras)
         if handle_signals:
             for sig in signals:
                 loop.add_signal_handler(sig, on_signal, sig.name)
@@ -141,6 +166,7 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
         "wall_time_s": wall_time,
         "metrics": {
             "follow": follow_metrics(log.records),
+            "estimation": estimation_metrics(log.records),
             "sim": {"real_time_factor": sim_time / wall_time if sim_time and wall_time > 0
                     else None,
                     "cpu_steal_pct": steal.percent()},

@@ -28,22 +28,20 @@ import contextlib
 import math
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
+import cv2
 import numpy as np
 
 from autopilot.behaviors.base import BehaviorInputs, RequestKind, VehicleRequest
-from autopilot.estimation.pose_history import PoseHistory
-from autopilot.estimation.target import TargetFilter, TargetFilterSettings, camera_measurement
 from autopilot.flightlog import records as ch
 from autopilot.flightlog.log import FlightLog
 from autopilot.mission import MissionExecutor, MissionOutput, MissionPlan, build_behavior
-from autopilot.perception.ball import BallDetection, BallDetector, BallDetectorSettings
-from autopilot.perception.colors import COLORS
+from autopilot.perception.ball import BallDetection
+from autopilot.pipeline import TargetPipeline, detection_record
 from drivers.base import Frame, Setpoint, Vehicle, VehicleError, VehicleState
-from drivers.geometry import quat_to_matrix
 from drivers.slots import LatestSlot
 
 
@@ -73,36 +71,58 @@ class RunStats:
     follow_frames: int = 0
     follow_detections: int = 0
     setpoints_sent: int = 0
+    frames_logged: int = 0
+    frames_log_dropped: int = 0
     stages_ms: list[float] = field(default_factory=list)
+
+
+FRAME_LOG_BUFFER = 8  # frames waiting for JPEG encoding; more are dropped (and counted)
+
+
+class FrameSampler:
+    """Which frames of a camera go to the log: ``rate_hz`` per second on average, evenly
+    spread; every frame when the rate is at or above the camera's."""
+
+    def __init__(self, rate_hz: float, camera_rate_hz: float) -> None:
+        self._period_s = 1.0 / rate_hz if rate_hz > 0 else math.inf
+        self._slack_s = 0.5 / camera_rate_hz if camera_rate_hz > 0 else 0.0
+        self._due_s = -math.inf
+
+    def take(self, time_s: float) -> bool:
+        if math.isinf(self._period_s) or time_s < self._due_s - self._slack_s:
+            return False
+        # the next one is due a period after this one was due (the rate holds on average);
+        # after a gap (or at the start), a period after this one
+        due = self._due_s + self._period_s
+        self._due_s = due if due >= time_s else time_s + self._period_s
+        return True
+
+
+def encode_jpeg(image_bgr: np.ndarray, quality: int) -> bytes:
+    """JPEG without chroma subsampling (4:4:4): colour detection lives on the chroma, and
+    halving its resolution moves a ball's edge by a few tenths of a pixel."""
+    ok, buffer = cv2.imencode(".jpg", image_bgr, [
+        cv2.IMWRITE_JPEG_QUALITY, quality,
+        cv2.IMWRITE_JPEG_SAMPLING_FACTOR, cv2.IMWRITE_JPEG_SAMPLING_FACTOR_444])
+    if not ok:
+        raise ValueError("JPEG encoding failed")
+    return buffer.tobytes()
 
 
 class Runtime:
     def __init__(self, vehicle: Vehicle, plan: MissionPlan, log: FlightLog, *,
-                 progress: Callable[[str], None] | None = None) -> None:
+                 progress: Callable[[str], None] | None = None,
+                 log_cameras: Mapping[str, float] | None = None) -> None:
         self.vehicle = vehicle
         self.plan = plan
         self.config = plan.config
         self.log = log
         self.clock = vehicle.clock
         cfg = plan.config
-        ball = cfg.perception.ball
-        ranges = tuple(tuple(map(tuple, r)) for r in ball.hsv_ranges) if ball.hsv_ranges \
-            else COLORS[ball.color][1]
-        self.detector = BallDetector(BallDetectorSettings(
-            hsv_ranges=ranges, diameter_m=ball.diameter_m, open_kernel_px=ball.open_kernel_px,
-            close_kernel_px=ball.close_kernel_px, min_radius_px=ball.min_radius_px,
-            max_radius_px=ball.max_radius_px, min_circularity=ball.min_circularity,
-            min_fill_ratio=ball.min_fill_ratio))
-        t = cfg.estimation.target
-        self.filter_settings = TargetFilterSettings(
-            accel_noise_m_s2=t.accel_noise_m_s2, gate_chi2=t.gate_chi2,
-            stale_after_s=t.stale_after_s, initial_velocity_std_m_s=t.initial_velocity_std_m_s,
-            max_extrapolation_s=t.max_extrapolation_s, pixel_noise_px=t.pixel_noise_px,
-            radius_noise_px=t.radius_noise_px, restart_after=t.restart_after,
-            confirm_after=t.confirm_after)
-        self.filter = TargetFilter(self.filter_settings)
-        self.history = PoseHistory()
-        self.camera_name = ball.camera
+        self.pipeline = TargetPipeline(cfg)
+        self.filter = self.pipeline.filter
+        self.history = self.pipeline.history
+        self.camera_name = cfg.perception.ball.camera
         self.stats = RunStats()
         self.status = "running"
         self.reason = ""
@@ -121,6 +141,17 @@ class Runtime:
         self._step = ""
         self._phase = ""
         self._detect_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="detect")
+        # camera frames for the log: which cameras, how often; encoded off the loop
+        if log_cameras is None:
+            frames = cfg.log.frames
+            rate = frames.sim_rate_hz if cfg.driver == "sim" else frames.vehicle_rate_hz
+            log_cameras = {self.camera_name: rate}
+        cams = vehicle.cameras
+        self._samplers = {name: FrameSampler(rate, cams[name].rate_hz)
+                          for name, rate in log_cameras.items() if rate > 0 and name in cams}
+        self._to_log: asyncio.Queue[Frame] = asyncio.Queue(maxsize=FRAME_LOG_BUFFER)
+        self._log_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="frame-log")
+        self._encoding: Frame | None = None
 
     # ------------------------------------------------------------------------------------
     # Control from outside
@@ -152,6 +183,11 @@ class Runtime:
                     tasks.create_task(self._streaming(), name="setpoint-streaming"),
                     *self._simulator_tasks(tasks),
                 ]
+                if self._samplers and self.log.path is not None:
+                    background.append(tasks.create_task(self._log_frames(), name="frame-log"))
+                    background += [
+                        tasks.create_task(self._other_camera(name), name=f"camera-{name}")
+                        for name in self._samplers if name != self.camera_name]
                 if self._progress is not None:
                     background.append(tasks.create_task(self._report_progress(), name="progress"))
                 try:
@@ -166,6 +202,8 @@ class Runtime:
             await self._last_resort()
         finally:
             self._detect_pool.shutdown(wait=True, cancel_futures=True)
+            self._drain_frame_log()
+            self._log_pool.shutdown(wait=True, cancel_futures=True)
         return self.status
 
     async def _control(self) -> None:
@@ -241,8 +279,10 @@ class Runtime:
         async with contextlib.aclosing(self.vehicle.telemetry(buffer=64)) as samples:
             async for state in samples:
                 self._state = state
-                self.history.add(state)
-                self.log.write(ch.VEHICLE_STATE, state.time_s, ch.vehicle_state_record(state))
+                self.pipeline.add_state(state)
+                record = ch.vehicle_state_record(state)
+                record["received_s"] = self.clock.now()
+                self.log.write(ch.VEHICLE_STATE, state.time_s, record)
 
     async def _detection(self) -> None:
         camera = self.vehicle.cameras[self.camera_name]
@@ -250,47 +290,74 @@ class Runtime:
         async with contextlib.aclosing(self.vehicle.frames(self.camera_name)) as frames:
             async for frame in frames:
                 received = self.clock.now()
-                hint = self._predicted_pixel(frame)
-                uv, radius = hint if hint is not None else (None, None)
+                self._offer_frame(frame)
+                hint = self.pipeline.hint(frame.time_s, frame.camera)
                 started = time.perf_counter()
                 detection = await self.clock.run_blocking(
-                    self.detector.detect, frame.image, frame.camera, frame.time_s, uv, radius,
+                    self.pipeline.detect, frame.image, frame.camera, frame.time_s, hint,
                     executor=self._detect_pool, budget_s=self.config.runtime.lockstep_detection_s)
                 elapsed_ms = (time.perf_counter() - started) * 1e3
                 processed = ProcessedFrame(frame.time_s, frame.seq, frame, detection)
                 self._frames.put(processed)
                 self._count_frame(detection)
-                record = _detection_record(frame, detection, elapsed_ms)
-                record["received_s"] = received
-                record["detected_s"] = self.clock.now()
+                record = detection_record(frame.seq, frame.time_s, frame.camera.name, detection,
+                                          hint)
+                record.update(processing_ms=elapsed_ms, received_s=received,
+                              detected_s=self.clock.now())
                 self.log.write(ch.BALL_DETECTIONS, frame.time_s, record)
 
+    def _offer_frame(self, frame: Frame) -> None:
+        """Hand a frame to the frame log if its camera's rate wants it (never waits: a full
+        buffer drops the frame and counts it)."""
+        sampler = self._samplers.get(frame.camera.name)
+        if sampler is None or self.log.path is None or not sampler.take(frame.time_s):
+            return
+        try:
+            self._to_log.put_nowait(frame)
+        except asyncio.QueueFull:
+            self.stats.frames_log_dropped += 1
+
+    async def _log_frames(self) -> None:
+        quality = self.config.log.frames.jpeg_quality
+        while True:
+            frame = self._encoding = await self._to_log.get()
+            # modelled as done within half a frame period: the simulator runs on meanwhile
+            jpeg = await self.clock.run_blocking(
+                encode_jpeg, frame.image, quality, executor=self._log_pool,
+                budget_s=0.5 / frame.camera.rate_hz)
+            self._encoding = None
+            self.log.write_image(frame.camera.name, frame.time_s, jpeg)
+            self.stats.frames_logged += 1
+
+    def _drain_frame_log(self) -> None:
+        """Frames still waiting when the run ends are written now (the last second of a
+        flight belongs in its video)."""
+        quality = self.config.log.frames.jpeg_quality
+        waiting = [] if self._encoding is None else [self._encoding]
+        while not self._to_log.empty():
+            waiting.append(self._to_log.get_nowait())
+        for frame in waiting:
+            with contextlib.suppress(Exception):  # the run's outcome matters more than a frame
+                self.log.write_image(frame.camera.name, frame.time_s,
+                                     encode_jpeg(frame.image, quality))
+                self.stats.frames_logged += 1
+
+    async def _other_camera(self, name: str) -> None:
+        """Frames of a camera that nothing but the log uses (the video's chosen camera)."""
+        async with contextlib.aclosing(self.vehicle.frames(name)) as frames:
+            async for frame in frames:
+                self._offer_frame(frame)
+
     async def _estimation(self) -> None:
-        scale = self.config.estimation.target.border_noise_scale
         while True:
             item = await self._frames.get()
             self._last_frame = item
             det = item.detection
             if det is not None:
                 self._last_detection = det
-                pose = self.history.pose_at(item.time_s)
-                if pose is not None:
-                    meas = camera_measurement(
-                        det.position_cam_m, det.range_m, det.radius_px, item.frame.camera, pose,
-                        self.filter_settings, item.time_s,
-                        noise_scale=scale if det.cut_by_border else 1.0)
-                    result = self.filter.update(meas)
-                    est = self.filter.estimate(item.time_s)
-                    std = np.sqrt(np.diag(est.covariance))
-                    self.log.write(ch.TARGET_ESTIMATES, item.time_s, {
-                        "time_s": item.time_s, "measurement_time_s": item.time_s,
-                        "accepted": result.accepted, "reinitialised": result.reinitialised,
-                        "mahalanobis2": result.mahalanobis2,
-                        "measured_position_ned_m": meas.position_ned_m,
-                        "position_ned_m": est.position_ned_m,
-                        "velocity_ned_m_s": est.velocity_ned_m_s,
-                        "position_std_m": std[:3], "velocity_std_m_s": std[3:],
-                        "updates": est.updates})
+                record = self.pipeline.estimate(item.time_s, item.frame.camera, det)
+                if record is not None:
+                    self.log.write(ch.TARGET_ESTIMATES, item.time_s, record)
             self._estimated.put(item.time_s)
 
     async def _streaming(self) -> None:
@@ -368,26 +435,6 @@ class Runtime:
             last_detection=self._last_detection,
             frame_seq=frame.seq if frame is not None else -1)
 
-    def _predicted_pixel(self, frame: Frame) -> tuple[tuple[float, float], float] | None:
-        """Where the tracked target should appear in this frame, and how big (a hint for the
-        detector)."""
-        if self.filter.is_stale(frame.time_s):
-            return None
-        est = self.filter.estimate(frame.time_s)
-        pose = self.history.pose_at(frame.time_s)
-        if est is None or pose is None:
-            return None
-        cam = frame.camera
-        r_wb = quat_to_matrix(pose.attitude_q)
-        p_cam = cam.rotation_body_cam.T @ (
-            r_wb.T @ (est.position_ned_m - pose.position_ned_m) - cam.position_body_m)
-        if p_cam[2] <= 0.1:
-            return None
-        u, v = cam.intrinsics.project(p_cam)
-        radius = cam.intrinsics.fx * self.detector.settings.diameter_m / 2.0 / \
-            float(np.linalg.norm(p_cam))
-        return (float(u), float(v)), radius
-
     def _count_frame(self, detection: BallDetection | None) -> None:
         self.stats.frames += 1
         self.stats.detections += detection is not None
@@ -411,6 +458,7 @@ class Runtime:
             "steps": [{s.name: s.params.model_dump()} for s in plan.steps],
             "standoff_m": standoff, "camera": self.camera_name,
             "ball_diameter_m": self.config.perception.ball.diameter_m,
+            "config": self.config.model_dump(mode="json"),
             "driver": self.config.driver,
             "scenario": plan.mission.scenario.model_dump() if plan.mission.scenario else None}))
 
@@ -440,15 +488,3 @@ class Runtime:
                 sys.stderr.flush()
             else:
                 self._progress(line)
-
-
-def _detection_record(frame: Frame, det: BallDetection | None, elapsed_ms: float) -> dict:
-    base = {"time_s": frame.time_s, "seq": frame.seq, "camera": frame.camera.name,
-            "detected": det is not None, "processing_ms": elapsed_ms}
-    if det is None:
-        return {**base, "u_px": None, "v_px": None, "radius_px": None, "range_m": None,
-                "position_cam_m": [None] * 3, "score": None, "candidates": 0,
-                "cut_by_border": False}
-    return {**base, "u_px": det.u_px, "v_px": det.v_px, "radius_px": det.radius_px,
-            "range_m": det.range_m, "position_cam_m": det.position_cam_m, "score": det.score,
-            "candidates": det.candidates, "cut_by_border": det.cut_by_border}

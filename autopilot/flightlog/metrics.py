@@ -12,6 +12,14 @@ Follow metrics cover the intervals in which a ``follow_ball`` step ran:
 * ``max_lost_s`` — the longest time without a correct detection;
 * ``false_detection_rate`` — detections that were not the ball ÷ frames processed.
 
+Estimation metrics cover the target estimates made during those intervals, each compared with
+the ball's true position and velocity at its time:
+
+* ``rms_position_error_m`` — RMS of the 3-D position error; ``rms_position_error_ned_m`` per axis;
+* ``rms_velocity_error_m_s`` — RMS of the 3-D velocity error;
+* ``within_2sigma`` — the share of estimates whose error is inside ±2σ on every axis (a filter
+  whose σ is honest has about 0.87 here).
+
 Latency: for each setpoint computed from a frame, capture time → the setpoint being sent.
 """
 
@@ -44,7 +52,7 @@ def follow_intervals(events: Sequence[Mapping], end_s: float) -> list[tuple[floa
     return intervals
 
 
-class _Truth:
+class TruthTrack:
     def __init__(self, samples: Sequence[Mapping]) -> None:
         rows = [s for s in samples if BALL in s["bodies"]]
         self.ok = bool(rows)
@@ -65,7 +73,7 @@ class _Truth:
         return lerp(self.vp), slerp(self.vq[i], self.vq[i + 1], f), lerp(self.bp)
 
 
-def _project(cam: Mapping, vehicle_p, vehicle_q, ball_p, radius_m: float):
+def project_ball(cam: Mapping, vehicle_p, vehicle_q, ball_p, radius_m: float):
     """Pixel, apparent radius and depth of the ball's centre in a camera (None if behind)."""
     r_wb = quat_to_matrix(vehicle_q)
     r_bc = np.array(cam["rotation_body_cam"]).reshape(3, 3)
@@ -79,6 +87,12 @@ def _project(cam: Mapping, vehicle_p, vehicle_q, ball_p, radius_m: float):
     return u, v, r_px
 
 
+def fully_in_image(cam: Mapping, u: float, v: float, r_px: float) -> bool:
+    """Whether a ball imaged at (u, v) with radius ``r_px`` lies wholly inside the image."""
+    return (u - r_px >= 0 and v - r_px >= 0 and u + r_px <= cam["width_px"] - 1
+            and v + r_px <= cam["height_px"] - 1)
+
+
 def follow_metrics(log: Mapping[str, Sequence[Mapping]]) -> dict:
     plan = (log.get(ch.MISSION_PLAN) or [{}])[0]
     events = log.get(ch.MISSION_EVENTS, [])
@@ -88,7 +102,7 @@ def follow_metrics(log: Mapping[str, Sequence[Mapping]]) -> dict:
     intervals = follow_intervals(events, end)
     cams = {c["name"]: c for c in log.get(ch.CAMERA_INFO, [])}
     cam = cams.get(plan.get("camera"))
-    truth = _Truth(truth_samples)
+    truth = TruthTrack(truth_samples)
     if not intervals or cam is None or not truth.ok:
         return {}
     radius_m = plan["ball_diameter_m"] / 2.0
@@ -105,13 +119,12 @@ def follow_metrics(log: Mapping[str, Sequence[Mapping]]) -> dict:
             continue
         processed += 1
         pose = truth.at(t)
-        proj = _project(cam, *pose, radius_m) if pose is not None else None
+        proj = project_ball(cam, *pose, radius_m) if pose is not None else None
         if proj is not None:
             u, v, r_px = proj
             half_diagonal = 0.5 * math.hypot(cam["width_px"], cam["height_px"])
             image_errors.append(min(math.hypot(u - cam["cx"], v - cam["cy"]), half_diagonal))
-            visible = (u - r_px >= 0 and v - r_px >= 0 and u + r_px <= cam["width_px"] - 1
-                       and v + r_px <= cam["height_px"] - 1)
+            visible = fully_in_image(cam, u, v, r_px)
             in_view += visible
         if rec["detected"]:
             hit = proj is not None and math.hypot(rec["u_px"] - proj[0], rec["v_px"] - proj[1]) \
@@ -145,6 +158,36 @@ def follow_metrics(log: Mapping[str, Sequence[Mapping]]) -> dict:
         "max_lost_s": float(lost),
         "follow_time_s": float(sum(b - a for a, b in intervals)),
         "standoff_m": standoff,
+    }
+
+
+def estimation_metrics(log: Mapping[str, Sequence[Mapping]]) -> dict:
+    events = log.get(ch.MISSION_EVENTS, [])
+    truth_samples = [s for s in log.get(ch.GROUND_TRUTH, []) if BALL in s["bodies"]]
+    estimates = log.get(ch.TARGET_ESTIMATES, [])
+    if len(truth_samples) < 2 or not estimates:
+        return {}
+    end = max(r["time_s"] for r in truth_samples)
+    intervals = follow_intervals(events, end)
+    t = np.array([s["time_s"] for s in truth_samples])
+    bp = np.array([s["bodies"][BALL]["position_ned_m"] for s in truth_samples], dtype=float)
+    bv = np.array([s["bodies"][BALL]["velocity_ned_m_s"] for s in truth_samples], dtype=float)
+    rows = [e for e in estimates if t[0] <= e["time_s"] <= t[-1]
+            and any(a <= e["time_s"] <= b for a, b in intervals)]
+    if not rows:
+        return {}
+    et = np.array([e["time_s"] for e in rows])
+    interp = lambda a: np.stack([np.interp(et, t, a[:, i]) for i in range(3)], axis=1)  # noqa: E731
+    nan = lambda v: [math.nan if x is None else x for x in v]  # noqa: E731
+    pos_err = np.array([nan(e["position_ned_m"]) for e in rows], dtype=float) - interp(bp)
+    vel_err = np.array([nan(e["velocity_ned_m_s"]) for e in rows], dtype=float) - interp(bv)
+    std = np.array([nan(e["position_std_m"]) for e in rows], dtype=float)
+    return {
+        "rms_position_error_m": float(np.sqrt(np.mean(np.sum(pos_err ** 2, axis=1)))),
+        "rms_position_error_ned_m": np.sqrt(np.mean(pos_err ** 2, axis=0)).tolist(),
+        "rms_velocity_error_m_s": float(np.sqrt(np.mean(np.sum(vel_err ** 2, axis=1)))),
+        "within_2sigma": float(np.mean(np.all(np.abs(pos_err) <= 2.0 * std, axis=1))),
+        "estimates": len(rows),
     }
 
 

@@ -12,7 +12,15 @@ from typing import Any
 
 import numpy as np
 
-from drivers.base import CameraInfo, VehicleState
+from drivers.base import (
+    Battery,
+    CameraInfo,
+    CameraIntrinsics,
+    FlightMode,
+    Health,
+    LandedState,
+    VehicleState,
+)
 
 CAMERA_INFO = "/camera/info"
 VEHICLE_STATE = "/vehicle/state"
@@ -24,6 +32,19 @@ MISSION_EVENTS = "/mission/events"
 MISSION_PLAN = "/mission/plan"
 GROUND_TRUTH = "/sim/ground_truth"
 TIME_SYNC = "/vehicle/time_sync"
+
+
+def camera_image_topic(camera: str) -> str:
+    """The channel of a camera's logged frames (``foxglove.CompressedImage``, JPEG)."""
+    return f"/camera/{camera}/image/compressed"
+
+
+def image_topic_camera(topic: str) -> str | None:
+    """The camera whose frames a channel holds (None: not a camera image channel)."""
+    if topic.startswith("/camera/") and topic.endswith("/image/compressed"):
+        return topic[len("/camera/"):-len("/image/compressed")]
+    return None
+
 
 _NUM = {"type": ["number", "null"]}
 _INT = {"type": "integer"}
@@ -48,25 +69,25 @@ SCHEMAS: dict[str, dict] = {
                         velocity_ned_m_s=_vec(3), attitude_q=_vec(4), yaw_rad=_NUM,
                         angular_velocity_frd_rad_s=_vec(3), armed=_BOOL, mode=_STR,
                         landed_state=_STR, distance_to_ground_m=_NUM, battery_voltage_v=_NUM,
-                        battery_remaining=_NUM, failsafe=_BOOL),
+                        battery_remaining=_NUM, failsafe=_BOOL, received_s=_NUM),
     VEHICLE_STATUS: _obj("StatusText", time_s=_NUM, text=_STR),
     BALL_DETECTIONS: _obj("BallDetection", time_s=_NUM, seq=_INT, camera=_STR, detected=_BOOL,
                           u_px=_NUM, v_px=_NUM, radius_px=_NUM, range_m=_NUM,
                           position_cam_m=_vec(3), score=_NUM, candidates=_INT,
                           cut_by_border=_BOOL, processing_ms=_NUM, received_s=_NUM,
-                          detected_s=_NUM),
+                          detected_s=_NUM, hint_u_px=_NUM, hint_v_px=_NUM, hint_radius_px=_NUM),
     TARGET_ESTIMATES: _obj("TargetEstimate", time_s=_NUM, measurement_time_s=_NUM,
                            accepted=_BOOL, reinitialised=_BOOL, mahalanobis2=_NUM,
                            measured_position_ned_m=_vec(3), position_ned_m=_vec(3),
                            velocity_ned_m_s=_vec(3), position_std_m=_vec(3),
-                           velocity_std_m_s=_vec(3), updates=_INT),
+                           velocity_std_m_s=_vec(3), position_cov_m2=_vec(9), updates=_INT),
     SETPOINTS: _obj("Setpoint", time_s=_NUM, source_frame_time_s=_NUM, latency_ms=_NUM,
                     frame=_STR, position_ned_m=_vec(3), velocity_m_s=_vec(3), yaw_rad=_NUM,
                     yaw_rate_rad_s=_NUM, expires_s=_NUM, step=_STR, phase=_STR),
     MISSION_EVENTS: _obj("MissionEvent", time_s=_NUM, step=_STR, text=_STR),
     MISSION_PLAN: _obj("MissionPlan", mission=_STR, source=_STR, steps={"type": "array"},
                        standoff_m=_NUM, camera=_STR, ball_diameter_m=_NUM, driver=_STR,
-                       scenario={"type": ["object", "null"]}),
+                       scenario={"type": ["object", "null"]}, config={"type": "object"}),
     TIME_SYNC: _obj("TimeSync", time_s=_NUM, vehicle_to_local_s=_NUM, round_trip_s=_NUM),
     GROUND_TRUTH: _obj("GroundTruth", time_s=_NUM, vehicle_position_ned_m=_vec(3),
                        vehicle_velocity_ned_m_s=_vec(3), vehicle_attitude_q=_vec(4),
@@ -121,3 +142,35 @@ def ground_truth_record(gt) -> dict:
                           "velocity_ned_m_s": b.velocity_ned_m_s}
                    for name, b in gt.bodies.items()},
     }
+
+
+def _f(value: Any) -> float:
+    return math.nan if value is None else float(value)
+
+
+def _v(values: Any) -> np.ndarray:
+    return np.array([_f(v) for v in values], dtype=float)
+
+
+def camera_info_from_record(rec: dict) -> CameraInfo:
+    """The :class:`CameraInfo` a ``/camera/info`` record describes."""
+    intrinsics = CameraIntrinsics(
+        width_px=int(rec["width_px"]), height_px=int(rec["height_px"]), fx=_f(rec["fx"]),
+        fy=_f(rec["fy"]), cx=_f(rec["cx"]), cy=_f(rec["cy"]),
+        distortion=tuple(_f(d) for d in rec.get("distortion") or (0.0,) * 5))
+    return CameraInfo(rec["name"], intrinsics, _v(rec["rotation_body_cam"]).reshape(3, 3),
+                      _v(rec["position_body_m"]), _f(rec["rate_hz"]))
+
+
+def vehicle_state_from_record(rec: dict) -> VehicleState:
+    """The :class:`VehicleState` a ``/vehicle/state`` record holds (what the log keeps of it:
+    health flags and battery current are not logged and come back as defaults)."""
+    return VehicleState(
+        time_s=_f(rec["time_s"]), position_ned_m=_v(rec["position_ned_m"]),
+        velocity_ned_m_s=_v(rec["velocity_ned_m_s"]), attitude_q=_v(rec["attitude_q"]),
+        angular_velocity_frd_rad_s=_v(rec["angular_velocity_frd_rad_s"]),
+        armed=bool(rec["armed"]), mode=FlightMode(rec["mode"]),
+        landed_state=LandedState(rec["landed_state"]),
+        distance_to_ground_m=_f(rec["distance_to_ground_m"]),
+        battery=Battery(_f(rec["battery_voltage_v"]), math.nan, _f(rec["battery_remaining"])),
+        health=Health(), failsafe=bool(rec.get("failsafe", False)))

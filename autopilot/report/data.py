@@ -13,6 +13,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from autopilot.flightlog import records as ch
+from autopilot.flightlog.metrics import TruthTrack, fully_in_image, project_ball
 
 BALL = "ball"
 Records = Mapping[str, Sequence[Mapping]]
@@ -87,10 +88,25 @@ def standoff_error(records: Records) -> dict[str, np.ndarray]:
 
 
 def detection_timeline(records: Records) -> dict[str, np.ndarray]:
-    """Per processed frame: its time, whether the ball was detected."""
+    """Per processed frame: its time, whether the ball was detected, and (from ground truth,
+    when the log has it) whether the whole ball was truly in the image; ``in_view`` is all
+    False without truth, and ``has_truth`` says which."""
     rows = records.get(ch.BALL_DETECTIONS, [])
+    plan = (records.get(ch.MISSION_PLAN) or [{}])[0]
+    cams = {c.get("name"): c for c in records.get(ch.CAMERA_INFO, [])}
+    truth = TruthTrack(records.get(ch.GROUND_TRUTH, []))
+    in_view = np.zeros(len(rows), dtype=bool)
+    has_truth = truth.ok and plan.get("ball_diameter_m") is not None
+    if has_truth:
+        radius_m = plan["ball_diameter_m"] / 2.0
+        for i, r in enumerate(rows):
+            cam = cams.get(r.get("camera", plan.get("camera")))
+            pose = truth.at(r["time_s"]) if cam is not None else None
+            proj = project_ball(cam, *pose, radius_m) if pose is not None else None
+            in_view[i] = proj is not None and fully_in_image(cam, *proj)
     return {"t": _arr(rows, "time_s"),
-            "detected": np.array([bool(r.get("detected")) for r in rows], dtype=bool)}
+            "detected": np.array([bool(r.get("detected")) for r in rows], dtype=bool),
+            "in_view": in_view, "has_truth": np.array(has_truth)}
 
 
 def estimate_vs_truth(records: Records) -> dict[str, np.ndarray]:

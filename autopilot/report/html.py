@@ -15,12 +15,12 @@ import html
 import io
 import json
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
 
-from autopilot.flightlog.log import read_log_checked
+from autopilot.flightlog.log import ChannelInfo, channel_counts, read_log_checked
 from autopilot.report import data
 
 _COLOURS = ["#e8eef7", "#f7efe3", "#e9f5e9", "#f5e8f0", "#eeeeee"]
@@ -31,11 +31,14 @@ def write_report(run_dir: Path) -> Path:
     summary_path = run_dir / "summary.json"
     summary = json.loads(summary_path.read_text()) if summary_path.is_file() else None
     out = run_dir / "report.html"
-    out.write_text(render(records, complete, summary, title=run_dir.name))
+    video = "onboard.mp4" if (run_dir / "onboard.mp4").is_file() else None
+    out.write_text(render(records, complete, summary, title=run_dir.name,
+                          channels=channel_counts(run_dir / "flight.mcap"), video=video))
     return out
 
 
-def render(records, complete: bool, summary: dict | None, title: str = "flight") -> str:
+def render(records, complete: bool, summary: dict | None, title: str = "flight",
+           channels: Sequence[ChannelInfo] = (), video: str | None = None) -> str:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -53,12 +56,25 @@ def render(records, complete: bool, summary: dict | None, title: str = "flight")
         "<p class='cut'>This log was cut short (the run did not close it, e.g. it crashed): "
         "the plots show what was written before the cut.</p>")
     table = _metrics_table(summary)
+    if video:  # beside the page, not inside it: a video is too big to embed
+        table += (f"<h2>Onboard video</h2><video controls width='640' src='{html.escape(video)}'>"
+                  f"</video><p><a href='{html.escape(video)}'>{html.escape(video)}</a></p>")
     return (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{html.escape(title)}"
             "</title><style>body{font-family:sans-serif;max-width:1100px;margin:auto}"
             "img{max-width:100%}.cut{background:#fdd;padding:8px}.none{color:#888}"
             "td,th{padding:2px 8px;text-align:left}</style></head><body>"
             f"<h1>Flight report: {html.escape(title)}</h1>{banner}{table}"
-            + "".join(sections) + "</body></html>")
+            + "".join(sections) + _channels_table(channels) + "</body></html>")
+
+
+def _channels_table(channels: Sequence[ChannelInfo]) -> str:
+    if not channels:
+        return ""
+    cells = "".join(f"<tr><td>{html.escape(c.topic)}</td><td>{html.escape(c.schema)}</td>"
+                    f"<td>{html.escape(c.encoding)}</td><td>{c.messages}</td></tr>"
+                    for c in channels)
+    return ("<h2>Log channels (flight.mcap)</h2><table id='channels'><tr><th>topic</th>"
+            f"<th>schema</th><th>encoding</th><th>messages</th></tr>{cells}</table>")
 
 
 class _NoData(Exception):
@@ -125,9 +141,19 @@ def _detections(fig, records, phases) -> None:
     if not len(d["t"]):
         raise _NoData("no frames were processed")
     ax = fig.subplots()
-    ax.eventplot([d["t"][d["detected"]], d["t"][~d["detected"]]], lineoffsets=[1, 0],
-                 colors=["tab:green", "tab:red"], linelengths=0.8)
-    ax.set(yticks=[0, 1], yticklabels=["not detected", "detected"], xlabel="time (s)")
+    detected, in_view = d["detected"], d["in_view"]
+    if d["has_truth"]:
+        # in view (truth) on one row; below it, detected, and lost (in view, not detected)
+        rows = [d["t"][in_view], d["t"][detected], d["t"][in_view & ~detected]]
+        ax.eventplot(rows, lineoffsets=[2, 1, 0], colors=["tab:blue", "tab:green", "tab:red"],
+                     linelengths=0.8)
+        ax.set(yticks=[0, 1, 2], yticklabels=["lost (in view,\nnot detected)", "detected",
+                                               "in view (truth)"])
+    else:
+        ax.eventplot([d["t"][detected], d["t"][~detected]], lineoffsets=[1, 0],
+                     colors=["tab:green", "tab:red"], linelengths=0.8)
+        ax.set(yticks=[0, 1], yticklabels=["not detected", "detected"])
+    ax.set(xlabel="time (s)")
     _shade(ax, phases)
 
 
@@ -166,7 +192,12 @@ def _latency(fig, records, phases) -> None:
     if not len(lat):
         raise _NoData("no setpoint was computed from a frame")
     ax = fig.subplots()
-    ax.hist(lat, bins=min(60, max(10, int(math.sqrt(len(lat))))))
+    if np.ptp(lat) < 2.0:  # lockstep: (nearly) one value; half-millisecond bins around it
+        bins = np.arange(math.floor(lat.min()) - 1.0, math.ceil(lat.max()) + 1.5, 0.5)
+    else:
+        bins = min(60, max(10, int(math.sqrt(len(lat)))))
+    ax.hist(lat, bins=bins)
+    ax.ticklabel_format(axis="x", useOffset=False)
     for q, style in ((50, "--"), (95, ":")):
         ax.axvline(np.percentile(lat, q), color="k", ls=style, label=f"p{q}")
     ax.set(xlabel="frame capture → setpoint (ms)", ylabel="setpoints")
@@ -195,4 +226,6 @@ def _metrics_table(summary: dict | None) -> str:
 def _fmt(value) -> str:
     if isinstance(value, float):
         return f"{value:.4g}"
+    if isinstance(value, list):
+        return "[" + ", ".join(_fmt(v) for v in value) + "]"
     return "—" if value is None else str(value)

@@ -53,13 +53,19 @@ def test_follow_ball_closed_loop(tmp_path):
         schemas = reader.get_summary().schemas
         counts = {}
         for _, channel, message in reader.iter_messages():
-            json.loads(message.data)  # strict JSON
+            if channel.message_encoding == "json":
+                json.loads(message.data)  # strict JSON
             counts[channel.topic] = counts.get(channel.topic, 0) + 1
     for topic in (ch.VEHICLE_STATE, ch.BALL_DETECTIONS, ch.TARGET_ESTIMATES, ch.SETPOINTS,
                   ch.GROUND_TRUTH, ch.MISSION_EVENTS, ch.CAMERA_INFO, ch.MISSION_PLAN):
         assert counts.get(topic, 0) > 0, topic
         assert channels[topic].message_encoding == "json"
         assert schemas[channels[topic].schema_id].encoding == "jsonschema"
+    # camera frames, every one (the simulator's default), as Foxglove's CompressedImage
+    images = ch.camera_image_topic("front")
+    assert counts[images] == summary["stats"]["frames_logged"] == summary["stats"]["frames"]
+    assert channels[images].message_encoding == "protobuf"
+    assert schemas[channels[images].schema_id].name == "foxglove.CompressedImage"
 
 
 def test_lateral_mode_closed_loop():
@@ -107,9 +113,9 @@ def test_ctrl_c_in_flight_lands_and_disarms(monkeypatch, tmp_path):
     assert "SIGINT" in summary["reason"]
     assert orphans == []
     # ended landed and disarmed, in bounded (simulated) time
-    from autopilot.flightlog.read import read_records
+    from autopilot.flightlog.log import read_log
 
-    log = read_records(tmp_path / "flight.mcap")
+    log = read_log(tmp_path / "flight.mcap")
     last = log[ch.VEHICLE_STATE][-1]
     assert last["armed"] is False
     assert last["landed_state"] == "on_ground"

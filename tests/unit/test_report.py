@@ -10,11 +10,13 @@ from autopilot.flightlog import records as ch
 from autopilot.flightlog.log import FlightLog
 from autopilot.report import data
 from autopilot.report.html import write_report
+from tests.factories import front_camera
 
 
 def _log(n: int = 50) -> dict:
     """A tiny synthetic flight: the vehicle 2.5 m south of a ball at rest, flying north 1 m/s."""
     recs = {ch.MISSION_PLAN: [{"standoff_m": 2.0, "camera": "front", "ball_diameter_m": 0.2}],
+            ch.CAMERA_INFO: [ch.clean(ch.camera_info_record(front_camera()))],
             ch.MISSION_EVENTS: [
                 {"time_s": 0.0, "step": "takeoff", "text": "step takeoff started"},
                 {"time_s": 1.0, "step": "takeoff", "text": "step takeoff succeeded"},
@@ -26,10 +28,12 @@ def _log(n: int = 50) -> dict:
         recs[ch.VEHICLE_STATE].append({"time_s": t, "position_ned_m": [t - 2.5, 0, -2],
                                        "velocity_ned_m_s": [1.0, 0, 0], "yaw_rad": math.pi / 2})
         recs[ch.GROUND_TRUTH].append({"time_s": t, "vehicle_position_ned_m": [t - 2.5, 0, -2],
+                                      "vehicle_attitude_q": [1.0, 0, 0, 0],  # facing north
                                       "bodies": {"ball": {"position_ned_m": [0, 0, -2]}}})
         recs[ch.TARGET_ESTIMATES].append({"time_s": t, "position_ned_m": [0.1, 0, -2],
                                           "position_std_m": [0.05, 0.05, 0.02]})
-        recs[ch.BALL_DETECTIONS].append({"time_s": t, "detected": k % 5 != 0})
+        recs[ch.BALL_DETECTIONS].append({"time_s": t, "camera": "front",
+                                         "detected": k % 5 != 0})
         recs[ch.SETPOINTS].append({"time_s": t, "frame": "body_frd", "velocity_m_s": [1, 0, 0],
                                    "latency_ms": 30.0 + k % 3})
     return recs
@@ -50,6 +54,13 @@ def test_standoff_error_is_true_distance_minus_standoff():
 def test_detection_timeline_and_estimate_against_truth():
     d = data.detection_timeline(_log())
     assert d["detected"].sum() == 40
+    # flying north past the ball: in view until it is (nearly) alongside, then behind
+    assert d["has_truth"]
+    assert d["in_view"][:20].all()
+    assert not d["in_view"][26:].any()
+    no_truth = data.detection_timeline({**_log(), ch.GROUND_TRUTH: []})
+    assert not no_truth["has_truth"]
+    assert not no_truth["in_view"].any()
     e = data.estimate_vs_truth(_log())
     assert np.allclose(e["estimate"][:, 0] - e["truth"][:, 0], 0.1)
     assert np.allclose(e["std"][:, 2], 0.02)

@@ -1,0 +1,62 @@
+"""Camera frames in the flight log: which are logged, how they are stored and read back."""
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+
+from autopilot.flightlog import records as ch
+from autopilot.flightlog.log import FlightLog, read_images, read_log
+from autopilot.runtime import FrameSampler, encode_jpeg
+from tests.factories import front_camera, vehicle_state
+
+
+@pytest.mark.parametrize(("rate_hz", "expected"), [(30.0, 30), (60.0, 30), (10.0, 10),
+                                               (7.0, 7), (0.0, 0)])
+def test_the_sampler_takes_frames_evenly_at_its_rate(rate_hz, expected):
+    sampler = FrameSampler(rate_hz, 30.0)
+    # a 30 Hz camera whose frames land on a 2 ms physics grid (33 or 34 ms apart)
+    times = [round(k / 30.0, 3) for k in range(30)]
+    taken = [t for t in times if sampler.take(t)]
+    assert len(taken) == expected
+    if len(taken) > 2:
+        gaps = np.diff(taken)
+        assert gaps.max() - gaps.min() <= 1 / 30.0 + 0.002  # one frame, on the 2 ms grid
+
+
+def test_frames_are_foxglove_compressed_images_read_back_lazily(tmp_path):
+    image = np.zeros((48, 64, 3), np.uint8)
+    image[10:30, 20:40] = (0, 128, 255)
+    log = FlightLog(tmp_path / "flight.mcap")
+    log.write(ch.CAMERA_INFO, 0.0, ch.camera_info_record(front_camera()))
+    for k in range(3):
+        log.write_image("front", 0.1 * k, encode_jpeg(image, 95))
+    log.write_image("down", 0.05, encode_jpeg(image, 95))
+    log.close()
+    with open(tmp_path / "flight.mcap", "rb") as f:
+        summary = make_reader(f).get_summary()
+    schema_names = {s.name for s in summary.schemas.values()}
+    assert "foxglove.CompressedImage" in schema_names
+    front = list(read_images(tmp_path / "flight.mcap", "front"))
+    assert [im.time_s for im in front] == pytest.approx([0.0, 0.1, 0.2])
+    assert len(list(read_images(tmp_path / "flight.mcap"))) == 4
+    import cv2
+
+    decoded = cv2.imdecode(np.frombuffer(front[0].jpeg, np.uint8), cv2.IMREAD_COLOR)
+    error = np.abs(decoded.astype(int) - image)
+    assert error.mean() < 1.0  # quality 95
+    assert error[14:26, 24:36].max() <= 3  # 4:4:4: the colour holds up to its edges
+    # the JSON readers skip the image channels
+    assert set(read_log(tmp_path / "flight.mcap")) == {ch.CAMERA_INFO}
+
+
+def test_records_come_back_as_the_messages_they_were_made_from():
+    state = vehicle_state(1.5, pos=(1.0, -2.0, -3.0), vel=(0.5, 0.0, -0.1), yaw=0.7)
+    again = ch.vehicle_state_from_record(ch.clean(ch.vehicle_state_record(state)))
+    assert again.time_s == state.time_s
+    assert again.mode == state.mode
+    for name in ("position_ned_m", "velocity_ned_m_s", "attitude_q"):
+        assert np.array_equal(getattr(again, name), getattr(state, name))
+    camera = front_camera(10.0)
+    info = ch.camera_info_from_record(ch.clean(ch.camera_info_record(camera)))
+    assert info.intrinsics == camera.intrinsics
+    assert np.array_equal(info.rotation_body_cam, camera.rotation_body_cam)
