@@ -118,6 +118,18 @@ def build_parser() -> argparse.ArgumentParser:
     follow.add_argument("--set", dest="overrides", action="append", default=[],
                         metavar="KEY=VALUE", help="override a mission or configuration key")
 
+    logging_bench = benches.add_parser(
+        "logging", help="what writing flight.mcap (camera frames included) costs a lockstep "
+        "follow_ball run: alternate runs with and without the log")
+    logging_bench.add_argument("--json", action="store_true",
+                               help="print one JSON object on stdout")
+    logging_bench.add_argument("--pairs", type=int, default=3, metavar="N",
+                               help="runs with and without the log (default 3 of each)")
+    logging_bench.add_argument("--mission", default="follow_ball", metavar="NAME|FILE")
+    logging_bench.add_argument("--set", dest="overrides", action="append", default=[],
+                               metavar="KEY=VALUE", help="override a mission or configuration "
+                               "key")
+
     validate = commands.add_parser("validate", help="check a mission or configuration file")
     validate.add_argument("file")
     return parser
@@ -187,6 +199,11 @@ def _run(args: argparse.Namespace) -> int:
         lines.append("follow: " + ", ".join(
             f"{k}={_fmt(follow[k])}" for k in ("detection_rate", "rms_range_error_m",
                                                "rms_image_error_px", "max_lost_s")))
+    estimation = summary["metrics"].get("estimation") or {}
+    if estimation:
+        lines.append("estimate: " + ", ".join(
+            f"{k}={_fmt(estimation[k])}" for k in ("rms_position_error_m",
+                                                   "rms_velocity_error_m_s", "within_2sigma")))
     lat = summary["metrics"]["latency_ms"]
     if lat["samples"]:
         lines.append(f"latency: p50 {lat['p50']:.1f} ms, p95 {lat['p95']:.1f} ms")
@@ -332,6 +349,13 @@ def _bench(args: argparse.Namespace) -> int:
 
         result = follow_ball.run_bench(args.mission, args.overrides, log)
         print(json.dumps(result) if args.json else follow_ball.format_table(result))
+        return EXIT_OK
+
+    if args.bench == "logging":
+        from autopilot.bench import logging as logging_bench
+
+        result = logging_bench.run_bench(args.mission, args.overrides, args.pairs, log)
+        print(json.dumps(result) if args.json else logging_bench.format_table(result))
         return EXIT_OK
 
     from autopilot.bench.sitl import format_table, run_sitl_bench

@@ -175,6 +175,11 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
         "stats": vars(runtime.stats) if runtime is not None else {},
         "log": "flight.mcap" if out_dir is not None else None,
     }
+    if log.error is not None:
+        summary["log_error"] = f"{type(log.error).__name__}: {log.error}"
+    if runtime is not None:  # frames the log took, and those it had to drop
+        summary["stats"]["frames_logged"] = log.images_written
+        summary["stats"]["frames_log_dropped"] += log.images_dropped
     summary["stats"] = {k: v for k, v in summary["stats"].items() if not isinstance(v, list)}
     summary = clean(summary)
     if out_dir is not None:

@@ -28,6 +28,7 @@ import contextlib
 import math
 import sys
 import time
+from collections import deque
 from collections.abc import Callable, Mapping
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -71,12 +72,12 @@ class RunStats:
     follow_frames: int = 0
     follow_detections: int = 0
     setpoints_sent: int = 0
-    frames_logged: int = 0
     frames_log_dropped: int = 0
     stages_ms: list[float] = field(default_factory=list)
 
 
 FRAME_LOG_BUFFER = 8  # frames waiting for JPEG encoding; more are dropped (and counted)
+FRAME_LOG_PIPELINE = 3  # frames being encoded at once (each within this many frame periods)
 
 
 class FrameSampler:
@@ -151,7 +152,7 @@ class Runtime:
                           for name, rate in log_cameras.items() if rate > 0 and name in cams}
         self._to_log: asyncio.Queue[Frame] = asyncio.Queue(maxsize=FRAME_LOG_BUFFER)
         self._log_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="frame-log")
-        self._encoding: Frame | None = None
+        self._encoding: deque[tuple[Frame, asyncio.Future[bytes]]] = deque()
 
     # ------------------------------------------------------------------------------------
     # Control from outside
@@ -318,29 +319,40 @@ class Runtime:
             self.stats.frames_log_dropped += 1
 
     async def _log_frames(self) -> None:
+        """Encode frames for the log (JPEG, off the loop) and write them in order.
+
+        Up to ``FRAME_LOG_PIPELINE`` frames are in hand at once, each modelled (on the lockstep
+        clock) as encoded within that many frame periods: the encoder uses the CPU the rest
+        of the pipeline leaves idle instead of the simulator stopping for it every frame."""
         quality = self.config.log.frames.jpeg_quality
-        while True:
-            frame = self._encoding = await self._to_log.get()
-            # modelled as done within half a frame period: the simulator runs on meanwhile
-            jpeg = await self.clock.run_blocking(
-                encode_jpeg, frame.image, quality, executor=self._log_pool,
-                budget_s=0.5 / frame.camera.rate_hz)
-            self._encoding = None
-            self.log.write_image(frame.camera.name, frame.time_s, jpeg)
-            self.stats.frames_logged += 1
+        pending = self._encoding
+        try:
+            while True:
+                frame = await self._to_log.get()
+                pending.append((frame, asyncio.ensure_future(self.clock.run_blocking(
+                    encode_jpeg, frame.image, quality, executor=self._log_pool,
+                    budget_s=FRAME_LOG_PIPELINE / frame.camera.rate_hz))))
+                while pending and (pending[0][1].done() or len(pending) >= FRAME_LOG_PIPELINE):
+                    done, job = pending[0]
+                    jpeg = await job
+                    pending.popleft()
+                    self.log.write_image(done.camera.name, done.time_s, jpeg)
+        finally:
+            for _, job in pending:
+                job.cancel()
 
     def _drain_frame_log(self) -> None:
         """Frames still waiting when the run ends are written now (the last second of a
         flight belongs in its video)."""
         quality = self.config.log.frames.jpeg_quality
-        waiting = [] if self._encoding is None else [self._encoding]
+        waiting = [frame for frame, _ in self._encoding]
+        self._encoding.clear()
         while not self._to_log.empty():
             waiting.append(self._to_log.get_nowait())
         for frame in waiting:
             with contextlib.suppress(Exception):  # the run's outcome matters more than a frame
                 self.log.write_image(frame.camera.name, frame.time_s,
                                      encode_jpeg(frame.image, quality))
-                self.stats.frames_logged += 1
 
     async def _other_camera(self, name: str) -> None:
         """Frames of a camera that nothing but the log uses (the video's chosen camera)."""

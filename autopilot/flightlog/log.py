@@ -12,7 +12,8 @@ from __future__ import annotations
 
 import json
 import struct
-from collections import defaultdict
+import threading
+from collections import defaultdict, deque
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -32,66 +33,127 @@ def encode(record: dict) -> bytes:
     return orjson.dumps(record, option=orjson.OPT_SERIALIZE_NUMPY)
 
 
+#: Bytes waiting for the writer thread above which camera frames are dropped (and counted)
+#: rather than queued: a disk slower than the camera must not eat the companion's memory.
+MAX_PENDING_B = 64 << 20
+#: The writer thread is woken when this much is waiting, and otherwise every WAKE_S seconds
+#: (wall): woken per message, it fights the event loop for the GIL thousands of times a second.
+WAKE_B = 1 << 20
+WAKE_S = 0.25
+
+
 class FlightLog:
+    """Records in memory at once; to the file through a writer thread (encoding, chunking,
+    compression and disk writes stay off the event loop). A write error stops the file, not
+    the flight: it is kept in :attr:`error` and the records stay in memory."""
+
     def __init__(self, path: Path | None) -> None:
         self.records: dict[str, list[dict]] = defaultdict(list)
         self.path = path
-        self._file: IO[bytes] | None = None
-        self._writer: Writer | None = None
-        self._channels: dict[str, int] = {}
-        self._seq = 0
-        self._image_schema: int | None = None
         self.images_written = 0
+        self.images_dropped = 0
+        self.error: BaseException | None = None
+        self._queue: deque | None = None
+        self._thread: threading.Thread | None = None
+        self._pending_b = 0
+        self._lock = threading.Lock()
+        self._wake = threading.Event()
+        self._closing = False
         if path is not None:
-            self._file = open(path, "wb")  # noqa: SIM115 - closed in close()
-            # small chunks: a run that crashes loses at most the unfinished chunk (about a
-            # second of records), not the megabyte a default chunk holds
-            self._writer = Writer(self._file, chunk_size=CHUNK_SIZE_B)
-            self._writer.start(profile="", library="autopilot")
-            for topic, schema in SCHEMAS.items():
-                schema_id = self._writer.register_schema(
-                    name=schema["title"], encoding="jsonschema",
-                    data=json.dumps(schema).encode())
-                self._channels[topic] = self._writer.register_channel(
-                    topic=topic, message_encoding="json", schema_id=schema_id)
+            file = open(path, "wb")  # noqa: SIM115 - closed by the writer thread
+            self._queue = deque()
+            self._thread = threading.Thread(target=self._write_all, args=(file,),
+                                            name="flight-log", daemon=True)
+            self._thread.start()
 
     def write(self, topic: str, time_s: float, record: dict) -> None:
         self.records[topic].append(record)
-        if self._writer is not None:
-            ns = max(0, round(time_s * 1e9))
-            self._seq += 1
-            self._writer.add_message(self._channels[topic], log_time=ns, publish_time=ns,
-                                     sequence=self._seq, data=encode(record))
+        if self._queue is not None:
+            self._put(topic, time_s, encode(record), None)
 
     def write_image(self, camera: str, time_s: float, jpeg: bytes) -> None:
         """A camera frame (JPEG bytes) captured at ``time_s``, as ``foxglove.CompressedImage``."""
-        if self._writer is None:
+        if self._queue is None:
             return
-        from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
-
-        topic = ch.camera_image_topic(camera)
-        if topic not in self._channels:
-            if self._image_schema is None:
-                from mcap_protobuf.schema import register_schema
-
-                self._image_schema = register_schema(self._writer, CompressedImage)
-            self._channels[topic] = self._writer.register_channel(
-                topic=topic, message_encoding="protobuf", schema_id=self._image_schema)
-        ns = max(0, round(time_s * 1e9))
-        message = CompressedImage(frame_id=camera, data=jpeg, format="jpeg")
-        message.timestamp.FromNanoseconds(ns)
-        self._seq += 1
-        self._writer.add_message(self._channels[topic], log_time=ns, publish_time=ns,
-                                 sequence=self._seq, data=message.SerializeToString())
+        if self._pending_b > MAX_PENDING_B:
+            self.images_dropped += 1
+            return
+        self._put(ch.camera_image_topic(camera), time_s, jpeg, camera)
         self.images_written += 1
 
+    def _put(self, topic: str, time_s: float, data: bytes, camera: str | None) -> None:
+        q = self._queue  # None once the writer has failed
+        if q is not None:
+            with self._lock:
+                self._pending_b += len(data)
+                pending = self._pending_b
+            q.append((topic, max(0, round(time_s * 1e9)), data, camera))
+            if pending >= WAKE_B:
+                self._wake.set()
+
+    def _write_all(self, file: IO[bytes]) -> None:
+        from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
+        from mcap_protobuf.schema import register_schema
+
+        try:
+            # small chunks: a run that crashes loses at most the unfinished chunk (about a
+            # second of records), not the megabyte a default chunk holds
+            writer = Writer(file, chunk_size=CHUNK_SIZE_B)
+            writer.start(profile="", library="autopilot")
+            channels: dict[str, int] = {}
+            for topic, schema in SCHEMAS.items():
+                schema_id = writer.register_schema(
+                    name=schema["title"], encoding="jsonschema", data=json.dumps(schema).encode())
+                channels[topic] = writer.register_channel(
+                    topic=topic, message_encoding="json", schema_id=schema_id)
+            image_schema: int | None = None
+            sequence = 0
+            while True:
+                self._wake.wait(WAKE_S)
+                self._wake.clear()
+                closing = self._closing  # read first: what was written before close() is taken
+                for topic, ns, data, camera in self._take_all():
+                    if camera is not None:
+                        if topic not in channels:
+                            if image_schema is None:
+                                image_schema = register_schema(writer, CompressedImage)
+                            channels[topic] = writer.register_channel(
+                                topic=topic, message_encoding="protobuf",
+                                schema_id=image_schema)
+                        message = CompressedImage(frame_id=camera, data=data, format="jpeg")
+                        message.timestamp.FromNanoseconds(ns)
+                        data = message.SerializeToString()
+                    sequence += 1
+                    writer.add_message(channels[topic], log_time=ns, publish_time=ns,
+                                       sequence=sequence, data=data)
+                if closing:
+                    break
+            writer.finish()
+        except Exception as exc:  # e.g. the disk is full: the flight goes on without the file
+            self.error = exc
+            self._queue = None
+        finally:
+            try:
+                file.close()  # flushes: may fail the same way
+            except OSError as exc:
+                self.error = self.error or exc
+
+    def _take_all(self) -> list:
+        q = self._queue
+        items = []
+        while q:
+            items.append(q.popleft())
+        with self._lock:
+            self._pending_b -= sum(len(item[2]) for item in items)
+        return items
+
     def close(self) -> None:
-        if self._writer is not None:
-            self._writer.finish()
-            self._writer = None
-        if self._file is not None:
-            self._file.close()
-            self._file = None
+        """Write what is queued, finish the file (its summary and footer) and close it."""
+        if self._thread is not None:
+            self._closing = True
+            self._wake.set()
+            self._thread.join()
+            self._thread = None
 
 
 def read_log(path: Path) -> dict[str, list[dict]]:

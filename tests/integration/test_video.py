@@ -41,3 +41,29 @@ def test_video_command_and_its_errors(logged_flight, tmp_path, capsys):
         write_video(run_dir, "down", out=tmp_path / "x.mp4")
     assert main(["video", str(tmp_path)]) == 2
     assert "no such file" in capsys.readouterr().err
+
+
+def test_run_records_a_chosen_camera_and_reports(tmp_path, capsys):
+    out = tmp_path / "run"
+    code = main(["run", "--mission", "follow_ball", "--out", str(out), "--report",
+                 "--record-video", "down", "--set", "steps.1.follow_ball.duration_s=2"])
+    assert code == 0
+    printed = capsys.readouterr().out
+    assert f"wrote {out / 'onboard.mp4'}" in printed
+    down = list(read_images(out / "flight.mcap", "down"))
+    front = list(read_images(out / "flight.mcap", "front"))
+    assert len(down) > 100  # every frame of the downward camera, from takeoff to landing
+    assert len(front) > 100  # and the followed camera's, as always in the simulator
+    frames, _, _ = _decode(out / "onboard.mp4")
+    assert frames == len(down)
+    report = (out / "report.html").read_text()
+    assert "<video" in report
+    assert "/camera/down/image/compressed" in report
+
+
+def test_an_unknown_video_camera_is_refused_before_flying(tmp_path, capsys):
+    code = main(["run", "--mission", "follow_ball", "--out", str(tmp_path / "run"),
+                 "--record-video", "rear"])
+    assert code == 2
+    assert "rear: no such camera" in capsys.readouterr().err
+    assert not (tmp_path / "run" / "flight.mcap").exists()

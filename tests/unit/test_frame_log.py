@@ -1,5 +1,7 @@
 """Camera frames in the flight log: which are logged, how they are stored and read back."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from mcap.reader import make_reader
@@ -60,3 +62,14 @@ def test_records_come_back_as_the_messages_they_were_made_from():
     info = ch.camera_info_from_record(ch.clean(ch.camera_info_record(camera)))
     assert info.intrinsics == camera.intrinsics
     assert np.array_equal(info.rotation_body_cam, camera.rotation_body_cam)
+
+
+@pytest.mark.skipif(not Path("/dev/full").exists(), reason="needs /dev/full")
+def test_a_full_disk_stops_the_file_not_the_flight():
+    log = FlightLog(Path("/dev/full"))  # every write fails with ENOSPC
+    for k in range(2000):
+        log.write(ch.MISSION_EVENTS, 0.01 * k, {"time_s": 0.01 * k, "step": "", "text": "x" * 64})
+        log.write_image("front", 0.01 * k, b"\xff" * 1000)
+    log.close()
+    assert isinstance(log.error, OSError)
+    assert len(log.records[ch.MISSION_EVENTS]) == 2000  # the metrics still have them
