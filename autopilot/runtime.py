@@ -76,7 +76,7 @@ class RunStats:
     stages_ms: list[float] = field(default_factory=list)
 
 
-FRAME_LOG_BUFFER = 8  # frames waiting for JPEG encoding; more are dropped (and counted)
+FRAME_LOG_BUFFER = 32  # frames waiting for JPEG encoding; more are dropped (and counted)
 FRAME_LOG_PIPELINE = 3  # frames being encoded at once (each within this many frame periods)
 
 
