@@ -9,7 +9,7 @@ import sys
 from collections.abc import Sequence
 
 from autopilot import __version__
-from autopilot.config import ConfigError, load_config
+from autopilot.config import ConfigError, InputError, load_config
 from autopilot.process import configure_for_flight, yield_cpu_to_other_processes
 
 EXIT_OK = 0
@@ -161,6 +161,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ConfigError as exc:
         print(f"error: invalid configuration:\n{exc}", file=sys.stderr)
         return EXIT_USAGE
+    except InputError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
@@ -264,13 +267,9 @@ def _report(args: argparse.Namespace) -> int:
 def _video(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from autopilot.report.video import VideoError, write_video
+    from autopilot.report.video import write_video
 
-    try:
-        path, frames = write_video(Path(args.run_dir), args.camera)
-    except VideoError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return EXIT_USAGE
+    path, frames = write_video(Path(args.run_dir), args.camera)
     print(f"wrote {path} ({frames} frames)")
     return EXIT_OK
 
@@ -279,13 +278,9 @@ def _replay(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from autopilot.flightlog.records import clean
-    from autopilot.replay import ReplayError, format_replay, replay
+    from autopilot.replay import format_replay, replay
 
-    try:
-        result = replay(Path(args.run_dir), args.overrides)
-    except ReplayError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return EXIT_USAGE
+    result = replay(Path(args.run_dir), args.overrides)
     print(json.dumps(clean(result)) if args.json else format_replay(result))
     return EXIT_OK
 
@@ -293,13 +288,9 @@ def _replay(args: argparse.Namespace) -> int:
 def _score(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from autopilot.score import ScoreError, score
+    from autopilot.score import score
 
-    try:
-        metrics = score(Path(args.run_dir), Path(args.truth))
-    except ScoreError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return EXIT_USAGE
+    metrics = score(Path(args.run_dir), Path(args.truth))
     if not metrics:
         print("no follow_ball step in this run, or no truth overlapping it", file=sys.stderr)
         return EXIT_FAILED

@@ -134,6 +134,11 @@ class Problem:
         return f"{where}: {self.key_path or '(top level)'}: {self.message}"
 
 
+class InputError(Exception):
+    """A run folder, log or file that cannot be used as given; the message names it and what
+    was expected (the CLI prints it and exits with 2)."""
+
+
 class ConfigError(Exception):
     """One or more problems in a configuration or mission file."""
 

@@ -22,7 +22,15 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from autopilot.config import AppConfig, ConfigError, Located, Problem, apply_overrides, validate
+from autopilot.config import (
+    AppConfig,
+    ConfigError,
+    InputError,
+    Located,
+    Problem,
+    apply_overrides,
+    validate,
+)
 from autopilot.flightlog import records as ch
 from autopilot.flightlog.log import read_images, read_log_checked
 from autopilot.flightlog.metrics import estimation_metrics, follow_metrics
@@ -33,12 +41,8 @@ DETECTION_KEYS = ("detection_rate", "frames_in_view", "frames_processed",
                   "false_detection_rate", "max_lost_s")
 
 
-class ReplayError(Exception):
+class ReplayError(InputError):
     pass
-
-
-def _ns(time_s: float) -> int:
-    return round(time_s * 1e9)
 
 
 def replay(run_dir: Path, overrides: Sequence[str] = ()) -> dict:
@@ -63,7 +67,7 @@ def replay(run_dir: Path, overrides: Sequence[str] = ()) -> dict:
         raise ReplayError(f"{path}: no {ch.CAMERA_INFO} record for camera {camera_name!r}")
     camera = ch.camera_info_from_record(info)
 
-    flown = {_ns(r["time_s"]): r for r in records.get(ch.BALL_DETECTIONS, [])}
+    flown = {ch.time_key(r["time_s"]): r for r in records.get(ch.BALL_DETECTIONS, [])}
     states = records.get(ch.VEHICLE_STATE, [])  # in arrival order
     arrival = [s.get("received_s", s["time_s"]) for s in states]
     pipeline = TargetPipeline(cfg)
@@ -77,7 +81,7 @@ def replay(run_dir: Path, overrides: Sequence[str] = ()) -> dict:
 
     detections, estimates, replayed_ns = [], [], set()
     for image in read_images(path, camera_name):
-        live = flown.get(_ns(image.time_s))
+        live = flown.get(ch.time_key(image.time_s))
         if live is None:
             continue  # logged but never processed in flight (the run ended)
         frame = cv2.imdecode(np.frombuffer(image.jpeg, np.uint8), cv2.IMREAD_COLOR)
@@ -89,7 +93,7 @@ def replay(run_dir: Path, overrides: Sequence[str] = ()) -> dict:
         telemetry_until(live.get("detected_s", image.time_s))
         detections.append(detection_record(live["seq"], image.time_s, camera.name, detection,
                                            hint))
-        replayed_ns.add(_ns(image.time_s))
+        replayed_ns.add(ch.time_key(image.time_s))
         if detection is not None:
             estimate = pipeline.estimate(image.time_s, camera, detection)
             if estimate is not None:
@@ -100,7 +104,7 @@ def replay(run_dir: Path, overrides: Sequence[str] = ()) -> dict:
                           "log.frames.vehicle_rate_hz)")
 
     flight_frames = [r for r in records.get(ch.BALL_DETECTIONS, [])
-                     if _ns(r["time_s"]) in replayed_ns]
+                     if ch.time_key(r["time_s"]) in replayed_ns]
     replayed = {**records, ch.BALL_DETECTIONS: detections, ch.TARGET_ESTIMATES: estimates}
     as_flown = {**records, ch.BALL_DETECTIONS: flight_frames}
     follow = follow_metrics(replayed)

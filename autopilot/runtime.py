@@ -148,8 +148,9 @@ class Runtime:
             rate = frames.sim_rate_hz if cfg.driver == "sim" else frames.vehicle_rate_hz
             log_cameras = {self.camera_name: rate}
         cams = vehicle.cameras
-        self._samplers = {name: FrameSampler(rate, cams[name].rate_hz)
-                          for name, rate in log_cameras.items() if rate > 0 and name in cams}
+        self._samplers = {} if log.path is None else {
+            name: FrameSampler(rate, cams[name].rate_hz)
+            for name, rate in log_cameras.items() if rate > 0 and name in cams}
         self._to_log: asyncio.Queue[Frame] = asyncio.Queue(maxsize=FRAME_LOG_BUFFER)
         self._log_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="frame-log")
         self._encoding: deque[tuple[Frame, asyncio.Future[bytes]]] = deque()
@@ -184,7 +185,7 @@ class Runtime:
                     tasks.create_task(self._streaming(), name="setpoint-streaming"),
                     *self._simulator_tasks(tasks),
                 ]
-                if self._samplers and self.log.path is not None:
+                if self._samplers:
                     background.append(tasks.create_task(self._log_frames(), name="frame-log"))
                     background += [
                         tasks.create_task(self._other_camera(name), name=f"camera-{name}")
@@ -311,7 +312,7 @@ class Runtime:
         """Hand a frame to the frame log if its camera's rate wants it (never waits: a full
         buffer drops the frame and counts it)."""
         sampler = self._samplers.get(frame.camera.name)
-        if sampler is None or self.log.path is None or not sampler.take(frame.time_s):
+        if sampler is None or not sampler.take(frame.time_s):
             return
         try:
             self._to_log.put_nowait(frame)

@@ -14,12 +14,13 @@ import json
 import math
 from pathlib import Path
 
+from autopilot.config import InputError
 from autopilot.flightlog import records as ch
 from autopilot.flightlog.log import read_log
 from autopilot.flightlog.metrics import follow_metrics
 
 
-class ScoreError(Exception):
+class ScoreError(InputError):
     pass
 
 

@@ -144,33 +144,41 @@ def ground_truth_record(gt) -> dict:
     }
 
 
-def _f(value: Any) -> float:
+def num(value: Any) -> float:
+    """A record's number (null → NaN)."""
     return math.nan if value is None else float(value)
 
 
-def _v(values: Any) -> np.ndarray:
-    return np.array([_f(v) for v in values], dtype=float)
+def vec(values: Any) -> np.ndarray:
+    """A record's vector (nulls → NaN)."""
+    return np.array([num(v) for v in values], dtype=float)
+
+
+def time_key(time_s: float) -> int:
+    """A sample time as integer nanoseconds: the key that matches one frame's records across
+    channels (the log's own timestamps are nanoseconds)."""
+    return round(time_s * 1e9)
 
 
 def camera_info_from_record(rec: dict) -> CameraInfo:
     """The :class:`CameraInfo` a ``/camera/info`` record describes."""
     intrinsics = CameraIntrinsics(
-        width_px=int(rec["width_px"]), height_px=int(rec["height_px"]), fx=_f(rec["fx"]),
-        fy=_f(rec["fy"]), cx=_f(rec["cx"]), cy=_f(rec["cy"]),
-        distortion=tuple(_f(d) for d in rec.get("distortion") or (0.0,) * 5))
-    return CameraInfo(rec["name"], intrinsics, _v(rec["rotation_body_cam"]).reshape(3, 3),
-                      _v(rec["position_body_m"]), _f(rec["rate_hz"]))
+        width_px=int(rec["width_px"]), height_px=int(rec["height_px"]), fx=num(rec["fx"]),
+        fy=num(rec["fy"]), cx=num(rec["cx"]), cy=num(rec["cy"]),
+        distortion=tuple(num(d) for d in rec.get("distortion") or (0.0,) * 5))
+    return CameraInfo(rec["name"], intrinsics, vec(rec["rotation_body_cam"]).reshape(3, 3),
+                      vec(rec["position_body_m"]), num(rec["rate_hz"]))
 
 
 def vehicle_state_from_record(rec: dict) -> VehicleState:
     """The :class:`VehicleState` a ``/vehicle/state`` record holds (what the log keeps of it:
     health flags and battery current are not logged and come back as defaults)."""
     return VehicleState(
-        time_s=_f(rec["time_s"]), position_ned_m=_v(rec["position_ned_m"]),
-        velocity_ned_m_s=_v(rec["velocity_ned_m_s"]), attitude_q=_v(rec["attitude_q"]),
-        angular_velocity_frd_rad_s=_v(rec["angular_velocity_frd_rad_s"]),
+        time_s=num(rec["time_s"]), position_ned_m=vec(rec["position_ned_m"]),
+        velocity_ned_m_s=vec(rec["velocity_ned_m_s"]), attitude_q=vec(rec["attitude_q"]),
+        angular_velocity_frd_rad_s=vec(rec["angular_velocity_frd_rad_s"]),
         armed=bool(rec["armed"]), mode=FlightMode(rec["mode"]),
         landed_state=LandedState(rec["landed_state"]),
-        distance_to_ground_m=_f(rec["distance_to_ground_m"]),
-        battery=Battery(_f(rec["battery_voltage_v"]), math.nan, _f(rec["battery_remaining"])),
+        distance_to_ground_m=num(rec["distance_to_ground_m"]),
+        battery=Battery(num(rec["battery_voltage_v"]), math.nan, num(rec["battery_remaining"])),
         health=Health(), failsafe=bool(rec.get("failsafe", False)))

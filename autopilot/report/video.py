@@ -25,6 +25,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from autopilot.config import InputError
 from autopilot.estimation.pose_history import slerp
 from autopilot.flightlog import records as ch
 from autopilot.flightlog.log import read_images, read_log_checked
@@ -36,7 +37,7 @@ GREEN, YELLOW, CYAN, WHITE, RED = (60, 220, 60), (0, 220, 255), (255, 220, 0), (
     (40, 40, 240)
 
 
-class VideoError(Exception):
+class VideoError(InputError):
     pass
 
 
@@ -112,21 +113,13 @@ class _Series:
         return a, b, (time_s - a["time_s"]) / span if span > 0 else 0.0
 
 
-def _num(value) -> float:
-    return math.nan if value is None else float(value)
-
-
-def _vec(values) -> np.ndarray:
-    return np.array([_num(v) for v in values], dtype=float)
-
-
 class OverlaySource:
     """What to draw at any instant of a flight, from its log records."""
 
     def __init__(self, records: Records, camera: str) -> None:
         cams = {c["name"]: c for c in records.get(ch.CAMERA_INFO, [])}
         self.camera = cams.get(camera)
-        self.detections = {round(r["time_s"] * 1e9): r
+        self.detections = {ch.time_key(r["time_s"]): r
                            for r in records.get(ch.BALL_DETECTIONS, []) if r["camera"] == camera}
         self.states = _Series(records.get(ch.VEHICLE_STATE, []))
         self.estimates = _Series(records.get(ch.TARGET_ESTIMATES, []))
@@ -139,13 +132,13 @@ class OverlaySource:
             last = self.states.at_or_before(time_s)
             if last is None or time_s - last["time_s"] > 0.1:
                 return None
-            return _vec(last["position_ned_m"]), _vec(last["attitude_q"]), last
+            return ch.vec(last["position_ned_m"]), ch.vec(last["attitude_q"]), last
         a, b, f = found
-        pa, pb = _vec(a["position_ned_m"]), _vec(b["position_ned_m"])
-        return pa + f * (pb - pa), slerp(_vec(a["attitude_q"]), _vec(b["attitude_q"]), f), b
+        pa, pb = ch.vec(a["position_ned_m"]), ch.vec(b["position_ned_m"])
+        return pa + f * (pb - pa), slerp(ch.vec(a["attitude_q"]), ch.vec(b["attitude_q"]), f), b
 
     def overlay_at(self, time_s: float) -> Overlay:
-        det = self.detections.get(round(time_s * 1e9))
+        det = self.detections.get(ch.time_key(time_s))
         detection = hint = None
         panel: list[tuple[str, str]] = []
         if det is not None:
@@ -174,10 +167,10 @@ class OverlaySource:
             if est is not None and time_s - est["time_s"] <= ESTIMATE_MAX_AGE_S \
                     and self.camera is not None:
                 dt = time_s - est["time_s"]
-                p_t = _vec(est["position_ned_m"]) + dt * _vec(est["velocity_ned_m_s"])
-                cov = _vec(est["position_cov_m2"]).reshape(3, 3) if est.get("position_cov_m2") \
-                    else np.diag(_vec(est["position_std_m"]) ** 2)
-                cov = cov + np.diag(_vec(est["velocity_std_m_s"]) ** 2) * dt * dt
+                p_t = ch.vec(est["position_ned_m"]) + dt * ch.vec(est["velocity_ned_m_s"])
+                cov = ch.vec(est["position_cov_m2"]).reshape(3, 3) if est.get("position_cov_m2") \
+                    else np.diag(ch.vec(est["position_std_m"]) ** 2)
+                cov = cov + np.diag(ch.vec(est["velocity_std_m_s"]) ** 2) * dt * dt
                 projected = project_with_covariance(self.camera, p_v, q_v, p_t, cov)
                 if projected is not None:
                     estimate_px, ellipse = projected
@@ -185,12 +178,12 @@ class OverlaySource:
                           ("sigma", f"{np.sqrt(np.trace(cov) / 3) * 100:.1f} cm")]
         command = yaw_rate = None
         if setpoint is not None and time_s - setpoint["time_s"] <= 1.0:
-            vel = _vec(setpoint["velocity_m_s"])
+            vel = ch.vec(setpoint["velocity_m_s"])
             if np.all(np.isfinite(vel)):
                 if setpoint["frame"] != "body_frd" and pose is not None:
                     vel = quat_to_matrix(pose[1]).T @ vel  # NED → body FRD
                 command = (float(vel[0]), float(vel[1]), float(vel[2]))
-            rate = _num(setpoint.get("yaw_rate_rad_s"))
+            rate = ch.num(setpoint.get("yaw_rate_rad_s"))
             yaw_rate = math.degrees(rate) if math.isfinite(rate) else None
             if setpoint.get("latency_ms") is not None:
                 panel.append(("latency", f"{setpoint['latency_ms']:.0f} ms"))
