@@ -35,6 +35,9 @@ class _Model(BaseModel):
 
 class RuntimeConfig(_Model):
     control_rate_hz: Annotated[float, Field(ge=5, le=200)]  # at least; also on every estimate
+    #: attitude or position older than this (by their capture times): no more motion
+    #: setpoints, HOLD, then the mission's fallback (as for a lost link)
+    telemetry_max_age_s: Annotated[float, Field(gt=0, le=10)]
     setpoint_rate_hz: Annotated[float, Field(ge=20, le=100)]  # streaming to the vehicle
     setpoint_expiry_s: Annotated[float, Field(gt=0, le=1)]  # a setpoint not renewed expires
     offboard_warmup_s: Annotated[float, Field(ge=0.1, le=2)]  # streaming before OFFBOARD
@@ -110,10 +113,25 @@ class LogConfig(_Model):
     frames: FrameLogConfig
 
 
+class LinkConfig(_Model):
+    """How the MAVLink drivers reach a vehicle and its camera (``--connect``, ``--video``)."""
+
+    connect: str  # MAVLink URL: udpin://, udpout://, tcp://, serial://
+    connect_timeout_s: Annotated[float, Field(gt=0, le=300)]
+    #: a file holding the MAVLink 2 signing key (None: unsigned)
+    signing_key: str | None = None
+    video: str  # the forward camera's stream (RTP H.264 udp://HOST:PORT, rtsp://, a device)
+    #: accept video only from this host (or host:port); None: lock onto the first sender
+    video_source: str | None = None
+    #: capture → arrival of a camera whose stream carries no usable clock (see the README)
+    camera_latency_s: Annotated[float, Field(ge=0, lt=2)]
+
+
 class AppConfig(_Model):
     """The whole of ``config.yaml``."""
 
     driver: Literal["sim", "mavsdk", "pymavlink"]
+    link: LinkConfig
     runtime: RuntimeConfig
     perception: PerceptionConfig
     estimation: EstimationConfig

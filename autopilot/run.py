@@ -36,8 +36,6 @@ def default_out_dir(plan: MissionPlan, root: Path = Path("runs")) -> Path:
     return path
 
 
-DEFAULT_CONNECT = "udpin://0.0.0.0:14540"
-DEFAULT_VIDEO = "udp://@:5600"
 
 
 def make_vehicle(plan: MissionPlan, *, realtime: bool = False, connect: str | None = None,
@@ -60,7 +58,8 @@ def make_vehicle(plan: MissionPlan, *, realtime: bool = False, connect: str | No
             from drivers.mavlink.mavsdk_driver import MavsdkDriver as Driver
         else:
             from drivers.mavlink.pymavlink_driver import PymavlinkDriver as Driver
-        vehicle = Driver(connect or DEFAULT_CONNECT)
+        link = plan.config.link
+        vehicle = Driver(connect or link.connect)
         info = camera_info("front", plan.config.sim.cameras["front"])
         if calibration is not None:
             from drivers.calibration import CalibrationError, load_calibration
@@ -72,9 +71,11 @@ def make_vehicle(plan: MissionPlan, *, realtime: bool = False, connect: str | No
                 raise ConfigError([Problem(str(calibration), None, "calibration",
                                            message)]) from None
             info = dataclasses.replace(info, intrinsics=intrinsics)
-        vehicle.add_camera(VideoSource(video or DEFAULT_VIDEO, info,
+        vehicle.add_camera(VideoSource(video or link.video, info,
                                        to_local=vehicle.vehicle_time_to_local,
-                                       clock=vehicle.clock.now))
+                                       clock=vehicle.clock.now,
+                                       latency_s=link.camera_latency_s,
+                                       source=link.video_source))
         return vehicle, None
     raise ConfigError([Problem("config", None, "driver",
                                f"unknown driver {driver!r} (sim, mavsdk, pymavlink)")])

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import datetime as dt
+import math
 import signal
 import time
 from collections.abc import Callable
@@ -21,9 +23,11 @@ from autopilot.flight_ops import wait_for_state
 from autopilot.flightlog import records as ch
 from autopilot.flightlog.log import FlightLog
 from autopilot.mission import Scenario
+from autopilot.photos import PhotoIndex
 from autopilot.scenario import build_world
 from drivers.base import FlightMode, VehicleError
 from drivers.calibration import write_calibration
+from drivers.geometry import yaw_from_quat
 from drivers.mavlink.common import cancel_all
 from drivers.mavlink.face import MavlinkFace
 from drivers.sim.driver import SimDriver
@@ -34,6 +38,7 @@ LAND_ON_EXIT_TIMEOUT_S = 60.0
 
 DEFAULT_VIDEO_URL = "udp://127.0.0.1:5600"
 TRUTH_LOG = "truth.mcap"
+PHOTOS = "photos"
 VIDEO_CAMERA = "front"
 
 
@@ -46,8 +51,7 @@ async def serve(config: AppConfig, scenario: Scenario | None, *, instance: int =
     sim_config, objects = build_world(scenario, config.sim)
     vehicle = SimDriver(sim_config, scenario=objects, lockstep=False)
     await vehicle.connect()
-    face = MavlinkFace(vehicle, instance=instance, events=vehicle.events(),
-                       takeoff_altitude_m=sim_config.flight_stack.commander.takeoff_altitude_m)
+    face = MavlinkFace(vehicle, instance=instance, events=vehicle.events())
     loop = asyncio.get_running_loop()
     handle_signals = stop is None
     stop = stop or asyncio.Event()
@@ -63,6 +67,7 @@ async def serve(config: AppConfig, scenario: Scenario | None, *, instance: int =
     events = loop.create_task(log_events(), name="sim-events")
     truth_log: FlightLog | None = None
     truth: asyncio.Task | None = None
+    photos: asyncio.Task | None = None
     if out_dir is not None:  # ground truth, on the vehicle's boot clock, for `autopilot score`
         await asyncio.to_thread(out_dir.mkdir, parents=True, exist_ok=True)
         truth_log = FlightLog(out_dir / TRUTH_LOG)
@@ -74,6 +79,8 @@ async def serve(config: AppConfig, scenario: Scenario | None, *, instance: int =
 
         truth = loop.create_task(log_truth(), name="sim-truth")
         log(f"ground truth → {out_dir / TRUTH_LOG}")
+        photos = loop.create_task(save_photos(vehicle, out_dir / PHOTOS, log), name="sim-photos")
+        log(f"photos → {out_dir / PHOTOS}/ (JPEG, geotagged; photos.jsonl)")
         if VIDEO_CAMERA in vehicle.cameras:
             calibration = out_dir / f"{VIDEO_CAMERA}_calibration.yaml"
             write_calibration(calibration, vehicle.cameras[VIDEO_CAMERA].intrinsics)
@@ -100,11 +107,37 @@ async def serve(config: AppConfig, scenario: Scenario | None, *, instance: int =
         if handle_signals:
             for sig in (signal.SIGINT, signal.SIGTERM):
                 loop.remove_signal_handler(sig)
-        await cancel_all(t for t in (video, events, truth) if t is not None)
+        await cancel_all(t for t in (video, events, truth, photos) if t is not None)
         await face.close()
         await vehicle.close()
         if truth_log is not None:
             truth_log.close()
+
+
+async def save_photos(vehicle: SimDriver, folder: Path, log: Callable[[str], None]) -> None:
+    """Write each photo the vehicle takes (mission camera items, trigger distance, camera
+    commands) into ``folder``, geotagged, off the event loop."""
+    index = PhotoIndex(folder)
+    boot_wall = time.time() - vehicle.clock.now()  # the vehicle's boot clock on the calendar
+    async with contextlib.aclosing(vehicle.photos()) as stream:
+        async for photo in stream:
+            record = {
+                "index": photo.index, "time_s": photo.time_s, "lat_deg": photo.lat_deg,
+                "lon_deg": photo.lon_deg, "alt_amsl_m": photo.alt_amsl_m,
+                "height_above_home_m": photo.height_above_home_m,
+                "position_ned_m": [float(v) for v in photo.position_ned_m],
+                "attitude_q": [float(v) for v in photo.attitude_q],
+                "yaw_deg": math.degrees(yaw_from_quat(photo.attitude_q)) % 360.0,
+                "camera": photo.frame.camera.name if photo.frame is not None else None}
+            taken = dt.datetime.fromtimestamp(boot_wall + photo.time_s, dt.UTC)
+            image = photo.frame.image if photo.frame is not None else None
+            try:
+                path = await asyncio.to_thread(index.add, image, record, taken)
+            except OSError as exc:  # a full disk stops the photos, not the vehicle
+                log(f"photos stopped: {exc}")
+                return
+            where = f"{photo.lat_deg:.7f}, {photo.lon_deg:.7f}, {photo.alt_amsl_m:.1f} m AMSL"
+            log(f"photo {photo.index} → {path.name if path else '(no camera)'} ({where})")
 
 
 async def stream_video(vehicle: SimDriver, camera: str, url: str,
@@ -118,7 +151,8 @@ async def stream_video(vehicle: SimDriver, camera: str, url: str,
     sender: VideoSender | None = None
     try:
         sender = await loop.run_in_executor(
-            executor, lambda: VideoSender(url, intr.width_px, intr.height_px, info.rate_hz))
+            executor, lambda: VideoSender(url, intr.width_px, intr.height_px, info.rate_hz,
+                                          capture_clock=vehicle.clock.now))
         async with contextlib.aclosing(vehicle.frames(camera)) as frames:
             async for frame in frames:
                 await loop.run_in_executor(executor, sender.send, frame.image, frame.time_s)

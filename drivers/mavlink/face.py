@@ -1,24 +1,25 @@
-"""A PX4 SITL look-alike on MAVLink 2, in front of any :class:`~drivers.base.Vehicle`.
+"""A PX4 SITL look-alike on MAVLink 2, in front of the simulated vehicle.
 
 ``autopilot sim`` puts it in front of the real-time simulator, so that real MAVLink clients
 (MAVSDK, MAVProxy, QGroundControl) and our own MAVLink drivers fly the simulated vehicle as
 they would fly PX4 SITL. What it copies from PX4 (see ``shared/reference/px4-mavlink-sitl.md``):
 
-* ports: it binds UDP 14580+i (offboard API) and 18570+i (ground station), sends to
-  127.0.0.1:14540+i and 127.0.0.1:14550 until someone writes to it, then replies to the
-  sender's address from the same socket; no SO_REUSEADDR, so a stale simulator is an error;
+* ports: it binds UDP 14580+i (offboard API) and 18570+i (ground station) on ``host``
+  (127.0.0.1 unless configured), sends to 14540+i and 14550 there until someone writes to it,
+  then replies to the sender's address from the same socket; no SO_REUSEADDR, so a stale
+  simulator is an error;
 * identity: sysid 1, compid 1, MAVLink 2, HEARTBEAT at 1 Hz as a PX4 quadrotor, PX4 custom
-  modes, ``SAFETY_ARMED`` in ``base_mode`` when armed;
-* commands answered with COMMAND_ACK (arm/disarm, takeoff to ``MIS_TAKEOFF_ALT`` when the
-  altitude is NaN, land, DO_SET_MODE, flight termination, message intervals and requests;
-  anything else UNSUPPORTED; a refused command DENIED);
-* telemetry at PX4's onboard-link rates, SYS_STATUS health bits (with PREARM_CHECK),
-  HOME_POSITION, BATTERY_STATUS, DISTANCE_SENSOR, STATUSTEXT for the vehicle's events;
-* offboard: SET_POSITION_TARGET_LOCAL_NED (LOCAL_NED, BODY_NED) goes to the vehicle one by one,
-  never re-sent: the vehicle's own setpoint-loss failsafe acts when a client stops;
-* parameters (PARAM_REQUEST_LIST / _READ / PARAM_SET, REAL32) and empty mission, fence and rally
-  lists, as QGroundControl asks for them on connect;
-* TIMESYNC answered with the vehicle's boot time (the clock of every ``time_boot_ms``).
+  modes with PX4's base-mode flags;
+* commands (:mod:`~drivers.mavlink.face_commands`), telemetry at PX4's onboard-link rates
+  (:mod:`~drivers.mavlink.face_telemetry`), parameters (:mod:`~drivers.mavlink.face_params`),
+  the mission protocol with MISSION_CURRENT and MISSION_ITEM_REACHED
+  (:mod:`~drivers.mavlink.face_mission`), STATUSTEXT for the vehicle's events;
+* offboard: SET_POSITION_TARGET_LOCAL_NED (LOCAL_NED, BODY_NED) and _GLOBAL_INT go to the vehicle
+  one by one, never re-sent: the vehicle's own setpoint-loss failsafe acts when a client stops;
+* ground stations' heartbeats feed the vehicle's data-link loss failsafe (NAV_DLL_ACT);
+* TIMESYNC answered with the vehicle's boot time (the clock of every ``time_boot_ms``);
+* MAVLink 2 signing when given a key: unsigned or badly signed messages are then dropped
+  (counted), and everything sent is signed.
 
 Malformed, unknown and foreign-targeted messages are ignored (counted in :attr:`stats`).
 """
@@ -28,67 +29,52 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-import math
 import struct
 import time
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator, Callable, Coroutine
 from dataclasses import dataclass, field
 from typing import ClassVar
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from drivers.base import CommandDenied, FlightMode, Vehicle, VehicleError, VehicleState
-from drivers.geometry import euler_from_quat
+from drivers.base import CommandDenied, VehicleError, VehicleState
 from drivers.mavlink import px4
 from drivers.mavlink.common import cancel_all
+from drivers.mavlink.face_commands import CommandHandler, ModeNotAvailable
+from drivers.mavlink.face_mission import MissionServer
+from drivers.mavlink.face_params import ParamServer
+from drivers.mavlink.face_telemetry import DEFAULT_RATES_HZ, TelemetryEncoder, base_mode
 from drivers.mavlink.link import pack
+from drivers.mavlink.signing import Signing
 
 log = logging.getLogger(__name__)
 
 SYSTEM_ID = 1
 COMPONENT_ID = 1
-#: PX4 SITL's default home (Zurich), for GLOBAL_POSITION_INT and HOME_POSITION.
-DEFAULT_HOME = (47.397742, 8.545594, 488.0)
-_EARTH_RADIUS_M = 6_378_137.0
+#: compids PX4 takes mission and parameter messages for besides its own (0: broadcast,
+#: 190: MAV_COMP_ID_MISSIONPLANNER)
+_OUR_COMPONENTS = (0, COMPONENT_ID, 190)
+#: MISSION_ITEM_REACHED is repeated this many times with the 1 Hz MISSION_CURRENT (as PX4)
+_REACHED_REPEATS = 10
 
 # MAV_RESULT
 ACCEPTED, DENIED = px4.MAV_RESULT_ACCEPTED, px4.MAV_RESULT_DENIED
 UNSUPPORTED, FAILED = px4.MAV_RESULT_UNSUPPORTED, px4.MAV_RESULT_FAILED
+TEMPORARILY_REJECTED = px4.MAV_RESULT_TEMPORARILY_REJECTED
 
-# MAVLink message ids we produce on request or at a rate
 _HEARTBEAT = mavlink.MAVLINK_MSG_ID_HEARTBEAT
-_AUTOPILOT_VERSION = mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION
-_HOME_POSITION = mavlink.MAVLINK_MSG_ID_HOME_POSITION
-
-#: Default stream rates (Hz): PX4's onboard link, limited by a 50 Hz telemetry source.
-DEFAULT_RATES_HZ: dict[int, float] = {
-    mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: 50.0,
-    mavlink.MAVLINK_MSG_ID_ATTITUDE: 50.0,
-    mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 30.0,
-    mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 50.0,
-    mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: 5.0,
-    mavlink.MAVLINK_MSG_ID_SYS_STATUS: 5.0,
-    mavlink.MAVLINK_MSG_ID_BATTERY_STATUS: 0.5,
-    mavlink.MAVLINK_MSG_ID_HOME_POSITION: 0.5,
-    mavlink.MAVLINK_MSG_ID_DISTANCE_SENSOR: 10.0,
-}
+_MAV_TYPE_GCS = mavlink.MAV_TYPE_GCS
 
 
 @dataclass
 class FaceStats:
     received: int = 0
     bad_data: int = 0
+    bad_signature: int = 0
     ignored: int = 0
     commands: int = 0
     setpoints: int = 0
     rejected_setpoints: int = 0
-
-
-@dataclass
-class Param:
-    value: float
-    #: Called with the new value when a client sets it (None: stored only).
-    apply: Callable[[float], None] | None = None
 
 
 class _Link(asyncio.DatagramProtocol):
@@ -101,21 +87,27 @@ class _Link(asyncio.DatagramProtocol):
         self.heard_from: tuple[str, int] | None = None
         self.transport: asyncio.DatagramTransport | None = None
         self.mav = mavlink.MAVLink(None, srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID)
-        self.mav.robust_parsing = True
         self._rx = mavlink.MAVLink(None, srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID)
         self._rx.robust_parsing = True
+        if face.signing is not None:
+            face.signing.apply(self.mav, self._rx)
 
     def connection_made(self, transport) -> None:
         self.transport = transport
 
     def datagram_received(self, data: bytes, addr) -> None:
-        self.peer = self.heard_from = addr
         try:
             messages = self._rx.parse_buffer(data) or []
-        except Exception as exc:  # pymavlink raises on some corrupt frames even when robust
-            self.face.stats.bad_data += 1
+        except Exception as exc:  # pymavlink raises on some corrupt (or badly signed) frames
+            if "signature" in str(exc).lower():
+                self.face.stats.bad_signature += 1
+            else:
+                self.face.stats.bad_data += 1
             log.debug("%s: unparsable datagram from %s: %s", self.name, addr, exc)
             return
+        good = [m for m in messages if m.get_type() != "BAD_DATA"]
+        if good:  # only a sender that spoke valid (and, with signing, signed) MAVLink is answered
+            self.peer = self.heard_from = addr
         for msg in messages:
             self.face._receive(self, msg)
 
@@ -146,42 +138,56 @@ class _Streams:
         return True
 
 
+class _Requests:
+    """What a command may ask of the link it came on (message intervals, a message now)."""
+
+    def __init__(self, face: MavlinkFace, link: _Link) -> None:
+        self.face, self.link = face, link
+
+    def set_interval(self, msg_id: int, interval_us: float) -> int:
+        return self.face._set_interval(self.link, msg_id, interval_us)
+
+    def send_now(self, msg_id: int) -> bool:
+        msg = self.face._message(msg_id, self.link.mav)
+        if msg is None:
+            return False
+        self.link.send(msg)
+        return True
+
+
 class MavlinkFace:
-    """Serves ``vehicle`` on MAVLink as PX4 SITL instance ``instance`` does.
+    """Serves ``vehicle`` (the simulator driver) on MAVLink as PX4 SITL instance ``instance``.
 
     ``events`` is an optional stream of ``(time_s, text)`` status messages to forward as
     STATUSTEXT. Start with :meth:`start`, stop with :meth:`close` (it does not command the
     vehicle).
     """
 
-    def __init__(self, vehicle: Vehicle, *, instance: int = 0, host: str = "127.0.0.1",
-                 gcs_port: int = 14550, home: tuple[float, float, float] = DEFAULT_HOME,
-                 takeoff_altitude_m: float = 2.5,
-                 events: AsyncIterator[tuple[float, str]] | None = None) -> None:
+    def __init__(self, vehicle, *, instance: int = 0, host: str = "127.0.0.1",
+                 gcs_port: int = 14550, peer_host: str | None = None,
+                 events: AsyncIterator[tuple[float, str]] | None = None,
+                 signing: Signing | None = None) -> None:
         self.vehicle = vehicle
         self.instance = instance
         self.host = host
-        self.home = home
+        self.signing = signing
         self.stats = FaceStats()
-        self.ports = {"offboard": (14580 + instance, (host, 14540 + instance)),
-                      "gcs": (18570 + instance, (host, gcs_port))}
+        peer = peer_host or ("127.0.0.1" if host in ("0.0.0.0", "") else host)
+        self.ports = {"offboard": (14580 + instance, (peer, 14540 + instance)),
+                      "gcs": (18570 + instance, (peer, gcs_port))}
         self.links: dict[str, _Link] = {}
         self._streams = {name: _Streams() for name in self.ports}
         self._events = events
         self._tasks: list[asyncio.Task] = []
         self._state: VehicleState | None = None
         self._boot = time.monotonic()
-        self.params: dict[str, Param] = {
-            "MIS_TAKEOFF_ALT": Param(takeoff_altitude_m),
-            "COM_OF_LOSS_T": Param(0.5),
-            "COM_OBL_RC_ACT": Param(0.0),
-            "NAV_DLL_ACT": Param(0.0),
-            "MPC_XY_VEL_MAX": Param(12.0),
-            "MPC_Z_VEL_MAX_UP": Param(3.0),
-            "MPC_Z_VEL_MAX_DN": Param(1.5),
-            "MAV_SYS_ID": Param(float(SYSTEM_ID)),
-            "SYS_AUTOSTART": Param(10016.0),
-        }
+        origin = vehicle.global_origin
+        self.telemetry = TelemetryEncoder(vehicle, origin, self._boot_ms, instance)
+        self.commands = CommandHandler(vehicle, origin, lambda: self._state)
+        self.params = ParamServer(vehicle, self._send, self._spawn, self._say)
+        self.missions = MissionServer(vehicle, self._send, self._spawn, self._say)
+        self._reached: list[list[int]] = []  # [seq, sends left]
+        self._text_id = 0
 
     # ------------------------------------------------------------------------------------
     # Life cycle
@@ -193,14 +199,17 @@ class MavlinkFace:
             link = _Link(name, self, peer)
             try:
                 await loop.create_datagram_endpoint(lambda link=link: link,
-                                                    local_addr=("0.0.0.0", port))
+                                                    local_addr=(self.host, port))
             except OSError as exc:
                 await self.close()
-                raise OSError(f"cannot bind UDP port {port} for the {name} link: {exc} "
-                              "(is another simulator or PX4 SITL running?)") from exc
+                raise OSError(f"cannot bind UDP {self.host}:{port} for the {name} link: "
+                              f"{exc.strerror or exc} (is another simulator or PX4 SITL "
+                              f"running? --instance N picks other ports)") from exc
             self.links[name] = link
         self._tasks = [loop.create_task(self._heartbeats(), name="mavlink-heartbeat"),
-                       loop.create_task(self._telemetry(), name="mavlink-telemetry")]
+                       loop.create_task(self._telemetry(), name="mavlink-telemetry"),
+                       loop.create_task(self._mission_events(), name="mavlink-mission"),
+                       loop.create_task(self._housekeeping(), name="mavlink-housekeeping")]
         if self._events is not None:
             self._tasks.append(loop.create_task(self._statustext(), name="mavlink-events"))
 
@@ -220,9 +229,46 @@ class MavlinkFace:
         t = time.monotonic() - self._boot if time_s is None else time_s
         return max(0, int(t * 1000.0)) & 0xFFFFFFFF
 
+    @staticmethod
+    def _send(link: _Link, msg) -> None:
+        link.send(msg)
+
     def _send_all(self, make) -> None:
         for link in self.links.values():
             link.send(make(link.mav))
+
+    def _say(self, link: _Link | None, text: str, severity: int = 6) -> None:
+        """STATUSTEXT on ``link`` (all links if None); longer texts in 50-byte chunks with an
+        id, as MAVLink 2 allows (the last chunk ends short, or with an empty one)."""
+        data = _statustext(text)
+        if len(data) <= 50:
+            chunks, text_id = [data], 0
+        else:
+            self._text_id = self._text_id % 65535 + 1
+            text_id = self._text_id
+            chunks = [data[i:i + 50] for i in range(0, len(data), 50)]
+            if len(chunks[-1]) == 50:
+                chunks.append(b"")
+        for seq, chunk in enumerate(chunks):
+            def make(mav, chunk=chunk, seq=seq):
+                return mav.statustext_encode(severity, chunk, text_id, seq)
+            if link is None:
+                self._send_all(make)
+            else:
+                link.send(make(link.mav))
+
+    def _spawn(self, coro: Coroutine) -> asyncio.Task:
+        """Run ``coro`` as a task the face owns (cancelled at close; failures logged)."""
+        task = asyncio.get_running_loop().create_task(coro)
+        self._tasks.append(task)
+        task.add_done_callback(self._task_done)
+        return task
+
+    def _task_done(self, task: asyncio.Task) -> None:
+        if task in self._tasks:
+            self._tasks.remove(task)
+        if not task.cancelled() and task.exception() is not None:
+            log.warning("MAVLink face task failed: %s", task.exception())
 
     async def _heartbeats(self) -> None:
         while True:
@@ -232,13 +278,11 @@ class MavlinkFace:
     def _heartbeat(self, mav):
         s = self._state
         armed = s is not None and s.armed
-        base = px4.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (px4.MAV_MODE_FLAG_SAFETY_ARMED
-                                                        if armed else 0)
         custom = px4.px4_custom_mode(s.mode) if s is not None else 0
         status = (px4.MAV_STATE_CRITICAL if s is not None and s.failsafe else
                   px4.MAV_STATE_ACTIVE if armed else px4.MAV_STATE_STANDBY)
-        return mav.heartbeat_encode(px4.MAV_TYPE_QUADROTOR, px4.MAV_AUTOPILOT_PX4, base, custom,
-                                    status)
+        return mav.heartbeat_encode(px4.MAV_TYPE_QUADROTOR, px4.MAV_AUTOPILOT_PX4, base_mode(s),
+                                    custom, status)
 
     async def _telemetry(self) -> None:
         async with contextlib.aclosing(self.vehicle.telemetry()) as samples:
@@ -248,102 +292,51 @@ class MavlinkFace:
                     streams = self._streams[name]
                     for msg_id in streams.rates_hz:
                         if streams.due(msg_id, state.time_s):
-                            try:
-                                msg = self._message(msg_id, link.mav, state)
-                            except (ValueError, OverflowError, struct.error):
-                                # a value MAVLink cannot carry (NaN, out of range): skip this
-                                # one message, never the stream
-                                log.debug("cannot encode message %d", msg_id, exc_info=True)
-                                continue
+                            msg = self._message(msg_id, link.mav)
                             if msg is not None:
                                 link.send(msg)
+                            if msg_id == mavlink.MAVLINK_MSG_ID_MISSION_CURRENT:
+                                self._repeat_reached(link)
+
+    def _message(self, msg_id: int, mav):
+        try:
+            return self.telemetry.encode(msg_id, mav, self._state)
+        except (ValueError, OverflowError, struct.error):
+            # a value MAVLink cannot carry (NaN, out of range): skip this one message
+            log.debug("cannot encode message %d", msg_id, exc_info=True)
+            return None
+
+    async def _mission_events(self) -> None:
+        """MISSION_CURRENT at once when the current item changes, MISSION_ITEM_REACHED when
+        one is reached (repeated with the next few MISSION_CURRENTs, as PX4)."""
+        async with contextlib.aclosing(self.vehicle.mission_events()) as events:
+            async for event in events:
+                if event.kind == "current":
+                    self._send_all(self.telemetry.mission_current)
+                elif event.kind == "reached":
+                    self._send_all(lambda mav, seq=event.seq: mav.mission_item_reached_encode(
+                        seq))
+                    self._reached = [[event.seq, _REACHED_REPEATS]]
+                elif event.kind == "finished":
+                    self._send_all(self.telemetry.mission_current)
+
+    def _repeat_reached(self, link: _Link) -> None:
+        for entry in self._reached:
+            if entry[1] > 0:
+                link.send(link.mav.mission_item_reached_encode(entry[0]))
+                if link is next(iter(self.links.values())):
+                    entry[1] -= 1
 
     async def _statustext(self) -> None:
         assert self._events is not None
         async with contextlib.aclosing(self._events) as events:
             async for _, text in events:
-                self._send_all(lambda mav, text=text: mav.statustext_encode(
-                    6, _statustext(text)))  # MAV_SEVERITY_INFO
+                self._say(None, text, 6)  # MAV_SEVERITY_INFO
 
-    def _message(self, msg_id: int, mav, s: VehicleState | None):
-        """Encode message ``msg_id`` from telemetry sample ``s`` (None if not possible)."""
-        if msg_id == _AUTOPILOT_VERSION:
-            return self._autopilot_version(mav)
-        if s is None:
-            return None
-        t_ms = self._boot_ms(s.time_s)
-        n, e, d = (float(v) for v in s.position_ned_m)
-        vn, ve, vd = (float(v) for v in s.velocity_ned_m_s)
-        p, q, r = (float(v) for v in s.angular_velocity_frd_rad_s)
-        if msg_id == mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION:
-            return mav.attitude_quaternion_encode(t_ms, *(float(v) for v in s.attitude_q),
-                                                  p, q, r)
-        if msg_id == mavlink.MAVLINK_MSG_ID_ATTITUDE:
-            roll, pitch, yaw = euler_from_quat(s.attitude_q)
-            return mav.attitude_encode(t_ms, roll, pitch, yaw, p, q, r)
-        if msg_id == mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED:
-            return mav.local_position_ned_encode(t_ms, n, e, d, vn, ve, vd)
-        if msg_id == mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT:
-            lat, lon, alt = self._global(n, e, d)
-            hdg = round(math.degrees(s.yaw_rad) % 360.0 * 100.0) % 36000
-            return mav.global_position_int_encode(
-                t_ms, round(lat * 1e7), round(lon * 1e7), round(alt * 1000),
-                round(-d * 1000), round(vn * 100), round(ve * 100),
-                round(vd * 100), hdg)
-        if msg_id == mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE:
-            return mav.extended_sys_state_encode(0, px4.LANDED_STATES[s.landed_state])
-        if msg_id == mavlink.MAVLINK_MSG_ID_SYS_STATUS:
-            return self._sys_status(mav, s)
-        if msg_id == mavlink.MAVLINK_MSG_ID_BATTERY_STATUS:
-            b = s.battery
-            cells = [int(b.voltage_v * 1000)] + [65535] * 9
-            return mav.battery_status_encode(0, 1, 1, 32767, cells, int(b.current_a * 100), -1,
-                                             -1, round(b.remaining_fraction * 100))
-        if msg_id == _HOME_POSITION:
-            lat, lon, alt = self.home
-            return mav.home_position_encode(int(lat * 1e7), int(lon * 1e7), int(alt * 1000),
-                                            0.0, 0.0, 0.0, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0)
-        if msg_id == mavlink.MAVLINK_MSG_ID_DISTANCE_SENSOR:
-            dist = s.distance_to_ground_m
-            cm = 65535 if not math.isfinite(dist) else round(dist * 100)
-            # MAV_DISTANCE_SENSOR_LASER 0, orientation MAV_SENSOR_ROTATION_PITCH_270 (down) 25
-            return mav.distance_sensor_encode(t_ms, 10, 4000, cm, 0, 0, 25, 0)
-        return None
-
-    def _global(self, n: float, e: float, d: float) -> tuple[float, float, float]:
-        lat0, lon0, alt0 = self.home
-        lat = lat0 + math.degrees(n / _EARTH_RADIUS_M)
-        lon = lon0 + math.degrees(e / (_EARTH_RADIUS_M * math.cos(math.radians(lat0))))
-        return lat, lon, alt0 - d
-
-    def _sys_status(self, mav, s: VehicleState):
-        h = s.health
-        present = (px4.SENSOR_GYRO | px4.SENSOR_ACCEL | px4.SENSOR_MAG | px4.SENSOR_ABS_PRESSURE
-                   | px4.SENSOR_GPS | px4.SENSOR_MOTOR_OUTPUTS | px4.SENSOR_BATTERY
-                   | px4.SENSOR_PREARM_CHECK)
-        healthy = px4.SENSOR_GEOFENCE  # no fence, so never breached (MAVProxy reads this bit)
-        for ok, bit in ((h.gyro_ok, px4.SENSOR_GYRO), (h.accel_ok, px4.SENSOR_ACCEL),
-                        (h.mag_ok, px4.SENSOR_MAG), (True, px4.SENSOR_ABS_PRESSURE),
-                        (h.local_position_ok, px4.SENSOR_GPS), (True, px4.SENSOR_MOTOR_OUTPUTS),
-                        (h.battery_ok, px4.SENSOR_BATTERY), (h.armable, px4.SENSOR_PREARM_CHECK)):
-            if ok:
-                healthy |= bit
-        b = s.battery
-        return mav.sys_status_encode(present, present, healthy, 0, int(b.voltage_v * 1000),
-                                     int(b.current_a * 100), round(b.remaining_fraction
-                                                                       * 100),
-                                     0, 0, 0, 0, 0, 0)
-
-    def _autopilot_version(self, mav):
-        caps = (mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT
-                | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
-                | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_INT
-                | mavlink.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
-                | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
-                | mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2)
-        version = (1 << 24) | (15 << 16) | (0 << 8) | 255  # 1.15.0, FIRMWARE_VERSION_TYPE_OFFICIAL
-        return mav.autopilot_version_encode(caps, version, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8,
-                                            0, 0, 0x5349_4D00 + self.instance)
+    async def _housekeeping(self) -> None:
+        while True:
+            await asyncio.sleep(0.05)
+            self.missions.tick()
 
     # ------------------------------------------------------------------------------------
     # Incoming
@@ -353,10 +346,15 @@ class MavlinkFace:
         self.stats.received += 1
         kind = msg.get_type()
         if kind == "BAD_DATA":
-            self.stats.bad_data += 1
+            reason = str(getattr(msg, "reason", "")).lower()
+            if "signature" in reason or "unsigned" in reason:
+                self.stats.bad_signature += 1
+            else:
+                self.stats.bad_data += 1
             return
         target = getattr(msg, "target_system", SYSTEM_ID)
-        if target not in (0, SYSTEM_ID):
+        component = getattr(msg, "target_component", COMPONENT_ID)
+        if target not in (0, SYSTEM_ID) or component not in _OUR_COMPONENTS:
             self.stats.ignored += 1
             return
         handler = self._handlers.get(kind)
@@ -369,24 +367,34 @@ class MavlinkFace:
             self.stats.ignored += 1
             log.warning("ignoring %s from %s", kind, link.peer, exc_info=True)
 
+    def _on_heartbeat(self, link: _Link, msg) -> None:
+        if msg.type == _MAV_TYPE_GCS:
+            self._spawn(self.vehicle.gcs_heartbeat())
+
     def _on_command(self, link: _Link, msg) -> None:
         self.stats.commands += 1
+        frame = None
         if msg.get_type() == "COMMAND_INT":
-            params = (msg.param1, msg.param2, msg.param3, msg.param4, msg.x, msg.y, msg.z)
+            params = (msg.param1, msg.param2, msg.param3, msg.param4, float(msg.x),
+                      float(msg.y), msg.z)
+            frame = msg.frame
         else:
             params = (msg.param1, msg.param2, msg.param3, msg.param4, msg.param5, msg.param6,
                       msg.param7)
-        task = asyncio.get_running_loop().create_task(self._command(link, msg, params))
-        self._tasks.append(task)
-        task.add_done_callback(lambda t: t in self._tasks and self._tasks.remove(t))
+        self._spawn(self._command(link, msg, params, frame))
 
-    async def _command(self, link: _Link, msg, params: tuple[float, ...]) -> None:
+    async def _command(self, link: _Link, msg, params: tuple[float, ...],
+                       frame: int | None) -> None:
         command = msg.command
         try:
-            result = await self._execute(link, command, params)
+            result = await self.commands.execute(command, params, frame, _Requests(self, link))
+        except ModeNotAvailable as exc:
+            log.info("command %d: %s", command, exc.reason)
+            self._say(link, exc.reason, 4)
+            result = TEMPORARILY_REJECTED
         except CommandDenied as exc:
             log.info("command %d denied: %s", command, exc.reason)
-            link.send(link.mav.statustext_encode(4, _statustext(exc.reason)))
+            self._say(link, exc.reason, 4)
             result = DENIED
         except VehicleError as exc:
             log.warning("command %d failed: %s", command, exc)
@@ -397,71 +405,24 @@ class MavlinkFace:
         link.send(link.mav.command_ack_encode(command, result, 0, 0, msg.get_srcSystem(),
                                               msg.get_srcComponent()))
 
-    async def _execute(self, link: _Link, command: int, p: tuple[float, ...]) -> int:
-        """Carry out a command. MAVSDK sends NaN for parameters it does not use: those read
-        as 0 where a number is needed (the takeoff altitude keeps its NaN meaning)."""
-        v = self.vehicle
-        p = tuple(x if math.isfinite(x) or i == 6 else 0.0 for i, x in enumerate(p))
-        if command == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
-            if p[0] >= 0.5:
-                await v.arm()
-            else:
-                await v.disarm(force=round(p[1]) == px4.FORCE_DISARM_MAGIC)
-            return ACCEPTED
-        if command == mavlink.MAV_CMD_NAV_TAKEOFF:
-            await v.takeoff(self._takeoff_altitude(p[6]))
-            return ACCEPTED
-        if command == mavlink.MAV_CMD_NAV_LAND:
-            await v.land()
-            return ACCEPTED
-        if command == mavlink.MAV_CMD_DO_SET_MODE:
-            return await self._set_mode(p)
-        if command == mavlink.MAV_CMD_DO_FLIGHTTERMINATION:
-            if p[0] >= 0.5:
-                await v.disarm(force=True)
-            return ACCEPTED
-        if command == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL:
-            return self._set_interval(link, int(p[0]), p[1])
-        if command == mavlink.MAV_CMD_REQUEST_MESSAGE:
-            return self._send_requested(link, int(p[0]))
-        if command == mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
-            return self._send_requested(link, _AUTOPILOT_VERSION)
-        return UNSUPPORTED
+    def _on_set_mode(self, link: _Link, msg) -> None:
+        """SET_MODE (the message older clients send instead of DO_SET_MODE)."""
+        main, sub = (msg.custom_mode >> 16) & 0xFF, (msg.custom_mode >> 24) & 0xFF
 
-    def _takeoff_altitude(self, amsl_m: float) -> float:
-        """Takeoff height above home: PX4 reads param7 as AMSL; NaN means MIS_TAKEOFF_ALT."""
-        if math.isfinite(amsl_m):
-            above_home = amsl_m - self.home[2]
-            if above_home > 0.0:
-                return above_home
-        return self.params["MIS_TAKEOFF_ALT"].value
+        async def change() -> None:
+            try:
+                await self.commands.set_mode(msg.base_mode, main, sub)
+            except CommandDenied as exc:
+                self._say(link, exc.reason, 4)
 
-    async def _set_mode(self, p: tuple[float, ...]) -> int:
-        if not int(p[0]) & px4.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
-            return UNSUPPORTED
-        mode = px4.px4_mode_from_pair(int(p[1]), int(p[2]))
-        v = self.vehicle
-        if mode is FlightMode.HOLD:
-            if self._state is not None and self._state.mode is FlightMode.OFFBOARD:
-                await v.stop_offboard()
-            else:
-                await v.hold()
-        elif mode is FlightMode.OFFBOARD:
-            await v.start_offboard()
-        elif mode is FlightMode.LAND:
-            await v.land()
-        elif mode is FlightMode.TAKEOFF:
-            await v.takeoff(self.params["MIS_TAKEOFF_ALT"].value)
-        else:
-            return DENIED  # manual, position, mission and return modes are not simulated
-        return ACCEPTED
+        self._spawn(change())
 
     def _set_interval(self, link: _Link, msg_id: int, interval_us: float) -> int:
         streams = self._streams[link.name]
-        if msg_id not in DEFAULT_RATES_HZ and msg_id != _HEARTBEAT:
-            return UNSUPPORTED
         if msg_id == _HEARTBEAT:
             return ACCEPTED  # fixed at 1 Hz, as PX4
+        if msg_id not in DEFAULT_RATES_HZ:
+            return UNSUPPORTED
         if interval_us == 0:
             streams.rates_hz[msg_id] = DEFAULT_RATES_HZ[msg_id]
         elif interval_us < 0:
@@ -471,58 +432,35 @@ class MavlinkFace:
         streams.next_s.pop(msg_id, None)
         return ACCEPTED
 
-    def _send_requested(self, link: _Link, msg_id: int) -> int:
-        msg = self._message(msg_id, link.mav, self._state)
-        if msg is None:
-            return UNSUPPORTED
-        link.send(msg)
-        return ACCEPTED
-
     def _on_setpoint(self, link: _Link, msg) -> None:
         try:
-            setpoint = px4.setpoint_from_mavlink(
-                msg.coordinate_frame, msg.type_mask, (msg.x, msg.y, msg.z),
-                (msg.vx, msg.vy, msg.vz), msg.yaw, msg.yaw_rate)
+            if msg.get_type() == "SET_POSITION_TARGET_GLOBAL_INT":
+                setpoint = self._global_setpoint(msg)
+            else:
+                setpoint = px4.setpoint_from_mavlink(
+                    msg.coordinate_frame, msg.type_mask, (msg.x, msg.y, msg.z),
+                    (msg.vx, msg.vy, msg.vz), msg.yaw, msg.yaw_rate)
         except px4.SetpointNotSupported as exc:
             self.stats.rejected_setpoints += 1
             log.debug("setpoint ignored: %s", exc)
             return
         self.stats.setpoints += 1
-        task = asyncio.get_running_loop().create_task(self.vehicle.send_setpoint(setpoint))
-        task.add_done_callback(_log_failure)
+        self._spawn(self.vehicle.send_setpoint(setpoint))
 
-    def _on_param_request_list(self, link: _Link, msg) -> None:
-        for index, name in enumerate(self.params):
-            self._send_param(link, name, index)
-
-    def _on_param_request_read(self, link: _Link, msg) -> None:
-        names = list(self.params)
-        name = _param_name(msg.param_id)
-        if msg.param_index >= 0:
-            if msg.param_index >= len(names):
-                return
-            name = names[msg.param_index]
-        if name in self.params:
-            self._send_param(link, name, names.index(name))
-
-    def _on_param_set(self, link: _Link, msg) -> None:
-        name = _param_name(msg.param_id)
-        param = self.params.get(name)
-        if param is None or not math.isfinite(msg.param_value):
-            return  # PX4 answers nothing for unknown parameters
-        param.value = float(msg.param_value)
-        if param.apply is not None:
-            param.apply(param.value)
-        self._send_param(link, name, list(self.params).index(name))
-
-    def _send_param(self, link: _Link, name: str, index: int) -> None:
-        link.send(link.mav.param_value_encode(name.encode(), self.params[name].value,
-                                              mavlink.MAV_PARAM_TYPE_REAL32, len(self.params),
-                                              index))
-
-    def _on_mission_request_list(self, link: _Link, msg) -> None:
-        link.send(link.mav.mission_count_encode(msg.get_srcSystem(), msg.get_srcComponent(), 0,
-                                                getattr(msg, "mission_type", 0)))
+    def _global_setpoint(self, msg):
+        """SET_POSITION_TARGET_GLOBAL_INT as a local setpoint (position about the origin)."""
+        origin = self.telemetry.origin
+        n, e, _ = origin.to_ned(msg.lat_int / 1e7, msg.lon_int / 1e7, origin.alt_amsl_m)
+        if msg.coordinate_frame in (mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+                                    mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT):
+            home = self.vehicle.home()
+            d = (float(home[3][2]) if home is not None else 0.0) - msg.alt
+        elif msg.coordinate_frame in (mavlink.MAV_FRAME_GLOBAL_INT, mavlink.MAV_FRAME_GLOBAL):
+            d = origin.alt_amsl_m - msg.alt
+        else:
+            raise px4.SetpointNotSupported(f"coordinate frame {msg.coordinate_frame}")
+        return px4.setpoint_from_mavlink(px4.MAV_FRAME_LOCAL_NED, msg.type_mask, (n, e, d),
+                                         (msg.vx, msg.vy, msg.vz), msg.yaw, msg.yaw_rate)
 
     def _on_timesync(self, link: _Link, msg) -> None:
         """MAVLink time synchronisation: answer a request (tc1 = 0) with our boot time."""
@@ -530,33 +468,31 @@ class MavlinkFace:
             now_ns = int(self.vehicle.clock.now() * 1e9)
             link.send(link.mav.timesync_encode(now_ns, msg.ts1))
 
-    def _ignore(self, link: _Link, msg) -> None:
-        pass
-
     _handlers: ClassVar[dict[str, Callable[[MavlinkFace, _Link, object], None]]] = {
         "COMMAND_LONG": _on_command,
         "COMMAND_INT": _on_command,
+        "SET_MODE": _on_set_mode,
         "SET_POSITION_TARGET_LOCAL_NED": _on_setpoint,
-        "PARAM_REQUEST_LIST": _on_param_request_list,
-        "PARAM_REQUEST_READ": _on_param_request_read,
-        "PARAM_SET": _on_param_set,
-        "MISSION_REQUEST_LIST": _on_mission_request_list,
+        "SET_POSITION_TARGET_GLOBAL_INT": _on_setpoint,
+        "PARAM_REQUEST_LIST": lambda self, link, msg: self.params.on_request_list(link, msg),
+        "PARAM_REQUEST_READ": lambda self, link, msg: self.params.on_request_read(link, msg),
+        "PARAM_SET": lambda self, link, msg: self.params.on_set(link, msg),
+        "MISSION_COUNT": lambda self, link, msg: self.missions.on_count(link, msg),
+        "MISSION_ITEM": lambda self, link, msg: self.missions.on_item(link, msg),
+        "MISSION_ITEM_INT": lambda self, link, msg: self.missions.on_item(link, msg),
+        "MISSION_REQUEST_LIST": lambda self, link, msg: self.missions.on_request_list(link, msg),
+        "MISSION_REQUEST": lambda self, link, msg: self.missions.on_request(link, msg),
+        "MISSION_REQUEST_INT": lambda self, link, msg: self.missions.on_request(link, msg),
+        "MISSION_ACK": lambda self, link, msg: self.missions.on_ack(link, msg),
+        "MISSION_CLEAR_ALL": lambda self, link, msg: self.missions.on_clear_all(link, msg),
+        "MISSION_SET_CURRENT": lambda self, link, msg: self.missions.on_set_current(link, msg),
         "TIMESYNC": _on_timesync,
-        "HEARTBEAT": _ignore,
+        "HEARTBEAT": _on_heartbeat,
     }
 
 
 def _statustext(text: str) -> bytes:
-    """STATUSTEXT's 50 characters, in ASCII (ground stations show other bytes as garbage)."""
-    return text.replace("→", "->").encode("ascii", "replace")[:50]
+    """A status text in ASCII (ground stations show other bytes as garbage), at most four
+    STATUSTEXT chunks long."""
+    return text.replace("→", "->").replace("−", "-").encode("ascii", "replace")[:200]
 
-
-def _param_name(raw) -> str:
-    if isinstance(raw, bytes):
-        raw = raw.decode(errors="replace")
-    return raw.rstrip("\x00")
-
-
-def _log_failure(task: asyncio.Task) -> None:
-    if not task.cancelled() and task.exception() is not None:
-        log.warning("setpoint not delivered: %s", task.exception())

@@ -9,7 +9,9 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+
+from drivers.sim.flight.params import validate_overrides
 
 Positive = Annotated[float, Field(gt=0)]
 NonNegative = Annotated[float, Field(ge=0)]
@@ -148,9 +150,7 @@ class CommanderConfig(_Model):
     land_speed_m_s: Positive  # MPC_LAND_SPEED
     descent_speed_m_s: Positive  # MPC_Z_V_AUTO_DN, above land_slow_altitude_m
     land_slow_altitude_m: Positive  # MPC_LAND_ALT2
-    offboard_min_rate_hz: Positive  # setpoints needed before OFFBOARD is accepted
     offboard_loss_timeout_s: Positive  # COM_OF_LOSS_T
-    offboard_loss_land_s: NonNegative  # HOLD this long after the loss, then LAND
     disarm_after_land_s: NonNegative  # COM_DISARM_LAND
     disarm_preflight_s: Positive  # COM_DISARM_PRFLT
 
@@ -188,6 +188,13 @@ class FlightStackConfig(_Model):
 
 class SimConfig(_Model):
     seed: Annotated[int, Field(ge=0)]
+    #: Where the local origin (the vehicle's start, PX4's EKF origin and first home) is on
+    #: Earth: latitude °, longitude °, altitude above mean sea level m.
+    global_origin: tuple[Annotated[float, Field(ge=-90, le=90)],
+                         Annotated[float, Field(ge=-180, le=180)],
+                         Annotated[float, Field(ge=-500, le=9000)]]
+    #: PX4 parameters that differ from their defaults, by name (see drivers/sim/flight/params.py)
+    params: dict[str, float]
     world: str
     physics_rate_hz: Annotated[int, Field(ge=100, le=10000)]
     ground_truth_rate_hz: Annotated[float, Field(gt=0, le=1000)]
@@ -203,6 +210,14 @@ class SimConfig(_Model):
     rangefinder: RangefinderConfig
     flight_stack: FlightStackConfig
     cameras: dict[str, CameraConfig]
+
+    @field_validator("params")
+    @classmethod
+    def _known_params(cls, params: dict[str, float]) -> dict[str, float]:
+        problems = validate_overrides(params)
+        if problems:
+            raise ValueError("; ".join(problems))
+        return params
 
     @model_validator(mode="after")
     def _integer_ratio(self) -> SimConfig:

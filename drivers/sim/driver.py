@@ -28,10 +28,13 @@ from collections import deque
 from collections.abc import AsyncIterator, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 
+import numpy as np
+
 from drivers.base import (
     CameraInfo,
     CommandDenied,
     ConnectionLost,
+    FlightMode,
     Frame,
     Setpoint,
     Vehicle,
@@ -39,12 +42,15 @@ from drivers.base import (
     VehicleState,
 )
 from drivers.clock import Clock, LockstepClock, MonotonicClock
+from drivers.mission import MissionItem, MissionType
 from drivers.sim.camera import RenderingUnavailable, lower_thread_priority
 from drivers.sim.config import SimConfig
 from drivers.sim.flight.flight_stack import CommandRejected
+from drivers.sim.flight.navigator import MissionStatus, NavEvent
+from drivers.sim.flight.params import SPECS, ParamSpec, config_defaults
 from drivers.sim.model import camera_info
 from drivers.sim.scenario import ScenarioObject
-from drivers.sim.simulator import GroundTruth, SimOutput, Simulator
+from drivers.sim.simulator import GroundTruth, Photo, SimOutput, Simulator
 from drivers.slots import Broadcast
 
 
@@ -68,6 +74,10 @@ class SimDriver(Vehicle):
         self._telemetry: Broadcast[VehicleState] = Broadcast()
         self._truth: Broadcast[GroundTruth] = Broadcast()
         self._events: Broadcast[tuple[float, str]] = Broadcast()
+        self._mission_events: Broadcast[NavEvent] = Broadcast()
+        self._photos: Broadcast[Photo] = Broadcast()
+        #: PX4 parameters as the vehicle will boot with them (the live ones once connected)
+        self._param_defaults = config_defaults(config)
         self._frames: dict[str, Broadcast[Frame]] = {
             name: Broadcast(on_first=lambda n=name: self._camera_toggles.append((n, True)),
                             on_last=lambda n=name: self._camera_toggles.append((n, False)))
@@ -159,7 +169,7 @@ class SimDriver(Vehicle):
             with contextlib.suppress(asyncio.CancelledError):
                 await self._task
             self._task = None
-        for broadcast in (self._telemetry, self._truth, self._events, *self._frames.values()):
+        for broadcast in self._broadcasts():
             broadcast.close(self._failure)
         if self._executor is not None:
             if self._sim is not None:
@@ -168,6 +178,98 @@ class SimDriver(Vehicle):
             self._executor = None
         elif self._sim is not None:
             self._sim.close()
+
+    # ------------------------------------------------------------------------------------
+    # PX4 capabilities: parameters, missions, return, camera (what the MAVLink face serves)
+    # ------------------------------------------------------------------------------------
+
+    def param_specs(self) -> list[ParamSpec]:
+        """The vehicle's parameters, in index order."""
+        return [SPECS[name] for name in sorted(SPECS)]
+
+    def param(self, name: str) -> float:
+        """A parameter's current value (KeyError if there is none)."""
+        if self._sim is not None:
+            return self._sim.params[name]
+        if name not in SPECS:
+            raise KeyError(name)
+        return self._param_defaults.get(name, SPECS[name].default)
+
+    async def set_param(self, name: str, value: float) -> float:
+        """Set a PX4 parameter; returns the stored value. Refused (:class:`ParamError`) for
+        unknown names and values of the wrong type or out of range."""
+        return await self._call(f"set {name}", self._require_sim().set_param, name, value)
+
+    async def start_mission(self) -> None:
+        await self._command("start_mission")
+
+    async def return_to_launch(self) -> None:
+        await self._command("return_to_launch")
+
+    async def set_mode(self, mode: FlightMode) -> None:
+        await self._command("set_mode", mode)
+
+    async def reposition(self, target_ned_m, yaw_rad: float = float("nan"),
+                         speed_m_s: float = float("nan")) -> None:
+        await self._command("reposition", target_ned_m, yaw_rad, speed_m_s)
+
+    async def set_speed(self, speed_m_s: float) -> None:
+        await self._command("set_speed", speed_m_s)
+
+    async def take_photo(self) -> None:
+        await self._command("take_photo")
+
+    async def set_trigger_distance(self, distance_m: float, trigger_now: bool = False) -> None:
+        sim = self._require_sim()
+        await self._call("set trigger distance", sim.flight.navigator.set_trigger_distance,
+                         distance_m, trigger_now)
+
+    async def upload_mission(self, items: list[MissionItem],
+                             mission_type: int = MissionType.MISSION) -> None:
+        await self._command("set_mission", list(items), mission_type)
+
+    def mission_items(self, mission_type: int = MissionType.MISSION) -> list[MissionItem]:
+        return self._require_sim().flight.navigator.items(mission_type)
+
+    async def set_mission_current(self, seq: int) -> None:
+        await self._command("set_mission_current", seq)
+
+    @property
+    def mission_status(self) -> MissionStatus:
+        return self._require_sim().flight.mission_status
+
+    def mission_events(self, buffer: int = 64) -> AsyncIterator[NavEvent]:
+        """Mission progress (current item, item reached, finished) and video events."""
+        return self._mission_events.subscribe(buffer)
+
+    def photos(self, buffer: int = 16) -> AsyncIterator[Photo]:
+        """Photos taken by the vehicle's camera (missions, trigger distance, commands)."""
+        return self._photos.subscribe(buffer)
+
+    def home(self) -> tuple[float, float, float, np.ndarray] | None:
+        """Home as (lat °, lon °, alt AMSL m, local NED), None before the first arming."""
+        sim = self._require_sim()
+        home = sim.flight.home_ned_m
+        if home is None:
+            return None
+        lat, lon, alt = sim.origin.to_global(*(float(v) for v in home))
+        return lat, lon, alt, home
+
+    @property
+    def global_origin(self):
+        return self._require_sim().origin
+
+    @property
+    def geofence_breach(self) -> str | None:
+        """Why the vehicle is outside its geofence (None: inside, or no fence)."""
+        return self._require_sim().flight.geofence_breach
+
+    async def gcs_heartbeat(self) -> None:
+        """A ground station was heard (feeds the data-link loss failsafe, NAV_DLL_ACT)."""
+        sim = self._sim
+        if sim is None or self._failure is not None:
+            return
+        await self._call("gcs heartbeat", sim.command, "gcs_heartbeat")
 
     # ------------------------------------------------------------------------------------
     # Simulator-only extras (ground truth is for scoring and tests, never for the autopilot)
@@ -234,18 +336,18 @@ class SimDriver(Vehicle):
         sim = self._require_sim()
         await self._call(name, sim.command, name, *args)
 
-    async def _call(self, name: str, fn, *args) -> None:
+    async def _call(self, name: str, fn, *args):
+        """``fn(*args)`` on the simulator's thread, between physics batches; its result."""
         self._check_alive()
 
         def on_sim_thread():
             self._drain_inbox()
-            fn(*args)
+            return fn(*args)
 
         try:
             if self._executor is None:  # lockstep: time stands still while we are running
-                on_sim_thread()
-            else:
-                await self._clock.run_blocking(on_sim_thread, executor=self._executor)
+                return on_sim_thread()
+            return await self._clock.run_blocking(on_sim_thread, executor=self._executor)
         except CommandRejected as exc:
             raise CommandDenied(name, exc.reason) from None
 
@@ -270,6 +372,10 @@ class SimDriver(Vehicle):
         self._wall_busy_s += time.perf_counter() - started
         return outputs
 
+    def _broadcasts(self) -> list[Broadcast]:
+        return [self._telemetry, self._truth, self._events, self._mission_events, self._photos,
+                *self._frames.values()]
+
     def _publish(self, outputs: list[SimOutput]) -> None:
         for out in outputs:
             if out.kind == "telemetry":
@@ -279,6 +385,10 @@ class SimDriver(Vehicle):
                 self._frames[out.payload.camera.name].publish(out.payload)
             elif out.kind == "truth":
                 self._truth.publish(out.payload)
+            elif out.kind == "mission":
+                self._mission_events.publish(out.payload)
+            elif out.kind == "photo":
+                self._photos.publish(out.payload)
             else:
                 self._events.publish((out.delivery_s, out.payload))
 
@@ -324,5 +434,5 @@ class SimDriver(Vehicle):
         if error is not exc:
             error.__cause__ = exc
         self._failure = error
-        for broadcast in (self._telemetry, self._truth, self._events, *self._frames.values()):
+        for broadcast in self._broadcasts():
             broadcast.close(error)

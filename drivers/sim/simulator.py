@@ -19,6 +19,7 @@ and in the ``truth`` outputs, for scoring and tests only; the vehicle interface 
 
 from __future__ import annotations
 
+import dataclasses
 import heapq
 import itertools
 import logging
@@ -31,9 +32,12 @@ import mujoco
 import numpy as np
 
 from drivers.base import CameraInfo, ConnectionLost, Frame, Health, Setpoint, VehicleState
+from drivers.geo import GlobalOrigin
 from drivers.sim.camera import CameraRig, SimCamera
 from drivers.sim.config import SimConfig
 from drivers.sim.flight.flight_stack import CommandRejected, FlightStack
+from drivers.sim.flight.navigator import NavEvent
+from drivers.sim.flight.params import Parameters, config_defaults
 from drivers.sim.frames import q_enu_flu_to_ned_frd, quat_ned_frd_to_enu_flu
 from drivers.sim.model import build_model
 from drivers.sim.scenario import BodyTruth, ScenarioObject
@@ -51,7 +55,9 @@ def _mujoco_warning(message: str) -> None:
 
 mujoco.set_mju_user_warning(_mujoco_warning)
 
-OutputKind = Literal["telemetry", "frame", "truth", "event"]
+OutputKind = Literal["telemetry", "frame", "truth", "event", "mission", "photo"]
+#: The camera that takes the photos of missions and camera commands.
+PHOTO_CAMERA = "down"
 FAILURE_NAMES = ("gyro", "accel", "mag", "local_position")
 _EPS = 1e-9
 _INSTABILITY_WARNINGS = np.array([
@@ -76,6 +82,22 @@ class GroundTruth:
     rotor_thrust_n: np.ndarray
     wind_ned_m_s: np.ndarray
     bodies: dict[str, BodyTruth] = field(default_factory=dict)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Photo:
+    """A photo the vehicle's camera took (a mission's camera item, a trigger distance, …):
+    the image, and where the vehicle was when it was taken (as the estimator had it)."""
+
+    time_s: float
+    index: int
+    frame: Frame | None  # None: the vehicle has no such camera (disabled)
+    position_ned_m: np.ndarray
+    attitude_q: np.ndarray
+    lat_deg: float
+    lon_deg: float
+    alt_amsl_m: float
+    height_above_home_m: float
 
 
 @dataclass(frozen=True, slots=True)
@@ -112,9 +134,11 @@ class Simulator:
         self.dt = 1.0 / config.physics_rate_hz
         self._rate_div = config.physics_rate_hz // config.flight_stack.rate_loop_hz
         self._dt_ctrl = self.dt * self._rate_div
+        self.params = Parameters(config_defaults(config))
+        self.origin = GlobalOrigin(*config.global_origin)
         self.flight = FlightStack(config.flight_stack, self.airframe,
-                                  config.flight_stack.motor_idle_fraction,
-                                  config.battery.critical_fraction)
+                                  config.flight_stack.motor_idle_fraction, self.params,
+                                  self.origin)
         self.estimator = EstimatorModel(config.estimator, rng_est)
         self.rangefinder = Rangefinder(config.rangefinder, rng_range, self._body)
         self.battery = BatteryModel(config.battery, config.vehicle.prop_diameter_m,
@@ -182,6 +206,10 @@ class Simulator:
             item = heapq.heappop(self._outbox)[2]
             if item.kind == "frame":
                 item = SimOutput(item.delivery_s, "frame", self._rig.finish(item.payload))
+            elif item.kind == "photo" and isinstance(item.payload, tuple):
+                meta, pending = item.payload
+                item = SimOutput(item.delivery_s, "photo", dataclasses.replace(
+                    meta, frame=self._rig.finish(pending)))
             out.append(item)
         return out
 
@@ -281,6 +309,8 @@ class Simulator:
             while self.flight.events:
                 when, text = self.flight.events.popleft()
                 self._queue(when, "event", text)
+            for nav_event in self.flight.nav_events():
+                self._nav_event(nav_event)
         else:
             q_est, gyro = self.estimator.attitude(*self._truth_attitude())
         self._tick += 1
@@ -290,6 +320,23 @@ class Simulator:
                 raise SimulationDiverged(f"flight stack produced non-finite thrust at "
                                          f"t={self.time_s:.3f} s: {thrust_cmd}")
         self._omega_cmd = np.sqrt(np.clip(np.array(thrust_cmd) / self._thrust_max, 0.0, 1.0))
+
+    def _nav_event(self, event: NavEvent) -> None:
+        if event.kind != "photo":
+            self._queue(event.time_s, "mission", event)
+            return
+        est = self._est
+        lat, lon, alt = self.origin.to_global(*(float(v) for v in est.position_ned_m))
+        home = self.flight.home_ned_m
+        height = float((home[2] if home is not None else 0.0) - est.position_ned_m[2])
+        meta = Photo(event.time_s, event.seq, None, est.position_ned_m.copy(),
+                     est.q_ned_frd.copy(), lat, lon, alt, height)
+        cam = self.cameras.get(PHOTO_CAMERA)
+        if cam is None:
+            self._queue(event.time_s, "photo", meta)
+            return
+        pending = self._rig.submit(self.data, cam, event.time_s)
+        self._queue(event.time_s + cam.latency_s, "photo", (meta, pending))
 
     def _truth_attitude(self) -> tuple[tuple[float, ...], list[float]]:
         qw, qx, qy, qz = self.data.qpos[self._qpos0 + 3:self._qpos0 + 7].tolist()
@@ -333,7 +380,7 @@ class Simulator:
             accel_ok="accel" not in f,
             mag_ok="mag" not in f,
             local_position_ok=est_ok and "local_position" not in f,
-            battery_ok=self.battery.remaining > self.cfg.battery.low_fraction,
+            battery_ok=self.battery.remaining > self.params["BAT_LOW_THR"],
         )
 
     def _capture_telemetry(self, t: float) -> None:
@@ -376,16 +423,21 @@ class Simulator:
     # Commands and inputs (raise CommandRejected to deny)
     # ------------------------------------------------------------------------------------
 
-    def command(self, name: str, *args: Any) -> None:
+    def command(self, name: str, *args: Any) -> Any:
         """Run a flight-stack command: arm, disarm, takeoff, land, hold, start_offboard,
-        stop_offboard."""
+        stop_offboard, start_mission, return_to_launch, set_mode, reposition, set_speed,
+        set_mission, set_mission_current, take_photo, gcs_heartbeat."""
         self.flight.observe(self.time_s, self._est, self.health())
-        getattr(self.flight, name)(*args)
+        return getattr(self.flight, name)(*args)
 
     def set_takeoff_altitude(self, altitude_m: float) -> None:
         if not altitude_m > 0:
             raise CommandRejected(f"takeoff altitude must be positive, got {altitude_m}")
-        self.flight.takeoff_altitude_m = altitude_m
+        self.set_param("MIS_TAKEOFF_ALT", altitude_m)
+
+    def set_param(self, name: str, value: float) -> float:
+        """Set a PX4 parameter (raises ParamError if refused); returns the stored value."""
+        return self.params.set(name, value)
 
     def push_setpoint(self, setpoint: Setpoint) -> None:
         self.flight.push_setpoint(setpoint, self.time_s)

@@ -10,6 +10,7 @@ from __future__ import annotations
 import asyncio
 import math
 import socket
+import struct
 
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
@@ -45,7 +46,7 @@ def test_mavsdk_flies_the_simulator_connect_arm_takeoff_offboard_land_disarm(no_
                 offboard = OffboardAsync(system)
                 await _first(tel.subscribe_health_all_ok(), bool, "healthy")
                 await action.set_takeoff_altitude(3.0)
-                assert face.params["MIS_TAKEOFF_ALT"].value == pytest.approx(3.0)
+                assert vehicle.param("MIS_TAKEOFF_ALT") == pytest.approx(3.0)
                 await action.arm()
                 await action.takeoff()
                 pv = await _first(tel.subscribe_position_velocity_ned(),
@@ -119,8 +120,8 @@ def test_garbage_and_unknown_messages_are_ignored_and_commands_answered(no_camer
                 client.send(client.mav.command_long_encode(42, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0))
                 # still alive, and answering: unknown command → UNSUPPORTED
                 assert await client.command(31999) == 3
-                # DO_SET_MODE to a mode the simulator does not fly → DENIED
-                assert await client.command(176, 1, 3, 0) == 2
+                # DO_SET_MODE to a mode the simulator cannot fly (POSCTL needs a pilot)
+                assert await client.command(176, 1, 3, 0) == 1  # TEMPORARILY_REJECTED
                 # a request for AUTOPILOT_VERSION is answered with the message and an ACK
                 assert await client.command(512, 148) == 0
                 assert face.stats.bad_data >= 1
@@ -169,14 +170,21 @@ async def _wait_armable(client: _Client) -> None:
                          & px4.SENSOR_PREARM_CHECK, timeout_s=30.0)
 
 
-def test_setpoints_stop_and_the_vehicle_falls_back_to_hold_then_lands(no_camera_config):
+def test_setpoints_stop_and_the_vehicle_lands_per_com_obl_rc_act(no_camera_config):
     """The face never re-sends a setpoint: when the client goes silent, PX4's offboard loss
-    failsafe acts (HOLD after COM_OF_LOSS_T, then LAND)."""
+    failsafe acts after COM_OF_LOSS_T, as COM_OBL_RC_ACT says (4: land)."""
     async def main():
         async with served(no_camera_config) as (_vehicle, _face):
             client = _Client()
             try:
                 await _wait_armable(client)
+                # an INT32 parameter travels bytewise, as PX4 sends it
+                client.send(client.mav.param_set_encode(
+                    1, 1, b"COM_OBL_RC_ACT", struct.unpack("<f", struct.pack("<i", 4))[0],
+                    mavlink.MAV_PARAM_TYPE_INT32))
+                echo = await client.receive("PARAM_VALUE",
+                                            lambda m: m.param_id == "COM_OBL_RC_ACT")
+                assert struct.unpack("<i", struct.pack("<f", echo.param_value))[0] == 4
                 assert await client.command(400, 1) == 0
                 assert await client.command(22, *[math.nan] * 7) == 0
                 await client.receive("EXTENDED_SYS_STATE", lambda m: m.landed_state == 2,
@@ -193,11 +201,9 @@ def test_setpoints_stop_and_the_vehicle_falls_back_to_hold_then_lands(no_camera_
                 assert await client.command(176, 129, 6, 0) == 0
                 await client.receive("HEARTBEAT", lambda m: px4.px4_flight_mode(m.custom_mode)
                                      is FlightMode.OFFBOARD, timeout_s=2.0)
-                # silence: HOLD within a second, then LAND
+                # silence: LAND once the newest setpoint is older than COM_OF_LOSS_T
                 await client.receive("HEARTBEAT", lambda m: px4.px4_flight_mode(m.custom_mode)
-                                     is FlightMode.HOLD, timeout_s=2.5)
-                await client.receive("HEARTBEAT", lambda m: px4.px4_flight_mode(m.custom_mode)
-                                     is FlightMode.LAND, timeout_s=15.0)
+                                     is FlightMode.LAND, timeout_s=3.0)
             finally:
                 client.close()
 

@@ -90,42 +90,84 @@ def test_disarm_in_air_refused_unless_forced(sim_config):
     run(main())
 
 
-def test_offboard_refused_without_setpoints_then_accepted(sim_config):
+def test_offboard_switch_in_needs_one_recent_setpoint_as_px4(sim_config):
+    """PX4's offboardCheck: the signal is there when the newest setpoint is younger than
+    COM_OF_LOSS_T; a stream is not needed to switch in (MAVSDK's examples send one)."""
     async def main():
         async with simulator(sim_config) as drv:
             await take_off(drv, 2.0)
-            with pytest.raises(CommandDenied, match="no offboard setpoints streaming"):
+            with pytest.raises(CommandDenied, match="no offboard setpoint within COM_OF_LOSS_T"):
                 await drv.start_offboard()
-            # a single setpoint is not a stream
-            await drv.send_setpoint(Setpoint.position(0, 0, -2.0))
-            with pytest.raises(CommandDenied, match="streaming"):
+            here = drv.latest_state.position_ned_m
+            await drv.send_setpoint(Setpoint.position(*here))
+            await drv.clock.sleep(drv.simulator.params["COM_OF_LOSS_T"] + 0.1)
+            with pytest.raises(CommandDenied, match="COM_OF_LOSS_T"):  # too old by now
                 await drv.start_offboard()
+            await drv.send_setpoint(Setpoint.position(*here))
+            await drv.start_offboard()  # one fresh setpoint is enough
             offboard = Offboard(drv)
-            await offboard.start_holding_here()
-            await wait_for_state(drv, lambda s: s.mode is FlightMode.OFFBOARD, 1.5, "OFFBOARD")
+            offboard.setpoint = Setpoint.position(*here)
+            await wait_for_state(drv, lambda s: s.mode is FlightMode.OFFBOARD, 1.0, "OFFBOARD")
             await offboard.aclose()
 
     run(main())
 
 
-def test_setpoint_loss_holds_then_lands(sim_config):
-    cmd = sim_config.flight_stack.commander
-
+def test_mode_changes_are_accepted_disarmed_and_checked_at_arming(sim_config):
+    """PX4 always takes a mode change while disarmed; arming checks the mode can run."""
     async def main():
         async with simulator(sim_config) as drv:
+            await armable(drv)
+            await drv.start_offboard()  # disarmed, no setpoints: accepted
+            await wait_for_state(drv, lambda s: s.mode is FlightMode.OFFBOARD, 1.0, "OFFBOARD")
+            with pytest.raises(CommandDenied, match="arming denied in offboard"):
+                await drv.arm()
+            await drv.start_mission()  # no mission uploaded
+            with pytest.raises(CommandDenied, match="no mission uploaded"):
+                await drv.arm()
+            await drv.hold()
+            await drv.arm()
+
+    run(main())
+
+
+def test_setpoint_loss_holds_by_default(sim_config):
+    """COM_OBL_RC_ACT 0 (position mode) without a pilot: HOLD, at once, and it stays."""
+    async def main():
+        async with simulator(sim_config) as drv:
+            loss_s = drv.simulator.params["COM_OF_LOSS_T"]
             await take_off(drv, 2.0)
             offboard = Offboard(drv)
             await offboard.start_holding_here()
             await drv.clock.sleep(1.0)
             stopped = drv.clock.now()
             offboard.setpoint = None  # the controller stalls: nothing more is sent
-            state = await wait_for_state(drv, lambda s: s.mode is FlightMode.HOLD, 2.0, "HOLD")
+            state = await wait_for_state(drv, lambda s: s.mode is FlightMode.HOLD, 3.0, "HOLD")
             assert state.failsafe
             # in HOLD once the last setpoint is older than the timeout (+ one telemetry period)
-            assert state.time_s - stopped == pytest.approx(cmd.offboard_loss_timeout_s, abs=0.1)
-            state = await wait_for_state(drv, lambda s: s.mode is FlightMode.LAND, 10.0, "LAND")
-            assert state.time_s - stopped == pytest.approx(
-                cmd.offboard_loss_timeout_s + cmd.offboard_loss_land_s, abs=0.1)
+            assert state.time_s - stopped == pytest.approx(loss_s, abs=0.1)
+            await drv.clock.sleep(10.0)
+            assert drv.latest_state.mode is FlightMode.HOLD
+            assert drv.latest_state.in_air
+            await offboard.aclose()
+
+    run(main())
+
+
+def test_setpoint_loss_lands_with_com_obl_rc_act_land(sim_config):
+    async def main():
+        async with simulator(sim_config) as drv:
+            await drv.set_param("COM_OBL_RC_ACT", 4)
+            loss_s = drv.simulator.params["COM_OF_LOSS_T"]
+            await take_off(drv, 2.0)
+            offboard = Offboard(drv)
+            await offboard.start_holding_here()
+            await drv.clock.sleep(1.0)
+            stopped = drv.clock.now()
+            offboard.setpoint = None
+            state = await wait_for_state(drv, lambda s: s.mode is FlightMode.LAND, 3.0, "LAND")
+            assert state.failsafe
+            assert state.time_s - stopped == pytest.approx(loss_s, abs=0.1)  # no action delay
             await wait_for_state(drv, lambda s: not s.armed, 20.0, "touchdown and disarm")
             await offboard.aclose()
 

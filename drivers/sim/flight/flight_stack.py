@@ -1,7 +1,8 @@
 """The simulated vehicle's autopilot: a PX4-equivalent flight stack.
 
-Commander (arming and its checks, modes, failsafes, auto-disarm), the navigator's TAKEOFF / HOLD /
-LAND behaviour, OFFBOARD setpoint handling, and the control cascade
+Split as PX4 is: :class:`~drivers.sim.flight.commander.Commander` (arming, modes, failsafes),
+:class:`~drivers.sim.flight.navigator.Navigator` (takeoff, hold, land, mission, return, geofence),
+:class:`~drivers.sim.flight.params.Parameters`, and here the glue and the control cascade
 position P → velocity PID → attitude P → rate PID → allocation. It knows nothing of MuJoCo: the
 simulator calls :meth:`FlightStack.update_outer` at the position-loop rate and
 :meth:`FlightStack.update_inner` at the rate-loop rate with the estimator's output (NED/FRD), and
@@ -9,14 +10,14 @@ applies the rotor thrusts that the latter returns.
 
 Semantics follow PX4 (v1.14+) as MAVSDK sees it; where this differs from PX4 it says so here:
 
-* OFFBOARD is accepted only while setpoints stream (more than ``offboard_min_rate_hz`` over the
-  last second, the newest younger than ``offboard_loss_timeout_s``). It is allowed disarmed or on
-  the ground; a setpoint above the vehicle then takes off, as in PX4.
-* Setpoint loss for ``offboard_loss_timeout_s`` → HOLD (failsafe). If setpoints return within
-  ``offboard_loss_land_s`` the vehicle goes back to OFFBOARD, otherwise it LANDs. (PX4's
-  COM_OBL_RC_ACT offers hold *or* land; this sequence is what the project specifies.)
-* TAKEOFF climbs to ``takeoff_altitude_m`` above home (the arming position), then HOLDs there.
-* LAND descends, detects touchdown, and disarms after ``disarm_after_land_s``.
+* OFFBOARD (PX4's offboardCheck): the offboard signal is present while the newest setpoint is
+  younger than COM_OF_LOSS_T and the vehicle can fly what it controls (a valid local position
+  for position and velocity setpoints). One setpoint is enough to switch in; "proof of life"
+  streaming is the loss failsafe's business. Mode changes are always accepted while disarmed
+  (PX4's user mode intention); arming then checks that the mode can run. In OFFBOARD on the
+  ground, a setpoint above the vehicle takes off, as in PX4.
+* Setpoint loss → COM_OBL_RC_ACT at once (no failsafe delay), and back to OFFBOARD when
+  setpoints return unless the user changed mode meanwhile.
 * Low-level differences: thrust is commanded in newtons directly (an ideal thrust curve), rate
   gains act on angular acceleration, and the hover thrust is known (a converged estimator).
 """
@@ -25,16 +26,22 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from drivers.base import FlightMode, Health, LandedState, Setpoint, SetpointFrame
+from drivers.geo import GlobalOrigin
 from drivers.geometry import rot_z, wrap_pi, yaw_from_quat
+from drivers.mission import MissionItem, MissionType
 from drivers.sim.config import FlightStackConfig
 from drivers.sim.flight.allocation import ControlAllocator
 from drivers.sim.flight.attitude_control import AttitudeController
+from drivers.sim.flight.commander import Commander, CommandRejected, Inputs
 from drivers.sim.flight.land_detector import LandDetector
+from drivers.sim.flight.navigator import Estimate, MissionStatus, NavEvent, Navigator
+from drivers.sim.flight.params import Parameters
 from drivers.sim.flight.position_control import (
     GRAVITY_M_S2,
     LEVEL_DOWN,
@@ -45,11 +52,13 @@ from drivers.sim.flight.position_control import (
 )
 from drivers.sim.flight.rate_control import RateController
 
+__all__ = ["Airframe", "CommandRejected", "EstimatedState", "FlightStack"]
+
 NAN = float("nan")
 _TAKEOFF_TRIGGER_M = 0.2  # a setpoint this far above the vehicle means "take off"
 _TAKEOFF_TRIGGER_M_S = 0.3
-_TAKEOFF_DONE_M = 0.1  # TAKEOFF hands over to HOLD this close to its altitude (profile done)
 _LAND_THRUST_RAMP_S = 0.5  # thrust ramps to zero this fast once the ground is felt
+_GCS_NEVER = -math.inf
 
 
 @dataclass(frozen=True, slots=True)
@@ -77,17 +86,14 @@ class EstimatedState:
     rates_frd_rad_s: np.ndarray
 
 
-class CommandRejected(Exception):
-    def __init__(self, reason: str) -> None:
-        super().__init__(reason)
-        self.reason = reason
-
-
 class FlightStack:
-    def __init__(self, cfg: FlightStackConfig, airframe: Airframe,
-                 motor_idle_fraction: float, battery_critical_fraction: float = 0.0) -> None:
+    def __init__(self, cfg: FlightStackConfig, airframe: Airframe, motor_idle_fraction: float,
+                 params: Parameters | None = None,
+                 origin: GlobalOrigin | None = None) -> None:
         self.cfg = cfg
         self.airframe = airframe
+        self.params = params if params is not None else Parameters()
+        self.origin = origin if origin is not None else GlobalOrigin(47.397742, 8.545594, 488.0)
         hover = cfg.position.hover_thrust or airframe.hover_thrust
         self.hover_thrust = hover
         self.position_ctrl = PositionController(cfg.position, hover)
@@ -100,32 +106,26 @@ class FlightStack:
         self._inertia = np.asarray(airframe.inertia_frd_kg_m2, dtype=float)
         self._thrust_total_max = float(airframe.thrust_max_n.sum())
 
-        # commander state
-        self.armed = False
-        self.mode = FlightMode.HOLD
-        self.failsafe: str | None = None
-        self.takeoff_altitude_m = cfg.commander.takeoff_altitude_m
         #: (time_s, text) of mode changes and failsafes, drained by the simulator.
         self.events: deque[tuple[float, str]] = deque(maxlen=256)
+        self.commander = Commander(self.params, self._event)
+        self.navigator = Navigator(self.params, self.origin, request_mode=self._auto_mode,
+                                   complete=self.commander.complete, event=self._event)
+        self.commander.on_mode_change = self._mode_changed
+        self.commander.on_disarm = self._disarmed
+        self.params.on_change(lambda name, value: self._apply_params())
+        self._apply_params()
         self._now = 0.0
         self._est: EstimatedState | None = None
         self._health = Health(local_position_ok=False)
         self._battery_fraction = 1.0
-        self._battery_critical = battery_critical_fraction
-        self._home = np.zeros(3)
-        self._armed_at = 0.0
-        self._ever_airborne = False
-        self._landed_since: float | None = None
-        self._loss_since = 0.0
+        self._gcs_heard_s = _GCS_NEVER
+        #: why the vehicle is outside its geofence now (None: inside, or no fence)
+        self.geofence_breach: str | None = None
 
-        # mode state
-        self._hold_pos = np.zeros(3)
-        self._hold_yaw = 0.0
-        self._takeoff_target = np.zeros(3)
-        self._takeoff_profile: _Profile | None = None
-        self._land_xy = np.zeros(2)
+        # offboard
         self._offboard_sp: tuple[np.ndarray, np.ndarray, float, float] | None = None
-        self._sp_times: deque[float] = deque(maxlen=512)
+        self._offboard_sp_s = -math.inf
         self._offboard_yaw = 0.0
 
         # control state
@@ -145,6 +145,18 @@ class FlightStack:
     # ------------------------------------------------------------------------------------
 
     @property
+    def armed(self) -> bool:
+        return self.commander.armed
+
+    @property
+    def mode(self) -> FlightMode:
+        return self.commander.mode
+
+    @property
+    def failsafe(self) -> str | None:
+        return self.commander.failsafe
+
+    @property
     def landed(self) -> bool:
         return self.land_detector.landed
 
@@ -154,9 +166,29 @@ class FlightStack:
             return LandedState.ON_GROUND
         if self.mode is FlightMode.TAKEOFF:
             return LandedState.TAKING_OFF
-        if self.mode is FlightMode.LAND:
+        if self.mode is FlightMode.LAND or self._landing:
             return LandedState.LANDING
         return LandedState.IN_AIR
+
+    _landing = False
+
+    @property
+    def takeoff_altitude_m(self) -> float:
+        return self.params["MIS_TAKEOFF_ALT"]
+
+    @property
+    def home_ned_m(self) -> np.ndarray | None:
+        return self.navigator.home
+
+    @property
+    def mission_status(self) -> MissionStatus:
+        return self.navigator.status
+
+    def nav_events(self) -> list[NavEvent]:
+        """Mission and camera events since the last call (drained)."""
+        events = list(self.navigator.events)
+        self.navigator.events.clear()
+        return events
 
     # ------------------------------------------------------------------------------------
     # Commands (MAVLink COMMAND_LONG equivalents). Raise CommandRejected to deny.
@@ -165,63 +197,99 @@ class FlightStack:
     def arm(self) -> None:
         if self.armed:
             return
-        if not self._health.armable:
-            raise CommandRejected("preflight checks failed: " + ", ".join(self._health.problems()))
-        if not self.landed:
-            raise CommandRejected("not landed")
-        self.armed = True
-        self._armed_at = self._now
-        self._ever_airborne = False
-        self._landed_since = self._now
-        self._home = self._est.position_ned_m.copy() if self._est is not None else np.zeros(3)
-        if self.mode is not FlightMode.OFFBOARD:
-            self._enter_hold()
-        self._event("armed")
+        problem = self.commander.arming_problem(self._health, self.landed,
+                                                self._battery_fraction)
+        if problem is not None:
+            raise CommandRejected(problem)
+        problem = self._mode_problem(self.commander.user_mode, arming=True)
+        if problem is not None:
+            raise CommandRejected(f"arming denied in {self.commander.user_mode.value}: "
+                                  f"{problem}")
+        if int(self.params["NAV_DLL_ACT"]) > 0 and self._gcs_heard_s == _GCS_NEVER:
+            raise CommandRejected("arming denied: no connection to the ground control station "
+                                  "(NAV_DLL_ACT is set)")
+        self.commander.arm(self._now)
+        est = self._est
+        self.navigator.home = est.position_ned_m.copy() if est is not None else np.zeros(3)
+        if self.commander.user_mode in (FlightMode.HOLD, FlightMode.MISSION):
+            # the hold point, the mission's takeoff: from where the vehicle stands now
+            self.navigator.activate(self.mode, self._nav_estimate(), landed=True)
 
     def disarm(self, force: bool = False) -> None:
         if not self.armed:
             return
         if not self.landed and not force:
             raise CommandRejected("vehicle is in the air (force to stop the motors)")
-        self._disarm("disarmed" + (" (forced)" if force else ""))
+        self.commander.disarm("disarmed" + (" (forced)" if force else ""))
 
-    def takeoff(self) -> None:
+    def takeoff(self, altitude_m: float | None = None) -> None:
         if not self.armed:
             raise CommandRejected("not armed")
         if not self._health.local_position_ok:
             raise CommandRejected("no valid local position")
-        est = self._require_estimate()
-        target = est.position_ned_m.copy()
-        target[2] = min(target[2], self._home[2] - self.takeoff_altitude_m)
-        self._takeoff_target = target
-        self._takeoff_profile = None  # starts from the vehicle's state once it flies
-        self._hold_yaw = yaw_from_quat(est.q_ned_frd)
-        self._set_mode(FlightMode.TAKEOFF)
+        self.navigator.takeoff_altitude_override_m = altitude_m
+        self._user_mode(FlightMode.TAKEOFF)
 
     def land(self) -> None:
-        est = self._require_estimate()
-        self._land_xy = self._stopping_point(est)[:2]
-        self._hold_yaw = yaw_from_quat(est.q_ned_frd)
-        self._set_mode(FlightMode.LAND)
+        self._require_estimate()
+        self._user_mode(FlightMode.LAND)
 
     def hold(self) -> None:
-        self._enter_hold()
-        self._set_mode(FlightMode.HOLD)
+        self._user_mode(FlightMode.HOLD)
 
     def start_offboard(self) -> None:
-        if not self._offboard_streaming():
-            raise CommandRejected(
-                f"no offboard setpoints streaming (need more than "
-                f"{self.cfg.commander.offboard_min_rate_hz:g} Hz)"
-            )
-        if not self._health.local_position_ok:
-            raise CommandRejected("no valid local position")
         if self.mode is not FlightMode.OFFBOARD:
             self._offboard_yaw = yaw_from_quat(self._require_estimate().q_ned_frd)
-        self._set_mode(FlightMode.OFFBOARD)
+        self._user_mode(FlightMode.OFFBOARD)
 
     def stop_offboard(self) -> None:
         self.hold()
+
+    def start_mission(self) -> None:
+        self._user_mode(FlightMode.MISSION)
+
+    def return_to_launch(self) -> None:
+        self._user_mode(FlightMode.RETURN)
+
+    def set_mode(self, mode: FlightMode) -> None:
+        """DO_SET_MODE to one of the modes the simulator flies."""
+        actions = {FlightMode.HOLD: self.hold, FlightMode.LAND: self.land,
+                   FlightMode.OFFBOARD: self.start_offboard, FlightMode.MISSION: self.start_mission,
+                   FlightMode.RETURN: self.return_to_launch, FlightMode.TAKEOFF: self.takeoff}
+        action = actions.get(mode)
+        if action is None:
+            raise CommandRejected(f"{mode.value} mode is not available (no manual control "
+                                  "in the simulation)")
+        action()
+
+    def reposition(self, target_ned_m: Sequence[float], yaw_rad: float = NAN,
+                   speed_m_s: float = NAN) -> None:
+        """DO_REPOSITION: HOLD, flying to ``target_ned_m`` first (NaN: keep that axis)."""
+        if not self.armed or self.landed:
+            raise CommandRejected("reposition needs the vehicle in the air")
+        self.hold()
+        self.navigator.reposition(np.asarray(target_ned_m, dtype=float), yaw_rad, speed_m_s,
+                                  self._nav_estimate())
+
+    def set_speed(self, speed_m_s: float) -> None:
+        self.navigator.set_speed(speed_m_s)
+
+    def set_mission(self, items: Sequence[MissionItem],
+                    mission_type: int = MissionType.MISSION) -> None:
+        self.navigator.set_items(items, mission_type)
+
+    def set_mission_current(self, seq: int) -> None:
+        try:
+            self.navigator.set_current(seq)
+        except ValueError as exc:
+            raise CommandRejected(str(exc)) from None
+
+    def take_photo(self) -> None:
+        self.navigator.take_photo()
+
+    def gcs_heartbeat(self) -> None:
+        """A ground station's HEARTBEAT arrived (for the data-link loss failsafe)."""
+        self._gcs_heard_s = self._now
 
     def push_setpoint(self, sp: Setpoint, now_s: float) -> None:
         """An offboard setpoint arrives at ``now_s``."""
@@ -232,7 +300,64 @@ class FlightStack:
             yaw = yaw_from_quat(self._est.q_ned_frd) if self._est is not None else 0.0
             vel = rot_z(yaw) @ vel
         self._offboard_sp = (np.array(sp.position_ned_m), vel, sp.yaw_rad, sp.yaw_rate_rad_s)
-        self._sp_times.append(self._now)
+        self._offboard_sp_s = now_s
+
+    # ------------------------------------------------------------------------------------
+    # Mode plumbing
+    # ------------------------------------------------------------------------------------
+
+    def _user_mode(self, mode: FlightMode) -> None:
+        problem = None if not self.armed else self._mode_problem(mode)
+        before = self.mode
+        self.commander.request_mode(mode, can_run=problem)
+        if mode is FlightMode.TAKEOFF and self.mode is before is mode:
+            self._mode_changed(mode, before)  # asked again: a new takeoff altitude
+
+    def _auto_mode(self, mode: FlightMode) -> None:
+        """A mode change the navigator asks for (a mission's RTL item)."""
+        self.commander.request_mode(mode)
+
+    def _mode_problem(self, mode: FlightMode, arming: bool = False) -> str | None:
+        """Why ``mode`` cannot run now (PX4's mode requirements), None if it can."""
+        h = self._health
+        if mode is FlightMode.OFFBOARD:
+            if self._now - self._offboard_sp_s > self.params["COM_OF_LOSS_T"]:
+                return (f"no offboard setpoint within COM_OF_LOSS_T "
+                        f"({self.params['COM_OF_LOSS_T']:g} s)")
+            if not self._setpoint_flyable():
+                return "offboard setpoint needs a valid local position"
+        if mode in (FlightMode.HOLD, FlightMode.MISSION, FlightMode.RETURN,
+                    FlightMode.TAKEOFF) and not h.local_position_ok:
+            return "no valid local position"
+        if mode is FlightMode.MISSION:
+            problem = self.navigator.mission_problem(landed=self.landed or arming)
+            if problem is not None:
+                return f"mission rejected: {problem}"
+        if mode is FlightMode.RETURN and self.navigator.home is None and not arming:
+            return "no home position"
+        return None
+
+    def _setpoint_flyable(self) -> bool:
+        return self._health.local_position_ok
+
+    def _mode_changed(self, mode: FlightMode, previous: FlightMode) -> None:
+        if mode is FlightMode.OFFBOARD and self._est is not None and \
+                previous is not FlightMode.OFFBOARD:
+            self._offboard_yaw = yaw_from_quat(self._est.q_ned_frd)
+        if self._est is not None and (self.armed or mode is not FlightMode.MISSION):
+            # (a mission chosen on the ground is set up when the vehicle arms)
+            self.navigator.activate(mode, self._nav_estimate(), self.landed)
+
+    def _nav_estimate(self) -> Estimate:
+        est = self._require_estimate()
+        return Estimate(est.position_ned_m, est.velocity_ned_m_s, yaw_from_quat(est.q_ned_frd))
+
+    def _apply_params(self) -> None:
+        p, ctrl = self.params, self.position_ctrl
+        ctrl.xy_vel_max_m_s = p["MPC_XY_VEL_MAX"]
+        ctrl.z_vel_max_up_m_s = p["MPC_Z_VEL_MAX_UP"]
+        ctrl.z_vel_max_down_m_s = p["MPC_Z_VEL_MAX_DN"]
+        ctrl.tilt_max_rad = math.radians(p["MPC_TILTMAX_AIR"])
 
     # ------------------------------------------------------------------------------------
     # The loop
@@ -252,18 +377,38 @@ class FlightStack:
         self._outer(now_s, dt_s, est, height_agl_m)
 
     def _outer(self, now: float, dt: float, est: EstimatedState, height_agl: float) -> None:
-        self._commander(now, est)
-        yaw_now = yaw_from_quat(est.q_ned_frd)
+        nav_est = Estimate(est.position_ned_m, est.velocity_ned_m_s, yaw_from_quat(est.q_ned_frd))
+        if self.navigator.home is None and self._health.local_position_ok:
+            # PX4 sets home when the position first becomes valid, and again at arming
+            self.navigator.home = est.position_ned_m.copy()
+        gcs_silent = now - self._gcs_heard_s if self._gcs_heard_s != _GCS_NEVER else 0.0
+        self.geofence_breach = self.navigator.geofence_breach(est.position_ned_m)
+        self.commander.update(Inputs(
+            now_s=now, landed=self.landed, health=self._health,
+            battery_fraction=self._battery_fraction,
+            setpoint_age_s=now - self._offboard_sp_s, setpoint_flyable=self._setpoint_flyable(),
+            gcs_silent_s=gcs_silent, geofence_breach=self.geofence_breach,
+            has_home=self.navigator.home is not None))
+        yaw_now = nav_est.yaw_rad
         if not self.armed:
             self._phase = "ground"
+            self._landing = False
             self._reset_controllers()
             self._att_sp = AttitudeSetpoint(body_z_to_attitude(LEVEL_DOWN, yaw_now), 0.0, 0.0)
             self.land_detector.update(now, False, est.velocity_ned_m_s, est.rates_frd_rad_s,
                                       0.0, False, height_agl)
             return
 
-        csp = self._mode_setpoint(now, dt, est, height_agl)
-        if self._phase == "ground" and self._wants_takeoff(csp, est):
+        if self.mode is FlightMode.OFFBOARD and self._offboard_sp is not None:
+            csp = self._offboard_setpoint(dt)
+            wants_takeoff = self._offboard_takeoff(csp, est)
+            landing = False
+        else:
+            nav = self.navigator.setpoint(now, dt, nav_est, height_agl, self.landed,
+                                          flying=self._phase == "flight")
+            csp, wants_takeoff, landing = nav.sp, nav.takeoff, nav.landing
+        self._landing = landing
+        if self._phase == "ground" and wants_takeoff:
             self._phase = "ramp" if self.cfg.commander.takeoff_ramp_s > 0 else "flight"
             self._ramp_start = now
             self._reset_controllers()
@@ -276,9 +421,9 @@ class FlightStack:
                 start = -GRAVITY_M_S2 / self.cfg.position.z_vel_p
                 up = csp.z_vel_max_up_m_s
                 if not math.isfinite(up):
-                    up = self.cfg.position.z_vel_max_up_m_s
+                    up = self.position_ctrl.z_vel_max_up_m_s
                 csp.z_vel_max_up_m_s = start + (up - start) * progress
-                csp.z_vel_max_down_m_s = max(self.cfg.position.z_vel_max_down_m_s,
+                csp.z_vel_max_down_m_s = max(self.position_ctrl.z_vel_max_down_m_s,
                                              -csp.z_vel_max_up_m_s)
 
         if self._phase == "ground":
@@ -291,7 +436,7 @@ class FlightStack:
                 self.position_ctrl.reset_integral()
             att = self.position_ctrl.update(dt, est.position_ned_m.tolist(),
                                             est.velocity_ned_m_s.tolist(), csp)
-            if self.mode is FlightMode.LAND and self.land_detector.ground_contact:
+            if landing and self.land_detector.ground_contact:
                 # touching down: level out and spool the thrust down so that landing is detected
                 self._land_thrust_scale = max(0.0, self._land_thrust_scale
                                               - dt / _LAND_THRUST_RAMP_S)
@@ -309,6 +454,27 @@ class FlightStack:
         if self._phase == "flight" and self.land_detector.landed:
             self._phase = "ground"
             self._event("landed")
+
+    def _offboard_setpoint(self, dt: float) -> ControlSetpoint:
+        pos, vel, yaw, yaw_rate = self._offboard_sp
+        if math.isfinite(yaw):
+            self._offboard_yaw = yaw
+            yaw_rate_ff = NAN
+        elif math.isfinite(yaw_rate):
+            self._offboard_yaw = wrap_pi(self._offboard_yaw + yaw_rate * dt)
+            yaw_rate_ff = yaw_rate
+        else:
+            yaw_rate_ff = NAN
+        return ControlSetpoint(pos.tolist(), vel.tolist(), self._offboard_yaw, yaw_rate_ff)
+
+    @staticmethod
+    def _offboard_takeoff(csp: ControlSetpoint, est: EstimatedState) -> bool:
+        """An offboard setpoint above the vehicle (or climbing) on the ground: take off."""
+        z_sp = csp.position_ned_m[2]
+        if math.isfinite(z_sp):
+            return z_sp < est.position_ned_m[2] - _TAKEOFF_TRIGGER_M
+        vz = csp.velocity_ned_m_s[2]
+        return math.isfinite(vz) and vz < -_TAKEOFF_TRIGGER_M_S
 
     def update_inner(self, dt: float, q: list[float], gyro: list[float]) -> list[float]:
         """Rate-loop tick: attitude and rate control, allocation. ``q`` and ``gyro`` are the
@@ -343,149 +509,8 @@ class FlightStack:
         return alloc.thrust_n
 
     # ------------------------------------------------------------------------------------
-    # Commander internals
+    # Internals
     # ------------------------------------------------------------------------------------
-
-    def _commander(self, now: float, est: EstimatedState) -> None:
-        c = self.cfg.commander
-        if self.armed:
-            if self.landed:
-                if self._landed_since is None:
-                    self._landed_since = now
-                if self._ever_airborne and now - self._landed_since >= c.disarm_after_land_s:
-                    self._disarm("auto-disarmed after landing")
-                elif not self._ever_airborne and now - self._armed_at >= c.disarm_preflight_s:
-                    self._disarm("auto-disarmed: no takeoff")
-            else:
-                self._landed_since = None
-                self._ever_airborne = True
-        if not self.armed:
-            return
-
-        in_air = not self.landed
-        if in_air and not self._health.local_position_ok and self.mode is not FlightMode.LAND:
-            self._failsafe_land("local position lost")
-        elif (in_air and self._battery_fraction <= self._battery_critical
-              and self.mode is not FlightMode.LAND):
-            self._failsafe_land("battery critical")
-
-        if self.mode is FlightMode.OFFBOARD:
-            last = self._sp_times[-1] if self._sp_times else -math.inf
-            if now - last > c.offboard_loss_timeout_s:
-                self._enter_hold()
-                self._set_mode(FlightMode.HOLD, failsafe="offboard setpoints lost")
-                self._loss_since = now
-        elif self.failsafe == "offboard setpoints lost" and self.mode is FlightMode.HOLD:
-            if self._offboard_streaming():
-                self._set_mode(FlightMode.OFFBOARD)
-                self._event("offboard setpoints back: resuming OFFBOARD")
-            elif now - self._loss_since >= c.offboard_loss_land_s:
-                self._failsafe_land("offboard setpoints lost")
-
-    def _failsafe_land(self, reason: str) -> None:
-        est = self._require_estimate()
-        self._land_xy = self._stopping_point(est)[:2]
-        self._hold_yaw = yaw_from_quat(est.q_ned_frd)
-        self._set_mode(FlightMode.LAND, failsafe=reason)
-
-    def _offboard_streaming(self) -> bool:
-        c = self.cfg.commander
-        if not self._sp_times or self._now - self._sp_times[-1] > c.offboard_loss_timeout_s:
-            return False
-        recent = sum(1 for t in self._sp_times if t > self._now - 1.0)
-        return recent > c.offboard_min_rate_hz
-
-    def _mode_setpoint(self, now: float, dt: float, est: EstimatedState,
-                       height_agl: float) -> ControlSetpoint:
-        p = self.cfg.position
-        c = self.cfg.commander
-        if self.mode is FlightMode.TAKEOFF:
-            target = self._takeoff_target
-            if self._phase != "flight":
-                # on the ground / ramping up: aim straight at the target, the ramp limits the climb
-                return ControlSetpoint(target.tolist(), [0.0, 0.0, 0.0], self._hold_yaw,
-                                       xy_vel_max_m_s=p.xy_cruise_m_s,
-                                       z_vel_max_up_m_s=c.takeoff_speed_m_s)
-            if self._takeoff_profile is None:
-                self._takeoff_profile = _Profile(float(est.position_ned_m[2]),
-                                                 float(est.velocity_ned_m_s[2]))
-            prof = self._takeoff_profile
-            prof.step(float(target[2]), c.takeoff_speed_m_s, c.takeoff_accel_m_s2, dt)
-            if prof.done and abs(est.position_ned_m[2] - target[2]) < _TAKEOFF_DONE_M:
-                self._hold_pos = target.copy()
-                self._set_mode(FlightMode.HOLD)
-            else:
-                return ControlSetpoint([target[0], target[1], prof.position],
-                                       [0.0, 0.0, prof.velocity], self._hold_yaw,
-                                       acceleration_ned_m_s2=[0.0, 0.0, prof.acceleration],
-                                       xy_vel_max_m_s=p.xy_cruise_m_s)
-        if self.mode is FlightMode.LAND:
-            height = height_agl if math.isfinite(height_agl) \
-                else self._home[2] - est.position_ned_m[2]
-            slow = c.land_slow_altitude_m
-            blend = min(max((height - slow) / slow, 0.0), 1.0)
-            speed = c.land_speed_m_s + blend * (c.descent_speed_m_s - c.land_speed_m_s)
-            return ControlSetpoint([float(self._land_xy[0]), float(self._land_xy[1]), NAN],
-                                   [NAN, NAN, speed], self._hold_yaw,
-                                   xy_vel_max_m_s=p.xy_cruise_m_s,
-                                   z_vel_max_down_m_s=max(speed, p.z_vel_max_down_m_s))
-        if self.mode is FlightMode.OFFBOARD and self._offboard_sp is not None:
-            pos, vel, yaw, yaw_rate = self._offboard_sp
-            if math.isfinite(yaw):
-                self._offboard_yaw = yaw
-                yaw_rate_ff = NAN
-            elif math.isfinite(yaw_rate):
-                self._offboard_yaw = wrap_pi(self._offboard_yaw + yaw_rate * dt)
-                yaw_rate_ff = yaw_rate
-            else:
-                yaw_rate_ff = NAN
-            return ControlSetpoint(pos.tolist(), vel.tolist(), self._offboard_yaw, yaw_rate_ff)
-        # HOLD (and any mode the simulator does not fly)
-        return ControlSetpoint(self._hold_pos.tolist(), [NAN, NAN, NAN], self._hold_yaw,
-                               xy_vel_max_m_s=p.xy_cruise_m_s)
-
-    def _wants_takeoff(self, csp: ControlSetpoint, est: EstimatedState) -> bool:
-        if self.mode is FlightMode.TAKEOFF:
-            return True
-        if self.mode is not FlightMode.OFFBOARD:
-            return False
-        z_sp = csp.position_ned_m[2]
-        if math.isfinite(z_sp):
-            return z_sp < est.position_ned_m[2] - _TAKEOFF_TRIGGER_M
-        vz = csp.velocity_ned_m_s[2]
-        return math.isfinite(vz) and vz < -_TAKEOFF_TRIGGER_M_S
-
-    def _stopping_point(self, est: EstimatedState) -> np.ndarray:
-        """Where the vehicle comes to rest braking at MPC_ACC_HOR (PX4's loiter brake)."""
-        vel = est.velocity_ned_m_s
-        pos = est.position_ned_m.copy()
-        if self.landed:
-            return pos
-        a = self.cfg.position.brake_accel_m_s2
-        speed = float(np.linalg.norm(vel[:2]))
-        pos[:2] += vel[:2] * speed / (2.0 * a)
-        return pos
-
-    def _enter_hold(self) -> None:
-        est = self._est
-        if est is None:
-            return
-        self._hold_pos = self._stopping_point(est)
-        self._hold_yaw = yaw_from_quat(est.q_ned_frd)
-
-    def _set_mode(self, mode: FlightMode, failsafe: str | None = None) -> None:
-        if failsafe is not None:
-            self._event(f"failsafe: {failsafe} → {mode.value}")
-        elif mode is not self.mode:
-            self._event(f"mode {self.mode.value} → {mode.value}")
-        self.failsafe = failsafe
-        self.mode = mode
-
-    def _disarm(self, why: str) -> None:
-        self.armed = False
-        self._phase = "ground"
-        self._reset_controllers()
-        self._event(why)
 
     def _reset_controllers(self) -> None:
         self.position_ctrl.reset()
@@ -496,27 +521,10 @@ class FlightStack:
             raise CommandRejected("flight stack not initialised")
         return self._est
 
+    def _disarmed(self) -> None:
+        self._phase = "ground"
+        self._landing = False
+        self._reset_controllers()
+
     def _event(self, text: str) -> None:
         self.events.append((self._now, text))
-
-
-class _Profile:
-    """1-D trapezoidal setpoint profile (velocity- and acceleration-limited), the auto modes'
-    trajectory smoothing in its simplest form."""
-
-    def __init__(self, position: float, velocity: float) -> None:
-        self.position = position
-        self.velocity = velocity
-        self.acceleration = 0.0
-        self.done = False
-
-    def step(self, target: float, v_max: float, a_max: float, dt: float) -> None:
-        err = target - self.position
-        v_des = math.copysign(min(v_max, math.sqrt(2.0 * a_max * abs(err))), err)
-        dv = min(max(v_des - self.velocity, -a_max * dt), a_max * dt)
-        self.acceleration = dv / dt
-        self.velocity += dv
-        self.position += self.velocity * dt
-        if abs(target - self.position) < 0.005 and abs(self.velocity) < 0.1:
-            self.position, self.velocity, self.acceleration = target, 0.0, 0.0
-            self.done = True

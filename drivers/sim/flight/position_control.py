@@ -108,7 +108,11 @@ class PositionController:
         self._vel_p = (cfg.xy_vel_p, cfg.xy_vel_p, cfg.z_vel_p)
         self._vel_i = (cfg.xy_vel_i, cfg.xy_vel_i, cfg.z_vel_i)
         self._vel_d = (cfg.xy_vel_d, cfg.xy_vel_d, cfg.z_vel_d)
-        self._tilt_max = math.radians(cfg.tilt_max_deg)
+        #: limits the flight stack may change in flight (PX4 parameters)
+        self.tilt_max_rad = math.radians(cfg.tilt_max_deg)
+        self.xy_vel_max_m_s = cfg.xy_vel_max_m_s
+        self.z_vel_max_up_m_s = cfg.z_vel_max_up_m_s
+        self.z_vel_max_down_m_s = cfg.z_vel_max_down_m_s
         self._dcutoff = velocity_derivative_cutoff_hz
         self._vel_int = [0.0, 0.0, 0.0]
         self._vel_dot = [0.0, 0.0, 0.0]
@@ -146,9 +150,9 @@ class PositionController:
                 vel_sp[i] = vel_sp_pos[i] + ff
             else:
                 vel_sp[i] = ff  # neither: brake to zero velocity
-        xy_max = _or(sp.xy_vel_max_m_s, cfg.xy_vel_max_m_s)
-        up_max = _or(sp.z_vel_max_up_m_s, cfg.z_vel_max_up_m_s)
-        down_max = _or(sp.z_vel_max_down_m_s, cfg.z_vel_max_down_m_s)
+        xy_max = min(_or(sp.xy_vel_max_m_s, self.xy_vel_max_m_s), self.xy_vel_max_m_s)
+        up_max = _or(sp.z_vel_max_up_m_s, self.z_vel_max_up_m_s)
+        down_max = _or(sp.z_vel_max_down_m_s, self.z_vel_max_down_m_s)
         vel_sp[0], vel_sp[1] = constrain_xy(
             vel_sp_pos, (vel_sp[0] - vel_sp_pos[0], vel_sp[1] - vel_sp_pos[1]), xy_max)
         vel_sp[2] = min(max(vel_sp[2], -up_max), down_max)
@@ -199,7 +203,7 @@ class PositionController:
     def _acceleration_to_thrust(self, acc_sp: Sequence[float]) -> list[float]:
         # PX4 with MPC_ACC_DECOUPLE: attitude from horizontal acceleration and gravity only.
         n = math.sqrt(acc_sp[0] ** 2 + acc_sp[1] ** 2 + GRAVITY_M_S2 ** 2)
-        up = limit_tilt((-acc_sp[0] / n, -acc_sp[1] / n, GRAVITY_M_S2 / n), self._tilt_max)
+        up = limit_tilt((-acc_sp[0] / n, -acc_sp[1] / n, GRAVITY_M_S2 / n), self.tilt_max_rad)
         thrust_ned_z = acc_sp[2] * (self.hover_thrust / GRAVITY_M_S2) - self.hover_thrust
         collective = min(thrust_ned_z / up[2], -self.cfg.thrust_min)
         return [up[0] * collective, up[1] * collective, up[2] * collective]
