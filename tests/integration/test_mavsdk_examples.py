@@ -1,0 +1,186 @@
+"""MAVSDK 4's own examples (tests/integration/mavsdk_examples), each run unmodified in its own
+process against the simulator's MAVLink face, as a user runs them against PX4 SITL.
+
+Real time (a MAVSDK client cannot be put on a lockstep clock), bounded by timeouts: a slow
+machine takes longer, it does not fail. Each example gets a fresh simulated vehicle; the test
+checks the example's exit code and output, and where the vehicle actually went.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import math
+import os
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from autopilot.flight_ops import wait_for_state
+from drivers.base import FlightMode
+
+from ..conftest import sim_with
+from .mavtools import CLIENT_URL, served
+
+EXAMPLES = Path(__file__).parent / "mavsdk_examples"
+
+
+async def _run_example(name: str, timeout_s: float) -> tuple[int, str]:
+    proc = await asyncio.create_subprocess_exec(
+        sys.executable, str(EXAMPLES / name), CLIENT_URL, stdout=asyncio.subprocess.PIPE,
+        stderr=asyncio.subprocess.STDOUT, env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    try:
+        out, _ = await asyncio.wait_for(proc.communicate(), timeout_s)
+    except TimeoutError:
+        proc.kill()
+        out, _ = await proc.communicate()
+        raise AssertionError(f"{name} did not finish within {timeout_s:g} s:\n"
+                             f"{out.decode(errors='replace')[-3000:]}") from None
+    return proc.returncode, out.decode(errors="replace")
+
+
+class _Track:
+    """The vehicle's telemetry while an example flies (for what the example does not print)."""
+
+    def __init__(self, vehicle) -> None:
+        self.states = []
+        self._task = asyncio.ensure_future(self._collect(vehicle))
+
+    async def _collect(self, vehicle) -> None:
+        async with contextlib.aclosing(vehicle.telemetry(buffer=256)) as samples:
+            async for state in samples:
+                self.states.append(state)
+
+    async def aclose(self) -> None:
+        self._task.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await self._task
+
+    @property
+    def max_altitude_m(self) -> float:
+        return max(s.altitude_m for s in self.states)
+
+    def modes(self) -> list[FlightMode]:
+        seen = []
+        for s in self.states:
+            if not seen or seen[-1] is not s.mode:
+                seen.append(s.mode)
+        return seen
+
+
+def _check(code: int, out: str, *expected: str) -> None:
+    assert code == 0, out[-3000:]
+    for text in expected:
+        assert text in out, f"{text!r} not in the example's output:\n{out[-3000:]}"
+
+
+def test_takeoff_and_land(no_camera_config):
+    async def main():
+        async with served(no_camera_config) as (vehicle, _face):
+            track = _Track(vehicle)
+            code, out = await _run_example("takeoff_and_land.py", 90.0)
+            _check(code, out, "-- Global position estimate OK", "-- Home at 488.",
+                   "-- Takeoff altitude: 2.5 m", "-- Return-to-launch altitude: 60.0 m",
+                   "-- Landing")
+            await wait_for_state(vehicle, lambda s: not s.armed, 30.0, "landed and disarmed")
+            await track.aclose()
+            assert track.max_altitude_m == pytest.approx(2.5, abs=0.3)  # MIS_TAKEOFF_ALT
+            assert FlightMode.TAKEOFF in track.modes() and FlightMode.LAND in track.modes()
+            assert vehicle.latest_state.altitude_m < 0.3
+
+    asyncio.run(main())
+
+
+def test_telemetry(no_camera_config):
+    async def main():
+        async with served(no_camera_config) as (_vehicle, _face):
+            code, out = await _run_example("telemetry.py", 60.0)
+            _check(code, out, "Battery: 100", "fix_type=3", "In air: False",
+                   "latitude_deg=47.39774", "longitude_deg=8.54559")
+
+    asyncio.run(main())
+
+
+def test_fly_mission_with_camera_pause_continue_and_rtl(sim_config):
+    # the published waypoints are 40-60 m out at 10 m: a 20 m return altitude keeps the RTL
+    # short (RTL_RETURN_ALT is the vehicle's parameter, not the example's business)
+    config = sim_with(sim_config, **{"params": {"RTL_RETURN_ALT": 20.0}})
+
+    async def main():
+        async with served(config) as (vehicle, _face):
+            photos = []
+
+            async def collect_photos():
+                async with contextlib.aclosing(vehicle.photos()) as stream:
+                    async for photo in stream:
+                        photos.append(photo)
+
+            photo_task = asyncio.ensure_future(collect_photos())
+            track = _Track(vehicle)
+            code, out = await _run_example("fly_mission.py", 240.0)
+            _check(code, out, "-- Mission uploaded", "-- Mission downloaded: 6 items",
+                   "-- Pausing mission for 5 seconds", "-- Resuming mission",
+                   "Mission status update: 6 / 6", "-- Mission finished", "-- Disarmed")
+            await track.aclose()
+            photo_task.cancel()
+            modes = track.modes()
+            # paused in HOLD and resumed, then RTL
+            assert modes[modes.index(FlightMode.MISSION):][:4] == [
+                FlightMode.MISSION, FlightMode.HOLD, FlightMode.MISSION, FlightMode.RETURN]
+            assert track.max_altitude_m == pytest.approx(20.0, abs=1.0)  # the return altitude
+            # every waypoint was visited, at 10 m above home
+            origin = vehicle.global_origin
+            flown = np.array([s.position_ned_m for s in track.states])
+            for lat, lon in [(47.398170327054473, 8.5456490218639658),
+                             (47.398058617228855, 8.5454618036746979),
+                             (47.398001890458097, 8.5455576181411743)]:
+                n, e, _ = origin.to_ned(lat, lon, origin.alt_amsl_m)
+                closest = np.min(np.hypot(flown[:, 0] - n, flown[:, 1] - e))
+                assert closest < 1.5, f"waypoint {lat}, {lon} missed by {closest:.1f} m"
+            # landed at home, and the camera took the mission's photos with the down camera
+            final = vehicle.latest_state.position_ned_m
+            assert math.hypot(final[0], final[1]) < 1.0
+            assert len(photos) >= 3  # one TAKE_PHOTO, then an interval of 1 s over a leg
+            assert all(p.frame is not None and p.frame.camera.name == "down" for p in photos)
+            assert all(p.height_above_home_m == pytest.approx(10.0, abs=1.0) for p in photos)
+
+    asyncio.run(main())
+
+
+def test_offboard_velocity_ned(no_camera_config):
+    async def main():
+        async with served(no_camera_config) as (vehicle, _face):
+            track = _Track(vehicle)
+            code, out = await _run_example("offboard_velocity_ned.py", 90.0)
+            _check(code, out, "-- Starting offboard", "-- Go up 2 m/s", "-- Stopping offboard")
+            await track.aclose()
+            assert "failed" not in out
+            assert track.modes()[-2:] == [FlightMode.OFFBOARD, FlightMode.HOLD]
+            # 4 s at 2 m/s, less the takeoff ramp (MPC_TKO_RAMP_T), and 4 s at 1 m/s down
+            assert 5.5 < track.max_altitude_m < 8.5
+            assert 1.5 < vehicle.latest_state.altitude_m < 5.5
+            assert vehicle.latest_state.in_air  # the example leaves it hovering in HOLD
+            await vehicle.land()
+            await wait_for_state(vehicle, lambda s: not s.armed, 30.0, "landed")
+
+    asyncio.run(main())
+
+
+def test_offboard_position_ned(no_camera_config):
+    async def main():
+        async with served(no_camera_config) as (vehicle, _face):
+            track = _Track(vehicle)
+            code, out = await _run_example("offboard_position_ned.py", 120.0)
+            _check(code, out, "-- Starting offboard", "-- Stopping offboard")
+            await track.aclose()
+            assert "failed" not in out
+            flown = np.array([s.position_ned_m for s in track.states])
+            corner = np.min(np.linalg.norm(flown - np.array([5.0, 10.0, -5.0]), axis=1))
+            assert corner < 0.3
+            final = vehicle.latest_state
+            assert final.position_ned_m[:2] == pytest.approx([0.0, 10.0], abs=0.3)
+            assert final.altitude_m < 0.3  # the last setpoint is on the ground: it lands
+
+    asyncio.run(main())
