@@ -87,7 +87,8 @@ def test_takeoff_and_land(no_camera_config):
             await wait_for_state(vehicle, lambda s: not s.armed, 30.0, "landed and disarmed")
             await track.aclose()
             assert track.max_altitude_m == pytest.approx(2.5, abs=0.3)  # MIS_TAKEOFF_ALT
-            assert FlightMode.TAKEOFF in track.modes() and FlightMode.LAND in track.modes()
+            assert FlightMode.TAKEOFF in track.modes()
+            assert FlightMode.LAND in track.modes()
             assert vehicle.latest_state.altitude_m < 0.3
 
     asyncio.run(main())
