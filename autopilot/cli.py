@@ -13,8 +13,13 @@ from autopilot.config import ConfigError, InputError, load_config
 from autopilot.process import configure_for_flight, yield_cpu_to_other_processes
 
 EXIT_OK = 0
-EXIT_FAILED = 1
-EXIT_USAGE = 2
+EXIT_FAILED = 1  # the mission failed (the summary says why)
+EXIT_USAGE = 2  # invalid input: configuration, mission, URL, key file
+EXIT_NO_VEHICLE = 3  # no vehicle answered within the timeout
+EXIT_LINK = 4  # the link cannot be opened: port in use, no such device, connection refused
+EXIT_NO_VIDEO = 5  # the camera delivered no frame
+EXIT_RENDERING = 6  # the simulator cannot render (MUJOCO_GL, OpenGL libraries)
+EXIT_ABORTED = 130
 
 
 def _add_config_options(parser: argparse.ArgumentParser) -> None:
@@ -48,11 +53,22 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--driver", choices=("sim", "mavsdk", "pymavlink"),
                      help="the vehicle driver (default: the configuration's 'driver')")
     run.add_argument("--connect", metavar="URL",
-                     help="MAVLink connection for MAVLink drivers (default "
-                     "udpin://0.0.0.0:14540)")
+                     help="MAVLink connection for MAVLink drivers: udpin://HOST:PORT, "
+                     "udpout://HOST:PORT, tcpout://HOST:PORT, tcpin://HOST:PORT or "
+                     "serial:///dev/DEVICE[:BAUD] (default link.connect, "
+                     "udpin://127.0.0.1:14540)")
     run.add_argument("--video", metavar="URL",
                      help="the forward camera's video stream for MAVLink drivers (default "
-                     "udp://@:5600)")
+                     "link.video, udp://127.0.0.1:5600)")
+    run.add_argument("--signing-key", metavar="FILE",
+                     help="sign MAVLink 2 with this key and accept only signed messages "
+                     "(64 hex digits, 32 raw bytes or a passphrase)")
+    run.add_argument("--insecure", action="store_true",
+                     help="allow an unsigned MAVLink link to another machine (without it, a "
+                     "non-loopback --connect needs --signing-key)")
+    run.add_argument("--verbose", action="store_true",
+                     help="show every log message (MAVSDK's and FFmpeg's too) on the terminal; "
+                     "they always go to DIR/autopilot.log")
     run.add_argument("--calibration", metavar="FILE",
                      help="the video camera's intrinsics (OpenCV or ROS calibration YAML); "
                      "default: the configuration's camera section")
@@ -69,7 +85,32 @@ def build_parser() -> argparse.ArgumentParser:
                      "default udp://127.0.0.1:5600)")
     sim.add_argument("--no-video", action="store_true", help="do not stream the camera")
     sim.add_argument("--out", metavar="DIR", help="record ground truth into DIR/truth.mcap "
-                     "(for 'autopilot score')")
+                     "(for 'autopilot score') and photos into DIR/photos/")
+    sim.add_argument("--bind", default="127.0.0.1", metavar="HOST",
+                     help="address the MAVLink ports listen on (default 127.0.0.1; another "
+                     "needs --signing-key or --insecure)")
+    sim.add_argument("--signing-key", metavar="FILE",
+                     help="MAVLink 2 signing: sign everything sent, drop unsigned messages")
+    sim.add_argument("--insecure", action="store_true",
+                     help="allow --bind on a network address without --signing-key")
+
+    doctor = commands.add_parser(
+        "doctor", help="preflight check of a companion computer: MAVLink link (heartbeat, "
+        "rates, time sync), cameras (frames, rate, calibration), clock, disk")
+    doctor.add_argument("--mission", default="follow_ball", metavar="NAME|FILE",
+                        help="the mission whose cameras and settings to check (default "
+                        "follow_ball)")
+    doctor.add_argument("--driver", choices=("mavsdk", "pymavlink"),
+                        help="the MAVLink driver (default: the configuration's, else pymavlink)")
+    doctor.add_argument("--connect", metavar="URL", help="MAVLink connection (as for run)")
+    doctor.add_argument("--video", metavar="URL", help="the camera's stream (as for run)")
+    doctor.add_argument("--calibration", metavar="FILE", help="the camera's intrinsics")
+    doctor.add_argument("--signing-key", metavar="FILE", help="MAVLink 2 signing key")
+    doctor.add_argument("--duration-s", type=float, default=5.0, metavar="S",
+                        help="how long to measure rates (default 5)")
+    doctor.add_argument("--json", action="store_true", help="print one JSON object")
+    doctor.add_argument("--set", dest="overrides", action="append", default=[],
+                        metavar="KEY=VALUE", help="override a mission or configuration key")
 
     report = commands.add_parser(
         "report", help="write DIR/report.html (plots of the flight) from DIR/flight.mcap")
@@ -137,27 +178,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    if args.command in ("run", "bench", "sim"):
+    if args.command in ("run", "bench", "sim", "doctor"):
         configure_for_flight()
     try:
-        if args.command == "run":
-            return _run(args)
-        if args.command == "sim":
-            return _sim(args)
-        if args.command == "report":
-            return _report(args)
-        if args.command == "video":
-            return _video(args)
-        if args.command == "replay":
-            return _replay(args)
-        if args.command == "score":
-            return _score(args)
-        if args.command == "missions":
-            return _missions()
-        if args.command == "bench":
-            return _bench(args)
-        if args.command == "validate":
-            return _validate(args.file)
+        return _dispatch(args)
     except ConfigError as exc:
         print(f"error: invalid configuration:\n{exc}", file=sys.stderr)
         return EXIT_USAGE
@@ -166,19 +190,64 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_USAGE
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
-        return 130
-    raise AssertionError(f"unhandled command {args.command}")
+        return EXIT_ABORTED
+    except Exception as exc:
+        code = _failure_exit_code(exc)
+        if code is None:
+            raise
+        print(f"error: {exc}", file=sys.stderr)
+        return code
+
+
+def _dispatch(args: argparse.Namespace) -> int:
+    handlers = {"run": _run, "sim": _sim, "doctor": _doctor, "report": _report, "video": _video,
+                "replay": _replay, "score": _score, "bench": _bench,
+                "missions": lambda _args: _missions(), "validate": lambda a: _validate(a.file)}
+    return handlers[args.command](args)
+
+
+def _failure_exit_code(exc: BaseException) -> int | None:
+    """The exit code for a failure that is the world's, not a bug: one line, no traceback."""
+    from drivers.base import CameraUnavailable, VehicleNotFound
+
+    if isinstance(exc, VehicleNotFound):
+        exc.args = (f"{exc}: is the vehicle on and sending there? (PX4 SITL and 'autopilot "
+                    "sim' send to udp 14540; a flight controller on a serial port: --connect "
+                    "serial:///dev/ttyAMA0:921600; a vehicle elsewhere: --connect "
+                    "udpin://0.0.0.0:14540 --signing-key FILE)",)
+        return EXIT_NO_VEHICLE
+    if isinstance(exc, CameraUnavailable):
+        return EXIT_RENDERING if exc.cause == "rendering" else EXIT_NO_VIDEO
+    if isinstance(exc, ConnectionError | OSError) and _is_link_error(exc):
+        return EXIT_LINK
+    if isinstance(exc, RuntimeError) and "MUJOCO_GL" in str(exc):
+        # MuJoCo refuses the backend as it loads: say what to do instead
+        exc.args = (f"{exc}; use MUJOCO_GL=egl (headless, Mesa's EGL), MUJOCO_GL=osmesa, or "
+                    "unset it",)
+        return EXIT_RENDERING
+    return None
+
+
+def _is_link_error(exc: BaseException) -> bool:
+    from drivers.mavlink.link import LinkError
+
+    return isinstance(exc, LinkError) or "cannot bind" in str(exc)
 
 
 def _run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
+    from autopilot.logs import setup_logging
     from autopilot.mission import load_mission
     from autopilot.run import default_out_dir, fly
 
     overrides = [*args.overrides, *([f"driver={args.driver}"] if args.driver else [])]
     plan = load_mission(args.mission, overrides, args.config)
     out = Path(args.out) if args.out else default_out_dir(plan)
+    if plan.config.driver != "sim":
+        _check_network_exposure("--connect", args.connect or plan.config.link.connect,
+                                args.signing_key or plan.config.link.signing_key, args.insecure)
+    setup_logging(out, verbose=args.verbose)
 
     def progress(line: str) -> None:
         if sys.stderr.isatty():
@@ -189,7 +258,8 @@ def _run(args: argparse.Namespace) -> int:
     summary = asyncio.run(fly(plan, out, realtime=args.realtime, progress=progress,
                               handle_signals=True, connect=args.connect, video=args.video,
                               calibration=Path(args.calibration) if args.calibration else None,
-                              record_video=args.record_video))
+                              record_video=args.record_video,
+                              signing_key=Path(args.signing_key) if args.signing_key else None))
     if sys.stderr.isatty():
         sys.stderr.write("\n")
     follow = summary["metrics"]["follow"]
@@ -224,7 +294,36 @@ def _run(args: argparse.Namespace) -> int:
 
         lines.append(f"wrote {write_report(out)}")
     print("\n".join(lines))
-    return {"completed": EXIT_OK, "aborted": 130}.get(summary["status"], EXIT_FAILED)
+    return {"completed": EXIT_OK, "aborted": EXIT_ABORTED}.get(summary["status"], EXIT_FAILED)
+
+
+def _check_network_exposure(option: str, url: str, key: str | None, insecure: bool) -> None:
+    """A MAVLink link to or from another machine needs a signing key (or an explicit
+    --insecure): anyone on that network could otherwise fly the vehicle."""
+    from autopilot.config import Problem
+    from drivers.mavlink.link import Endpoint, UrlError
+
+    try:
+        endpoint = Endpoint.parse(url)
+    except UrlError as exc:
+        raise ConfigError([Problem("command line", None, option, str(exc))]) from None
+    if endpoint.kind == "serial" or key or insecure or _loopback(endpoint.host):
+        return
+    raise ConfigError([Problem("command line", None, option, f"{url}: a MAVLink link on a "
+                               "network address needs "
+                               "--signing-key FILE (MAVLink 2 signing), or --insecure to "
+                               "accept unsigned traffic from that network")])
+
+
+def _loopback(host: str) -> bool:
+    import ipaddress
+
+    if host in ("localhost", ""):
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
 
 
 def _sim(args: argparse.Namespace) -> int:
@@ -239,16 +338,54 @@ def _sim(args: argparse.Namespace) -> int:
         config, scenario = plan.config, plan.mission.scenario
     else:
         config, scenario = load_config(args.config, args.overrides), None
+    signing = None
+    if args.signing_key:
+        from autopilot.config import Problem
+        from drivers.mavlink.signing import Signing, SigningKeyError
+
+        try:
+            signing = Signing.load(args.signing_key)
+        except SigningKeyError as exc:
+            raise ConfigError([Problem("command line", None, "--signing-key",
+                                       str(exc))]) from None
+    _check_network_exposure("--bind", f"udpin://{args.bind}:14580", args.signing_key,
+                            args.insecure)
+    from autopilot.logs import route_library_logs
+
+    route_library_logs()
     yield_cpu_to_other_processes()  # the vehicle's own hardware would not share our CPU
-    try:
-        asyncio.run(serve(config, scenario, instance=args.instance,
-                          video_url=None if args.no_video else args.video,
-                          out_dir=Path(args.out) if args.out else None,
-                          log=lambda line: print(line, file=sys.stderr, flush=True)))
-    except OSError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return EXIT_FAILED
+    asyncio.run(serve(config, scenario, instance=args.instance,
+                      video_url=None if args.no_video else args.video,
+                      out_dir=Path(args.out) if args.out else None,
+                      log=lambda line: print(line, file=sys.stderr, flush=True),
+                      host=args.bind, signing=signing))
     return EXIT_OK
+
+
+def _doctor(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from autopilot.doctor import as_dicts, run_doctor, summary_line
+    from autopilot.logs import setup_logging
+    from autopilot.mission import load_mission
+
+    setup_logging(None)
+    plan = load_mission(args.mission, args.overrides)
+    driver = args.driver or (plan.config.driver if plan.config.driver != "sim" else "pymavlink")
+    plan = load_mission(args.mission, [*args.overrides, f"driver={driver}"])
+    report = (lambda check: None) if args.json else (lambda check: print(check.line(),
+                                                                         flush=True))
+    checks = asyncio.run(run_doctor(
+        plan, connect=args.connect, video=args.video,
+        calibration=Path(args.calibration) if args.calibration else None,
+        signing_key=Path(args.signing_key) if args.signing_key else None,
+        duration_s=args.duration_s, report=report))
+    if args.json:
+        print(json.dumps({"checks": as_dicts(checks), "ok": not any(
+            c.status == "FAIL" for c in checks)}))
+    else:
+        print(summary_line(checks))
+    return EXIT_FAILED if any(c.status == "FAIL" for c in checks) else EXIT_OK
 
 
 def _report(args: argparse.Namespace) -> int:

@@ -21,9 +21,7 @@ from autopilot.flightlog.records import clean
 from autopilot.mission import MissionPlan
 from autopilot.process import StealMeter
 from autopilot.runtime import Runtime
-from autopilot.scenario import build_world
-from drivers.base import Vehicle
-from drivers.sim.driver import SimDriver
+from drivers.base import CameraUnavailable, Vehicle
 
 
 def default_out_dir(plan: MissionPlan, root: Path = Path("runs")) -> Path:
@@ -39,39 +37,53 @@ def default_out_dir(plan: MissionPlan, root: Path = Path("runs")) -> Path:
 
 
 def make_vehicle(plan: MissionPlan, *, realtime: bool = False, connect: str | None = None,
-                 video: str | None = None,
-                 calibration: Path | None = None) -> tuple[Vehicle, int | None]:
+                 video: str | None = None, calibration: Path | None = None,
+                 signing_key: Path | None = None) -> tuple[Vehicle, int | None]:
     """The vehicle the configuration's ``driver`` names, and the simulator's seed (if any).
 
     MAVLink drivers get the forward camera as a network video stream; its intrinsics come from
     ``calibration`` (an OpenCV or ROS calibration file) if given, else from the configuration's
-    camera section, which also gives its mounting."""
+    camera section, which also gives its mounting. Everything given is checked here, before
+    anything opens: a malformed URL or an unreadable key file is an input error
+    (:class:`~autopilot.config.ConfigError`) that names the option and what was expected."""
     driver = plan.config.driver
     if driver == "sim":
+        from autopilot.scenario import build_world  # MuJoCo loads only when the simulator flies
+        from drivers.sim.driver import SimDriver
+
         sim_config, objects = build_world(plan.mission.scenario, plan.config.sim)
         return SimDriver(sim_config, scenario=objects, lockstep=not realtime), sim_config.seed
     if driver in ("pymavlink", "mavsdk"):
-        from drivers.sim.model import camera_info
-        from drivers.video import VideoSource
+        from drivers.mavlink.link import Endpoint, UrlError
+        from drivers.mavlink.signing import Signing, SigningKeyError
+        from drivers.video import VideoSource, check_video_url
 
+        link = plan.config.link
+        url = connect or link.connect
+        video_url = video or link.video
+        key = signing_key or (Path(link.signing_key) if link.signing_key else None)
+        try:
+            Endpoint.parse(url)
+        except UrlError as exc:
+            raise ConfigError([Problem("command line", None, "--connect", str(exc))]) from None
+        try:
+            check_video_url(video_url)
+        except ValueError as exc:
+            raise ConfigError([Problem("command line", None, "--video", str(exc))]) from None
+        signing = None
+        if key is not None:
+            try:
+                signing = Signing.load(key)
+            except SigningKeyError as exc:
+                raise ConfigError([Problem("command line", None, "--signing-key",
+                                           str(exc))]) from None
         if driver == "mavsdk":
             from drivers.mavlink.mavsdk_driver import MavsdkDriver as Driver
         else:
             from drivers.mavlink.pymavlink_driver import PymavlinkDriver as Driver
-        link = plan.config.link
-        vehicle = Driver(connect or link.connect)
-        info = camera_info("front", plan.config.sim.cameras["front"])
-        if calibration is not None:
-            from drivers.calibration import CalibrationError, load_calibration
-
-            try:
-                intrinsics = load_calibration(calibration)
-            except CalibrationError as exc:
-                message = str(exc).removeprefix(f"{calibration}: ")
-                raise ConfigError([Problem(str(calibration), None, "calibration",
-                                           message)]) from None
-            info = dataclasses.replace(info, intrinsics=intrinsics)
-        vehicle.add_camera(VideoSource(video or link.video, info,
+        vehicle = Driver(url, signing=signing)
+        info = _camera_info(plan, calibration)
+        vehicle.add_camera(VideoSource(video_url, info,
                                        to_local=vehicle.vehicle_time_to_local,
                                        clock=vehicle.clock.now,
                                        latency_s=link.camera_latency_s,
@@ -79,6 +91,39 @@ def make_vehicle(plan: MissionPlan, *, realtime: bool = False, connect: str | No
         return vehicle, None
     raise ConfigError([Problem("config", None, "driver",
                                f"unknown driver {driver!r} (sim, mavsdk, pymavlink)")])
+
+
+def _camera_info(plan: MissionPlan, calibration: Path | None):
+    from drivers.sim.model import camera_info
+
+    info = camera_info("front", plan.config.sim.cameras["front"])
+    if calibration is None:
+        return info
+    from drivers.calibration import CalibrationError, load_calibration
+
+    try:
+        intrinsics = load_calibration(calibration)
+    except CalibrationError as exc:
+        message = str(exc).removeprefix(f"{calibration}: ")
+        raise ConfigError([Problem(str(calibration), None, "calibration", message)]) from None
+    return dataclasses.replace(info, intrinsics=intrinsics)
+
+
+async def first_frame(vehicle: Vehicle, camera: str, timeout_s: float, where: str) -> None:
+    """Wait for ``camera``'s first frame: a vehicle does not take off blind.
+    :class:`~drivers.base.CameraUnavailable` if none comes within ``timeout_s``."""
+    async with contextlib.aclosing(vehicle.frames(camera)) as frames:
+        try:
+            await vehicle.clock.wait_for(anext(frames), timeout_s)
+        except (TimeoutError, StopAsyncIteration):
+            source = getattr(vehicle, "video_sources", {}).get(camera)
+            error = getattr(source, "error", None)
+            detail = f" (last error: {error})" if error is not None else ""
+            raise CameraUnavailable(
+                f"no video from the {camera} camera on {where} within {timeout_s:g} s{detail}: "
+                "is the camera streaming to this address? (--video URL; a camera on another "
+                "machine: --video udp://0.0.0.0:5600 --set link.video_source=CAMERA_IP)",
+                "no_video") from None
 
 
 def logged_cameras(plan: MissionPlan, video_camera: str,
@@ -102,13 +147,13 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
               progress: Callable[[str], None] | None = None,
               handle_signals: bool = False, connect: str | None = None,
               video: str | None = None, calibration: Path | None = None,
-              record_video: str | None = None) -> dict:
+              record_video: str | None = None, signing_key: Path | None = None) -> dict:
     """Fly ``plan`` and return its summary (also written to ``out_dir/summary.json``).
 
     ``record_video`` names a camera whose every frame is logged (for ``onboard.mp4``; "" is
     the followed camera)."""
     vehicle, seed = make_vehicle(plan, realtime=realtime, connect=connect, video=video,
-                                 calibration=calibration)
+                                 calibration=calibration, signing_key=signing_key)
     log_cameras = None
     if record_video is not None:
         log_cameras = logged_cameras(plan, record_video, vehicle.cameras)
@@ -131,7 +176,12 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
             main_task.cancel()
 
     try:
-        await vehicle.connect()
+        await vehicle.connect(plan.config.link.connect_timeout_s if plan.config.driver != "sim"
+                              else 10.0)
+        if plan.config.driver != "sim":  # a real camera must be streaming before takeoff
+            camera = plan.config.perception.ball.camera
+            await first_frame(vehicle, camera, plan.config.link.connect_timeout_s,
+                              video or plan.config.link.video)
         runtime = Runtime(vehicle, plan, log, progress=progress, log_cameras=log_cameras)
         if handle_signals:
             for sig in signals:

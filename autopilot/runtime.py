@@ -138,6 +138,7 @@ class Runtime:
         self._last_send_s = -math.inf
         self._stop_reason: str | None = None
         self._stop_requested = asyncio.Event()
+        self._stale = False  # the pose went stale: no more motion setpoints this run
         self._executor: MissionExecutor | None = None
         self._step = ""
         self._phase = ""
@@ -218,6 +219,18 @@ class Runtime:
         while not out.finished:
             source = await self._next_tick(period)
             inputs = self._inputs(self._state)
+            stale = self._telemetry_stale()
+            if stale is not None and not self._stale:
+                # flying blind: no motion setpoint may go out on an old pose; hold, and let
+                # the mission's fallback bring the vehicle down (as for a lost link)
+                self._stale = True
+                self._intent = None
+                self._event(self.clock.now(), f"telemetry stale: {stale}; setpoints stopped")
+                with contextlib.suppress(VehicleError, TimeoutError):
+                    await self.clock.wait_for(self.vehicle.hold(), 2.0)
+                out = executor.abort(f"telemetry stale: {stale}", inputs)
+                await self._apply(out, None)
+                continue
             if self._stop_requested.is_set() and deadline is None:
                 deadline = self.clock.now() + self.config.runtime.shutdown_timeout_s
                 out = executor.abort(self._stop_reason or "stop requested", inputs)
@@ -236,7 +249,7 @@ class Runtime:
         for text in out.events:
             self._event(now, text)
         self._step, self._phase = out.step, out.phase
-        if out.setpoint is not None:
+        if out.setpoint is not None and not self._stale:
             self._intent = Intent(out.setpoint, now, now + self.config.runtime.setpoint_expiry_s,
                                   source_frame_s, out.step, out.phase)
             await self._send(self._intent)
@@ -379,8 +392,8 @@ class Runtime:
             await self.clock.sleep(period)
             intent = self._intent
             now = self.clock.now()
-            if intent is not None and now < intent.expires_s and \
-                    now - self._last_send_s >= 0.9 * period:
+            if intent is not None and now < intent.expires_s and not self._stale and \
+                    now - self._last_send_s >= 0.9 * period and self._telemetry_stale() is None:
                 await self._send(intent)
 
     async def _send(self, intent: Intent) -> None:
@@ -438,6 +451,21 @@ class Runtime:
         except TimeoutError:
             return None
         return None if math.isnan(source) else source
+
+    def _telemetry_stale(self) -> str | None:
+        """Why the newest pose is too old to fly on (None: it is fresh): position or attitude
+        captured longer ago than ``runtime.telemetry_max_age_s``."""
+        state = self._state
+        if state is None:
+            return None
+        now = self.clock.now()
+        limit = self.config.runtime.telemetry_max_age_s
+        ages = {"position": now - state.time_s, "attitude": now - state.attitude_time_s}
+        old = {name: age for name, age in ages.items() if age > limit}
+        if not old:
+            return None
+        return ", ".join(f"{name} {age:.2f} s old" for name, age in old.items()) + \
+            f" (limit {limit:g} s)"
 
     def _inputs(self, state: VehicleState) -> BehaviorInputs:
         now = self.clock.now()

@@ -30,6 +30,8 @@ from drivers.calibration import write_calibration
 from drivers.geometry import yaw_from_quat
 from drivers.mavlink.common import cancel_all
 from drivers.mavlink.face import MavlinkFace
+from drivers.mavlink.signing import Signing
+from drivers.sim.config import SimConfig
 from drivers.sim.driver import SimDriver
 from drivers.video import VideoSender
 
@@ -45,13 +47,16 @@ VIDEO_CAMERA = "front"
 async def serve(config: AppConfig, scenario: Scenario | None, *, instance: int = 0,
                 video_url: str | None = DEFAULT_VIDEO_URL, out_dir: Path | None = None,
                 log: Callable[[str], None] = print,
-                stop: asyncio.Event | None = None) -> None:
+                stop: asyncio.Event | None = None, host: str = "127.0.0.1",
+                signing: Signing | None = None) -> None:
     """Serve the simulated vehicle until ``stop`` is set (or SIGINT / SIGTERM when None),
-    streaming the forward camera to ``video_url`` (None: no video)."""
-    sim_config, objects = build_world(scenario, config.sim)
+    streaming the forward camera to ``video_url`` (None: no video). The MAVLink ports listen on
+    ``host``; with ``signing``, only signed MAVLink is accepted."""
+    sim_config, objects = build_world(scenario, with_instance_id(config.sim, instance))
     vehicle = SimDriver(sim_config, scenario=objects, lockstep=False)
     await vehicle.connect()
-    face = MavlinkFace(vehicle, instance=instance, events=vehicle.events())
+    face = MavlinkFace(vehicle, instance=instance, events=vehicle.events(), host=host,
+                       signing=signing)
     loop = asyncio.get_running_loop()
     handle_signals = stop is None
     stop = stop or asyncio.Event()
@@ -96,10 +101,11 @@ async def serve(config: AppConfig, scenario: Scenario | None, *, instance: int =
             for sig in (signal.SIGINT, signal.SIGTERM):
                 loop.add_signal_handler(sig, stop.set)
         offboard, gcs = face.ports["offboard"], face.ports["gcs"]
-        log(f"PX4-compatible simulated vehicle (sysid 1, compid 1, MAVLink 2): offboard API on "
-            f"udp {offboard[0]} → {offboard[1][0]}:{offboard[1][1]} "
-            f"(MAVSDK: udpin://0.0.0.0:{offboard[1][1]}), ground station on udp {gcs[0]} → "
-            f"{gcs[1][0]}:{gcs[1][1]}; Ctrl-C to stop")
+        signed = "signed" if signing is not None else "unsigned"
+        log(f"PX4-compatible simulated vehicle (system {face.system_id}, component 1, MAVLink 2, "
+            f"{signed}): offboard API on udp {host}:{offboard[0]} → "
+            f"{offboard[1][0]}:{offboard[1][1]} (MAVSDK: udpin://0.0.0.0:{offboard[1][1]}), "
+            f"ground station on udp {host}:{gcs[0]} → {gcs[1][0]}:{gcs[1][1]}; Ctrl-C to stop")
         await stop.wait()
         log("stopping")
         await _land_if_flying(vehicle, log)
@@ -112,6 +118,13 @@ async def serve(config: AppConfig, scenario: Scenario | None, *, instance: int =
         await vehicle.close()
         if truth_log is not None:
             truth_log.close()
+
+
+def with_instance_id(sim: SimConfig, instance: int) -> SimConfig:
+    """PX4 SITL instance i is MAVLink system i + 1 (unless MAV_SYS_ID is configured)."""
+    if "MAV_SYS_ID" in sim.params:
+        return sim
+    return sim.model_copy(update={"params": {**sim.params, "MAV_SYS_ID": instance + 1}})
 
 
 async def save_photos(vehicle: SimDriver, folder: Path, log: Callable[[str], None]) -> None:

@@ -114,6 +114,10 @@ class VehicleState:
 
     ``attitude_q`` rotates body FRD into world NED. ``distance_to_ground_m`` is the downward
     range sensor's reading along the body z axis (NaN when out of range or absent).
+
+    ``time_s`` is when the position and velocity were captured; ``attitude_time_s`` when the
+    attitude and rates were (over MAVLink they travel in separate messages, and either can
+    stop arriving on its own; NaN: at ``time_s``).
     """
 
     time_s: float
@@ -128,8 +132,11 @@ class VehicleState:
     battery: Battery
     health: Health
     failsafe: bool = False
+    attitude_time_s: float = NAN
 
     def __post_init__(self) -> None:
+        if math.isnan(self.attitude_time_s):
+            object.__setattr__(self, "attitude_time_s", self.time_s)
         object.__setattr__(self, "position_ned_m", _frozen_array(self.position_ned_m, (3,)))
         object.__setattr__(self, "velocity_ned_m_s", _frozen_array(self.velocity_ned_m_s, (3,)))
         object.__setattr__(self, "attitude_q", _frozen_array(self.attitude_q, (4,)))
@@ -296,6 +303,19 @@ class ConnectionLost(VehicleError):
     """The link to the vehicle is gone (heartbeats stopped, socket closed, simulator failed)."""
 
 
+class VehicleNotFound(ConnectionLost):
+    """``connect()`` heard no vehicle (heartbeat, then telemetry) within its timeout."""
+
+
+class CameraUnavailable(VehicleError):
+    """A camera cannot deliver frames: the simulator cannot render (``rendering``), or no
+    video arrives from the stream (``no_video``)."""
+
+    def __init__(self, message: str, cause: str) -> None:
+        super().__init__(message)
+        self.cause = cause
+
+
 # --------------------------------------------------------------------------------------------
 # The interface
 # --------------------------------------------------------------------------------------------
@@ -345,7 +365,8 @@ class Vehicle(abc.ABC):
 
     @abc.abstractmethod
     async def start_offboard(self) -> None:
-        """Enter OFFBOARD. Refused unless setpoints are already streaming (> 2 Hz)."""
+        """Enter OFFBOARD. Refused in flight unless a setpoint arrived within the vehicle's
+        offboard timeout (PX4's COM_OF_LOSS_T): send one first, then keep streaming."""
 
     @abc.abstractmethod
     async def stop_offboard(self) -> None:

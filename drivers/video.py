@@ -102,6 +102,34 @@ def _rtp_address(url: str) -> tuple[str, int] | None:
     return host or DEFAULT_HOST, parts.port
 
 
+#: what FFmpeg is asked to open besides RTP (and files and devices, given as paths)
+_FFMPEG_SCHEMES = ("rtsp", "rtsps", "rtmp", "rtmps", "http", "https", "srt", "tcp", "file")
+
+
+def check_video_url(url: str) -> None:
+    """Refuse a video URL that cannot work, before anything opens it (:class:`ValueError`,
+    saying what is accepted): RTP needs a port; other streams need a scheme FFmpeg reads;
+    anything else must be an existing file or device."""
+    parts = urlsplit(url)
+    if parts.scheme in ("udp", "rtp"):
+        try:
+            port = parts.port
+        except ValueError:
+            port = None
+        if port is None:
+            raise ValueError(f"{url!r}: RTP video needs a port, e.g. udp://127.0.0.1:5600")
+        source = _url_source(url)
+        if source is not None:
+            _parse_source(source)
+        return
+    if parts.scheme in _FFMPEG_SCHEMES:
+        return
+    if "://" in url or not os.path.exists(url):
+        raise ValueError(f"{url!r}: expected udp://HOST:PORT (RTP H.264), "
+                         f"{', '.join(s + '://' for s in _FFMPEG_SCHEMES[:5])}..., "
+                         "or an existing file or device (/dev/video0)")
+
+
 def _url_source(url: str) -> str | None:
     """The ``source`` option of an RTP URL's query (None without one)."""
     options = parse_qs(urlsplit(url).query, keep_blank_values=True)

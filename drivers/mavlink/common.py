@@ -50,6 +50,7 @@ class MavlinkVehicle(Vehicle):
         self._mode = FlightMode.UNKNOWN
         self._q = np.array([1.0, 0.0, 0.0, 0.0])
         self._rates = np.zeros(3)
+        self._attitude_vehicle_s = math.nan  # capture time (boot clock) of _q and _rates
         self._landed = LandedState.UNKNOWN
         self._range_m = math.nan
         self._battery = Battery(math.nan, math.nan, math.nan)
@@ -65,12 +66,15 @@ class MavlinkVehicle(Vehicle):
         """A LOCAL_POSITION_NED stamped ``vehicle_s`` (boot time) arrived: publish a sample
         made of it and the newest of everything else."""
         self._boot.observe(vehicle_s, self._clock.now())
+        attitude_s = self._boot.to_local(self._attitude_vehicle_s) \
+            if math.isfinite(self._attitude_vehicle_s) else -math.inf
         state = VehicleState(
             time_s=self._boot.to_local(vehicle_s), position_ned_m=position_ned_m,
             velocity_ned_m_s=velocity_ned_m_s, attitude_q=self._q,
             angular_velocity_frd_rad_s=self._rates, armed=self._armed, mode=self._mode,
             landed_state=self._landed, distance_to_ground_m=self._range_m,
-            battery=self._battery, health=self._health, failsafe=self._failsafe)
+            battery=self._battery, health=self._health, failsafe=self._failsafe,
+            attitude_time_s=attitude_s)
         self.latest_state = state
         self._telemetry.publish(state)
 
@@ -84,6 +88,11 @@ class MavlinkVehicle(Vehicle):
     @property
     def cameras(self) -> Mapping[str, CameraInfo]:
         return {name: source.info for name, source in self._video.items()}
+
+    @property
+    def video_sources(self) -> Mapping[str, object]:
+        """The network video sources of the cameras, by name (their errors and statistics)."""
+        return dict(self._video)
 
     def add_camera(self, source) -> None:
         """Attach a camera (a :class:`~drivers.video.VideoSource`), by its ``info.name``."""

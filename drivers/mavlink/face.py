@@ -8,8 +8,8 @@ they would fly PX4 SITL. What it copies from PX4 (see ``shared/reference/px4-mav
   (127.0.0.1 unless configured), sends to 14540+i and 14550 there until someone writes to it,
   then replies to the sender's address from the same socket; no SO_REUSEADDR, so a stale
   simulator is an error;
-* identity: sysid 1, compid 1, MAVLink 2, HEARTBEAT at 1 Hz as a PX4 quadrotor, PX4 custom
-  modes with PX4's base-mode flags;
+* identity: system id MAV_SYS_ID (1 + instance, as PX4 SITL), component 1, MAVLink 2,
+  HEARTBEAT at 1 Hz as a PX4 quadrotor, PX4 custom modes with PX4's base-mode flags;
 * commands (:mod:`~drivers.mavlink.face_commands`), telemetry at PX4's onboard-link rates
   (:mod:`~drivers.mavlink.face_telemetry`), parameters (:mod:`~drivers.mavlink.face_params`),
   the mission protocol with MISSION_CURRENT and MISSION_ITEM_REACHED
@@ -49,8 +49,7 @@ from drivers.mavlink.signing import Signing
 
 log = logging.getLogger(__name__)
 
-SYSTEM_ID = 1
-COMPONENT_ID = 1
+COMPONENT_ID = 1  # MAV_COMP_ID_AUTOPILOT1: MAVSDK finds an autopilot only there
 #: compids PX4 takes mission and parameter messages for besides its own (0: broadcast,
 #: 190: MAV_COMP_ID_MISSIONPLANNER)
 _OUR_COMPONENTS = (0, COMPONENT_ID, 190)
@@ -86,8 +85,8 @@ class _Link(asyncio.DatagramProtocol):
         self.peer = default_peer
         self.heard_from: tuple[str, int] | None = None
         self.transport: asyncio.DatagramTransport | None = None
-        self.mav = mavlink.MAVLink(None, srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID)
-        self._rx = mavlink.MAVLink(None, srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID)
+        self.mav = mavlink.MAVLink(None, srcSystem=face.system_id, srcComponent=COMPONENT_ID)
+        self._rx = mavlink.MAVLink(None, srcSystem=face.system_id, srcComponent=COMPONENT_ID)
         self._rx.robust_parsing = True
         if face.signing is not None:
             face.signing.apply(self.mav, self._rx)
@@ -169,6 +168,8 @@ class MavlinkFace:
                  signing: Signing | None = None) -> None:
         self.vehicle = vehicle
         self.instance = instance
+        #: MAV_SYS_ID (PX4 SITL gives instance i the id i + 1; read once, as PX4 at boot)
+        self.system_id = int(vehicle.param("MAV_SYS_ID"))
         self.host = host
         self.signing = signing
         self.stats = FaceStats()
@@ -352,9 +353,9 @@ class MavlinkFace:
             else:
                 self.stats.bad_data += 1
             return
-        target = getattr(msg, "target_system", SYSTEM_ID)
+        target = getattr(msg, "target_system", self.system_id)
         component = getattr(msg, "target_component", COMPONENT_ID)
-        if target not in (0, SYSTEM_ID) or component not in _OUR_COMPONENTS:
+        if target not in (0, self.system_id) or component not in _OUR_COMPONENTS:
             self.stats.ignored += 1
             return
         handler = self._handlers.get(kind)

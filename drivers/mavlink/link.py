@@ -1,44 +1,100 @@
-"""MAVLink 2 over UDP on the event loop (no threads), and the vehicle-time → local-time mapping.
+"""MAVLink 2 links on the event loop (no threads), and the vehicle-time → local-time mapping.
 
-Connection URLs as MAVSDK spells them: ``udpin://HOST:PORT`` listens there and answers whoever
-writes (a vehicle that sends to this port, as PX4 SITL sends to 14540); ``udpout://HOST:PORT``
-sends there first (a vehicle that listens, as ArduPilot SITL's ``--out``). ``udp://:PORT`` is
-the old spelling of ``udpin``.
+Connection URLs as MAVSDK spells them:
+
+* ``udpin://HOST:PORT`` listens there and answers the vehicle that writes (PX4 SITL sends to
+  14540); ``udp://:PORT`` is the old spelling. ``udpout://HOST:PORT`` sends there first (a
+  vehicle that listens, as ArduPilot SITL's ``--out``).
+* ``tcpout://HOST:PORT`` (or ``tcp://``) connects to a vehicle's TCP server (ArduPilot SITL 5760,
+  a WiFi telemetry bridge); ``tcpin://HOST:PORT`` waits for one to connect.
+* ``serial:///dev/ttyAMA0:921600`` opens a serial port (a companion computer wired to the
+  flight controller's TELEM port); the baud rate defaults to 57600.
+
+A link *locks on* to its vehicle: once the driver has recognised the autopilot (its first
+HEARTBEAT), :meth:`MavlinkLink.lock` fixes the address it came from, and datagrams from any other
+address are dropped before they are parsed, with one log line naming the sender — a second
+ground station or a stray script can neither inject messages nor redirect the setpoints.
+With a :class:`~drivers.mavlink.signing.Signing` key, everything sent is signed and what arrives
+unsigned or badly signed is dropped (counted in :attr:`MavlinkLink.stats`).
 """
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
+import errno
 import logging
 import math
+import os
+import re
+import termios
 from collections.abc import Callable
 from dataclasses import dataclass
 from urllib.parse import urlsplit
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from drivers.mavlink.signing import Signing
+
 log = logging.getLogger(__name__)
 
 #: A companion computer's usual MAVLink identity (MAV_COMP_ID_ONBOARD_COMPUTER).
 GCS_SYSTEM_ID = 245
 ONBOARD_COMPONENT_ID = 191
+DEFAULT_BAUD = 57600
+_SERIAL = re.compile(r"^serial://(?P<device>/[^:]+)(?::(?P<baud>\d+))?$")
+_URL_FORMS = ("udpin://HOST:PORT, udpout://HOST:PORT, tcpout://HOST:PORT, tcpin://HOST:PORT "
+              "or serial:///dev/DEVICE[:BAUD]")
+
+
+class LinkError(ConnectionError):
+    """A link that cannot be opened; the message says what was tried and what to do."""
+
+
+class UrlError(ValueError):
+    """A connection URL that is malformed or names a transport we do not have."""
 
 
 @dataclass(frozen=True, slots=True)
 class Endpoint:
-    listen: bool  # udpin: bind here, answer whoever writes
-    host: str
-    port: int
+    kind: str  # udpin | udpout | tcpout | tcpin | serial
+    host: str = ""
+    port: int = 0
+    device: str = ""
+    baud: int = DEFAULT_BAUD
+
+    @property
+    def listen(self) -> bool:
+        return self.kind in ("udpin", "tcpin")
 
     @classmethod
     def parse(cls, url: str) -> Endpoint:
-        parts = urlsplit(url)
-        if parts.scheme not in ("udpin", "udpout", "udp") or parts.port is None:
-            raise ValueError(f"unsupported MAVLink connection {url!r}: expected "
-                             "udpin://HOST:PORT, udpout://HOST:PORT or udp://:PORT")
-        listen = parts.scheme in ("udpin", "udp")
-        host = parts.hostname or ("0.0.0.0" if listen else "127.0.0.1")
-        return cls(listen, host, parts.port)
+        match = _SERIAL.match(url)
+        if match:
+            baud = int(match["baud"] or DEFAULT_BAUD)
+            if _baud_constant(baud) is None:
+                raise UrlError(f"{url!r}: {baud} is not a baud rate this system's serial ports "
+                               "support (e.g. 57600, 115200, 921600)")
+            return cls("serial", device=match["device"], baud=baud)
+        try:
+            parts = urlsplit(url)
+            port = parts.port
+        except ValueError as exc:
+            raise UrlError(f"malformed MAVLink connection {url!r} ({exc}): expected "
+                           f"{_URL_FORMS}") from None
+        scheme = {"udp": "udpin", "tcp": "tcpout"}.get(parts.scheme, parts.scheme)
+        if scheme == "serial":
+            raise UrlError(f"malformed serial connection {url!r}: expected "
+                           "serial:///dev/DEVICE[:BAUD], e.g. serial:///dev/ttyAMA0:921600")
+        if scheme not in ("udpin", "udpout", "tcpout", "tcpin") or port is None:
+            raise UrlError(f"unsupported MAVLink connection {url!r}: expected {_URL_FORMS}")
+        # no host: this machine (a listening link binds loopback unless told otherwise)
+        return cls(scheme, parts.hostname or "127.0.0.1", port)
+
+    def __str__(self) -> str:
+        if self.kind == "serial":
+            return f"serial://{self.device}:{self.baud}"
+        return f"{self.kind}://{self.host}:{self.port}"
 
 
 def pack(mav, msg) -> bytes:
@@ -49,61 +105,297 @@ def pack(mav, msg) -> bytes:
     return data
 
 
-class MavlinkUdp(asyncio.DatagramProtocol):
-    """One UDP MAVLink link: parses datagrams into messages for ``on_message``."""
+@dataclass
+class LinkStats:
+    received: int = 0
+    bad_data: int = 0
+    bad_signature: int = 0
+    #: datagrams from senders other than the locked-on vehicle
+    ignored: int = 0
 
-    def __init__(self, on_message: Callable[[object], None], *,
-                 system_id: int = GCS_SYSTEM_ID, component_id: int = ONBOARD_COMPONENT_ID) -> None:
+
+class MavlinkLink:
+    """One MAVLink link: parses what arrives into messages for ``on_message(msg, address)``
+    and sends messages (or raw frames) to the vehicle."""
+
+    def __init__(self, endpoint: Endpoint, on_message: Callable[[object, object], None], *,
+                 system_id: int = GCS_SYSTEM_ID, component_id: int = ONBOARD_COMPONENT_ID,
+                 signing: Signing | None = None) -> None:
+        self.endpoint = endpoint
         self._on_message = on_message
         self.mav = mavlink.MAVLink(None, srcSystem=system_id, srcComponent=component_id)
         self._rx = mavlink.MAVLink(None, srcSystem=system_id, srcComponent=component_id)
         self._rx.robust_parsing = True
-        self.transport: asyncio.DatagramTransport | None = None
+        self.signing = signing
+        if signing is not None:
+            signing.apply(self.mav, self._rx)
+        self.stats = LinkStats()
+        #: where sends go: the locked-on vehicle, the first sender, or the udpout target
         self.peer: tuple[str, int] | None = None
-        self.bad_data = 0
+        self.locked: object | None = None
+        self._transport = None  # DatagramTransport | StreamWriter | serial fd
+        self._closed = False
+        self._warned: set[str] = set()
+        self._reader_task: asyncio.Task | None = None
+        self._server: asyncio.base_events.Server | None = None
+        self._serial_fd: int | None = None
+        self._serial_out = bytearray()
+
+    # ------------------------------------------------------------------------------------
+    # Opening and closing
+    # ------------------------------------------------------------------------------------
 
     @classmethod
-    async def open(cls, url: str, on_message: Callable[[object], None], **kwargs) -> MavlinkUdp:
+    async def open(cls, url: str, on_message: Callable[[object, object], None],
+                   **kwargs) -> MavlinkLink:
+        """Open ``url``; :class:`UrlError` for a bad URL, :class:`LinkError` when the
+        transport cannot be opened (port in use, device missing, connection refused)."""
         endpoint = Endpoint.parse(url)
-        loop = asyncio.get_running_loop()
-        link = cls(on_message, **kwargs)
-        if endpoint.listen:
-            await loop.create_datagram_endpoint(lambda: link,
-                                                local_addr=(endpoint.host, endpoint.port))
-        else:
-            await loop.create_datagram_endpoint(lambda: link, local_addr=("0.0.0.0", 0))
-            link.peer = (endpoint.host, endpoint.port)
+        link = cls(endpoint, on_message, **kwargs)
+        try:
+            await link._open()
+        except OSError as exc:
+            link.close()
+            raise LinkError(link._open_error(exc)) from None
         return link
 
-    def connection_made(self, transport) -> None:
-        self.transport = transport
+    def _open_error(self, exc: OSError) -> str:
+        e = self.endpoint
+        why = exc.strerror or str(exc)
+        if exc.errno == errno.EADDRINUSE:
+            return (f"cannot listen on {e}: address already in use (another autopilot, "
+                    "MAVProxy or QGroundControl has the port; stop it or choose another port)")
+        if exc.errno in (errno.EADDRNOTAVAIL, errno.EINVAL) and e.kind in ("udpin", "tcpin"):
+            return f"cannot listen on {e}: {why} (is {e.host} an address of this machine?)"
+        if e.kind == "serial":
+            hint = {errno.ENOENT: "no such device (is the cable in, the UART enabled?)",
+                    errno.EACCES: "permission denied (add the user to the 'dialout' group)",
+                    errno.EBUSY: "busy (another program has it open)"}.get(exc.errno, why)
+            return f"cannot open {e}: {hint}"
+        if e.kind == "tcpout":
+            return f"cannot connect to {e}: {why} (is the vehicle's TCP server up?)"
+        return f"cannot open {e}: {why}"
 
-    def datagram_received(self, data: bytes, addr) -> None:
-        self.peer = addr
+    async def _open(self) -> None:
+        loop = asyncio.get_running_loop()
+        e = self.endpoint
+        if e.kind in ("udpin", "udpout"):
+            local = (e.host, e.port) if e.kind == "udpin" else ("0.0.0.0", 0)
+            self._transport, _ = await loop.create_datagram_endpoint(
+                lambda: _Datagrams(self), local_addr=local)
+            if e.kind == "udpout":
+                self.peer = (e.host, e.port)
+                self.lock(self.peer)  # only the vehicle we were told to talk to
+        elif e.kind == "tcpout":
+            reader, writer = await asyncio.open_connection(e.host, e.port)
+            self._stream(reader, writer)
+        elif e.kind == "tcpin":
+            connected = loop.create_future()
+
+            def client(reader, writer) -> None:
+                if self._transport is not None:  # one vehicle per link
+                    log.warning("%s: refusing a second TCP connection from %s", e,
+                                writer.get_extra_info("peername"))
+                    writer.close()
+                    return
+                self._stream(reader, writer)
+                if not connected.done():
+                    connected.set_result(None)
+
+            self._server = await asyncio.start_server(client, e.host, e.port)
+        else:
+            self._open_serial()
+
+    def _stream(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        self._transport = writer
+        self.peer = writer.get_extra_info("peername")
+
+        async def read() -> None:
+            while True:
+                data = await reader.read(4096)
+                if not data:
+                    log.warning("%s: the vehicle closed the connection", self.endpoint)
+                    self._transport = None
+                    return
+                self._feed(data, self.peer)
+
+        self._reader_task = asyncio.get_running_loop().create_task(read(), name="mavlink-tcp")
+
+    def _open_serial(self) -> None:
+        e = self.endpoint
+        fd = os.open(e.device, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+        try:
+            attrs = termios.tcgetattr(fd)
+            iflag, oflag, cflag, lflag, _, _, cc = attrs
+            speed = _baud_constant(e.baud)
+            # raw 8N1, no flow control, no echo: MAVLink is binary
+            iflag = 0
+            oflag = 0
+            cflag = (cflag & ~(termios.CSIZE | termios.PARENB | termios.CSTOPB
+                               | getattr(termios, "CRTSCTS", 0))) | termios.CS8 \
+                | termios.CREAD | termios.CLOCAL
+            lflag = 0
+            cc[termios.VMIN], cc[termios.VTIME] = 0, 0
+            termios.tcsetattr(fd, termios.TCSANOW, [iflag, oflag, cflag, lflag, speed, speed,
+                                                    cc])
+        except termios.error as exc:
+            os.close(fd)
+            raise OSError(errno.EINVAL, f"not a serial port ({exc})") from None
+        self._serial_fd = fd
+        self._transport = fd
+        self.peer = (e.device, e.baud)
+        asyncio.get_running_loop().add_reader(fd, self._serial_readable)
+
+    def _serial_readable(self) -> None:
+        try:
+            data = os.read(self._serial_fd, 4096)
+        except BlockingIOError:
+            return
+        except OSError as exc:
+            self._once("serial", logging.WARNING, "%s: %s", self.endpoint, exc)
+            return
+        if data:
+            self._feed(data, self.peer)
+
+    def close(self) -> None:
+        self._closed = True
+        if self._reader_task is not None:
+            self._reader_task.cancel()
+        if self._server is not None:
+            self._server.close()
+        t = self._transport
+        self._transport = None
+        if t is not None and self._serial_fd is None:
+            t.close()
+        if self._serial_fd is not None:
+            loop = asyncio.get_event_loop()
+            with contextlib.suppress(Exception):
+                loop.remove_reader(self._serial_fd)
+                loop.remove_writer(self._serial_fd)
+            with contextlib.suppress(OSError):
+                os.close(self._serial_fd)
+            self._serial_fd = None
+
+    # ------------------------------------------------------------------------------------
+    # Receiving
+    # ------------------------------------------------------------------------------------
+
+    def lock(self, address) -> None:
+        """From now on, talk to ``address`` only (the vehicle's)."""
+        if self.locked is None:
+            self.locked = address
+            self.peer = address
+            log.info("%s: locked onto the vehicle at %s", self.endpoint, _where(address))
+
+    def _datagram(self, data: bytes, address) -> None:
+        if self.locked is not None and address != self.locked:
+            self.stats.ignored += 1
+            self._once(f"sender {address}", logging.WARNING,
+                       "%s: ignoring MAVLink from %s: this link is locked onto the vehicle at %s",
+                       self.endpoint, _where(address), _where(self.locked))
+            return
+        self._feed(data, address)
+
+    def _feed(self, data: bytes, address) -> None:
         try:
             messages = self._rx.parse_buffer(data) or []
         except Exception:  # pymavlink raises on some corrupt frames even when robust
-            self.bad_data += 1
+            self.stats.bad_data += 1
             return
         for msg in messages:
             if msg.get_type() == "BAD_DATA":
-                self.bad_data += 1
+                reason = str(getattr(msg, "reason", ""))
+                if "signature" in reason.lower():
+                    self.stats.bad_signature += 1
+                    self._once("signature", logging.WARNING,
+                               "%s: dropping unsigned or badly signed MAVLink from %s "
+                               "(this link requires signing)", self.endpoint, _where(address))
+                else:
+                    self.stats.bad_data += 1
                 continue
-            self._on_message(msg)
+            self.stats.received += 1
+            self._on_message(msg, address)
 
-    def error_received(self, exc: Exception) -> None:
-        log.debug("MAVLink link: %s", exc)
+    # ------------------------------------------------------------------------------------
+    # Sending
+    # ------------------------------------------------------------------------------------
 
     def send(self, msg) -> bool:
-        """Send if the peer is known (a listening link learns it from the first packet)."""
-        if self.transport is None or self.transport.is_closing() or self.peer is None:
+        """Send ``msg`` (False if there is nobody to send it to yet, or the link is closed)."""
+        if not self._can_send():
             return False
-        self.transport.sendto(pack(self.mav, msg), self.peer)
+        return self._write(pack(self.mav, msg))
+
+    def send_frame(self, frame: bytes) -> bool:
+        """Send an already encoded frame (another MAVLink stack's, e.g. MAVSDK's)."""
+        if not self._can_send():
+            return False
+        return self._write(frame)
+
+    def _can_send(self) -> bool:
+        if self._closed or self._transport is None:
+            return False
+        return self.peer is not None
+
+    def _write(self, data: bytes) -> bool:
+        t = self._transport
+        if self._serial_fd is not None:
+            self._serial_out += data
+            self._serial_flush()
+            return True
+        if t.is_closing():
+            return False
+        if isinstance(t, asyncio.StreamWriter):
+            t.write(data)
+        else:  # a datagram transport (asyncio's own class does not derive DatagramTransport)
+            t.sendto(data, self.peer)
         return True
 
-    def close(self) -> None:
-        if self.transport is not None:
-            self.transport.close()
+    def _serial_flush(self) -> None:
+        fd = self._serial_fd
+        if fd is None:
+            return
+        loop = asyncio.get_event_loop()
+        try:
+            while self._serial_out:
+                written = os.write(fd, self._serial_out)
+                del self._serial_out[:written]
+        except BlockingIOError:
+            loop.add_writer(fd, self._serial_flush)
+            return
+        except OSError as exc:
+            self._once("serial-write", logging.WARNING, "%s: %s", self.endpoint, exc)
+            self._serial_out.clear()
+        with contextlib.suppress(Exception):
+            loop.remove_writer(fd)
+        if len(self._serial_out) > 1 << 20:  # a stuck port must not eat the memory
+            self._serial_out.clear()
+
+    def _once(self, key: str, level: int, message: str, *args) -> None:
+        if key not in self._warned:
+            self._warned.add(key)
+            log.log(level, message, *args)
+
+
+class _Datagrams(asyncio.DatagramProtocol):
+    def __init__(self, link: MavlinkLink) -> None:
+        self.link = link
+
+    def datagram_received(self, data: bytes, addr) -> None:
+        self.link._datagram(data, addr)
+
+    def error_received(self, exc: Exception) -> None:  # e.g. ICMP port unreachable
+        log.debug("MAVLink link: %s", exc)
+
+
+def _where(address) -> str:
+    if isinstance(address, tuple) and len(address) == 2:
+        return f"{address[0]}:{address[1]}"
+    return str(address)
+
+
+def _baud_constant(baud: int) -> int | None:
+    return getattr(termios, f"B{baud}", None)
 
 
 class BootTimeMapper:
@@ -163,3 +455,21 @@ class BootTimeMapper:
 
     def to_local(self, vehicle_s: float) -> float:
         return vehicle_s + self._offset
+
+
+class TimesyncRequests:
+    """Our outstanding TIMESYNC requests: an answer counts only if it echoes one of them
+    (``ts1``), so another client's exchange on the same link cannot skew our clock mapping."""
+
+    def __init__(self, keep: int = 32) -> None:
+        self._sent: dict[int, float] = {}
+        self._keep = keep
+
+    def sent(self, ts1_ns: int, local_s: float) -> None:
+        self._sent[ts1_ns] = local_s
+        while len(self._sent) > self._keep:
+            del self._sent[next(iter(self._sent))]
+
+    def answer(self, ts1_ns: int) -> float | None:
+        """When the request this answer echoes was sent (None: not ours)."""
+        return self._sent.pop(ts1_ns, None)

@@ -1,16 +1,23 @@
 """A :class:`~drivers.base.Vehicle` for PX4 through MAVSDK 4 (``mavsdk.asyncio``).
 
 MAVSDK's plugins do what they do well: ``action`` for arming, takeoff, land and hold (with
-their retries and PX4 specifics), ``telemetry`` for attitude, modes, landed state, health,
-battery and range. Two things go around them, through ``mavlink_direct``:
+their retries and PX4 specifics), ``telemetry`` for modes, landed state, health, battery and
+range. MAVSDK talks to the vehicle through this project's own link
+(:class:`~drivers.mavlink.link.MavlinkLink`, over MAVSDK's ``raw://`` connection), so that both
+drivers share one implementation of what MAVSDK 4 does not offer: locking onto the first
+vehicle (other systems and senders on the link are dropped before MAVSDK sees them), MAVLink 2
+signing (MAVSDK has none: frames it sends are signed on their way out), and UDP, TCP and serial
+links with clear errors. Around the plugins:
 
 * setpoints: MAVSDK's ``offboard`` plugin re-sends the last setpoint at 20 Hz on its own
   thread for as long as the process lives, which would keep a stalled controller's stale
-  intent alive. Here each :meth:`send_setpoint` is one SET_POSITION_TARGET_LOCAL_NED, and
-  OFFBOARD is entered with DO_SET_MODE: if the caller stops, PX4's offboard-loss failsafe acts.
-* time: telemetry samples are published on LOCAL_POSITION_NED, whose ``time_boot_ms`` is the
-  sample's capture time on the vehicle, mapped onto our clock by TIMESYNC round trips (MAVSDK
-  keeps its own time sync to itself).
+  intent alive. Here each :meth:`send_setpoint` is one SET_POSITION_TARGET_LOCAL_NED (through
+  ``mavlink_direct``, on one thread of its own so that setpoints keep their order; one whose
+  caller was cancelled before it went out is not sent), and OFFBOARD is entered with
+  DO_SET_MODE: if the caller stops, PX4's offboard-loss failsafe acts.
+* time: position and attitude are read from the link as they arrive, each stamped with its own
+  ``time_boot_ms`` mapped onto our clock by TIMESYNC round trips of our own (answers to MAVSDK's
+  or anyone else's requests are not taken for ours).
 """
 
 from __future__ import annotations
@@ -21,6 +28,8 @@ import itertools
 import json
 import logging
 import math
+import threading
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
@@ -33,9 +42,12 @@ from drivers.base import (
     Health,
     LandedState,
     Setpoint,
+    VehicleNotFound,
 )
 from drivers.mavlink import px4
 from drivers.mavlink.common import MavlinkVehicle, cancel_all
+from drivers.mavlink.link import MavlinkLink, TimesyncRequests
+from drivers.mavlink.signing import Signing
 
 log = logging.getLogger(__name__)
 
@@ -44,27 +56,36 @@ _MODES = {"HOLD": FlightMode.HOLD, "TAKEOFF": FlightMode.TAKEOFF, "LAND": Flight
           "RETURN_TO_LAUNCH": FlightMode.RETURN, "MANUAL": FlightMode.MANUAL,
           "ALTCTL": FlightMode.ALTCTL, "POSCTL": FlightMode.POSCTL,
           "STABILIZED": FlightMode.MANUAL, "ACRO": FlightMode.MANUAL}
-_DENIED = {"COMMAND_DENIED", "COMMAND_DENIED_LANDED_STATE_UNKNOWN", "COMMAND_DENIED_NOT_LANDED",
-           "UNSUPPORTED", "FAILED", "PARAMETER_ERROR", "INVALID_ARGUMENT", "BUSY"}
 _LOST = {"NO_SYSTEM", "CONNECTION_ERROR"}
+_GCS_OR_COMPANION = (6, 18)  # MAV_TYPE_GCS, MAV_TYPE_ONBOARD_CONTROLLER
+_MAV_AUTOPILOT_INVALID = 8
 
 
 class MavsdkDriver(MavlinkVehicle):
-    def __init__(self, url: str = "udpin://0.0.0.0:14540", *, discovery_timeout_s: float = 10.0,
-                 telemetry_timeout_s: float = 3.0) -> None:
+    def __init__(self, url: str = "udpin://127.0.0.1:14540", *,
+                 discovery_timeout_s: float = 10.0, telemetry_timeout_s: float = 3.0,
+                 signing: Signing | None = None) -> None:
         super().__init__()
         self.url = url
         self.discovery_timeout_s = discovery_timeout_s
         self.telemetry_timeout_s = telemetry_timeout_s
+        self.signing = signing
         self._mavsdk = None
         self._system = None
+        self._target: tuple[int, int] | None = None
         self._action = None
         self._telemetry_plugin = None
         self._direct = None
+        self._link: MavlinkLink | None = None
+        self._raw_handle = None
+        self._resigner = None
         self._tasks: list[asyncio.Task] = []
         self._error: ConnectionLost | None = None
         self._last_sample_s = -math.inf
         self._status_text: tuple[float, str] = (-math.inf, "")
+        self._ignored: set[tuple[int, int]] = set()
+        self._timesync_sent = TimesyncRequests()
+        self._sender = ThreadPoolExecutor(max_workers=1, thread_name_prefix="mavsdk-send")
 
     # ------------------------------------------------------------------------------------
     # Vehicle interface
@@ -78,31 +99,39 @@ class MavsdkDriver(MavlinkVehicle):
 
         if self._mavsdk is not None:
             return
-        config = Configuration.create_with_component_type(ComponentType.COMPANION_COMPUTER)
-        self._mavsdk = Mavsdk(config)
-        await self._mavsdk.__aenter__()
+        loop = asyncio.get_running_loop()
         try:
-            await self._mavsdk.add_any_connection(self.url)
+            self._link = await MavlinkLink.open(self.url, self._from_vehicle,
+                                                signing=self.signing)
+            config = Configuration.create_with_component_type(ComponentType.COMPANION_COMPUTER)
+            self._mavsdk = Mavsdk(config)
+            await self._mavsdk.__aenter__()
+            result = await self._mavsdk.add_any_connection("raw://")
+            if getattr(result, "name", "SUCCESS") != "SUCCESS":
+                raise ConnectionLost(f"MAVSDK refused its raw connection: {result}")
+            core = self._mavsdk._mavsdk  # the native Mavsdk: raw bytes in and out
+            if self.signing is not None:
+                self._resigner = _Resigner(self.signing)
+            self._raw_handle = core.subscribe_raw_bytes_to_be_sent(
+                lambda data: loop.call_soon_threadsafe(self._to_vehicle, bytes(data)))
             self._system = await self._mavsdk.first_autopilot(timeout_s=timeout_s)
             if self._system is None:
-                raise ConnectionLost(f"no autopilot found on {self.url} within {timeout_s:g} s")
+                raise VehicleNotFound(f"no autopilot heartbeat on {self.url} within "
+                                      f"{timeout_s:g} s")
             self._action = ActionAsync(self._system)
             self._telemetry_plugin = TelemetryAsync(self._system)
             self._direct = MavlinkDirectAsync(self._system)
-            loop = asyncio.get_running_loop()
             self._tasks = [loop.create_task(coro, name=f"mavsdk-{name}") for name, coro in (
-                ("position", self._positions()), ("attitude", self._attitude()),
-                ("rates", self._body_rates()), ("armed", self._armed_state()),
-                ("mode", self._flight_mode()), ("landed", self._landed_state()),
-                ("health", self._health_state()), ("battery", self._battery_state()),
-                ("range", self._range()), ("timesync", self._timesync()),
-                ("statustext", self._status_texts()),
+                ("armed", self._armed_state()), ("mode", self._flight_mode()),
+                ("landed", self._landed_state()), ("health", self._health_state()),
+                ("battery", self._battery_state()), ("range", self._range()),
+                ("timesync", self._timesync()), ("statustext", self._status_texts()),
                 ("watchdog", self._watchdog()))]
             async with contextlib.aclosing(self.telemetry()) as samples:
                 await asyncio.wait_for(anext(samples), timeout_s)
         except (TimeoutError, StopAsyncIteration):
             await self.close()
-            raise ConnectionLost(f"no LOCAL_POSITION_NED from the vehicle on {self.url} "
+            raise VehicleNotFound(f"no LOCAL_POSITION_NED from the vehicle on {self.url} "
                                  f"within {timeout_s:g} s") from None
         except BaseException:
             await self.close()
@@ -140,15 +169,28 @@ class MavsdkDriver(MavlinkVehicle):
         from mavsdk.asyncio.plugins.mavlink_direct import MavlinkMessage
 
         self._check_alive()
+        system, component = self._target
         frame, mask, pos, vel, yaw, rate = px4.setpoint_to_mavlink(setpoint)
         fields = {"time_boot_ms": int(self._clock.now() * 1000) & 0xFFFFFFFF,
-                  "target_system": 1, "target_component": 1, "coordinate_frame": frame,
-                  "type_mask": mask, "x": pos[0], "y": pos[1], "z": pos[2], "vx": vel[0],
-                  "vy": vel[1], "vz": vel[2], "afx": 0.0, "afy": 0.0, "afz": 0.0, "yaw": yaw,
-                  "yaw_rate": rate}
-        await self._direct.send_message(MavlinkMessage(
-            message_name="SET_POSITION_TARGET_LOCAL_NED", target_system_id=1,
-            target_component_id=1, fields_json=json.dumps(fields)))
+                  "target_system": system, "target_component": component,
+                  "coordinate_frame": frame, "type_mask": mask, "x": pos[0], "y": pos[1],
+                  "z": pos[2], "vx": vel[0], "vy": vel[1], "vz": vel[2], "afx": 0.0,
+                  "afy": 0.0, "afz": 0.0, "yaw": yaw, "yaw_rate": rate}
+        message = MavlinkMessage(message_name="SET_POSITION_TARGET_LOCAL_NED",
+                                 target_system_id=system, target_component_id=component,
+                                 fields_json=json.dumps(fields))
+        cancelled = threading.Event()
+        plugin = self._direct._plugin
+
+        def send() -> None:
+            if not cancelled.is_set():  # the caller gave up on this setpoint: drop it
+                plugin.send_message(message)
+
+        try:
+            await asyncio.get_running_loop().run_in_executor(self._sender, send)
+        except asyncio.CancelledError:
+            cancelled.set()
+            raise
 
     async def close(self) -> None:
         await cancel_all(self._tasks)
@@ -157,8 +199,62 @@ class MavsdkDriver(MavlinkVehicle):
         if self._mavsdk is not None:
             mavsdk, self._mavsdk = self._mavsdk, None
             with contextlib.suppress(Exception):
+                if self._raw_handle is not None:
+                    mavsdk._mavsdk.unsubscribe_raw_bytes_to_be_sent(self._raw_handle)
+            self._raw_handle = None
+            with contextlib.suppress(Exception):
                 await mavsdk.__aexit__(None, None, None)
+        if self._link is not None:
+            self._link.close()
+            self._link = None
+            await asyncio.sleep(0)  # the transport lets go of its socket on the next turn
+        self._sender.shutdown(wait=False, cancel_futures=True)
         self._end_telemetry(self._error)
+
+    # ------------------------------------------------------------------------------------
+    # The link: MAVSDK's frames out, the vehicle's in
+    # ------------------------------------------------------------------------------------
+
+    def _to_vehicle(self, frame: bytes) -> None:
+        link = self._link
+        if link is None:
+            return
+        if self._resigner is None:
+            link.send_frame(frame)
+            return
+        for signed in self._resigner.sign(frame):
+            link.send_frame(signed)
+
+    def _from_vehicle(self, msg, address) -> None:
+        src = (msg.get_srcSystem(), msg.get_srcComponent())
+        kind = msg.get_type()
+        if kind == "HEARTBEAT" and self._target is None and \
+                msg.autopilot != _MAV_AUTOPILOT_INVALID and msg.type not in _GCS_OR_COMPANION:
+            self._target = src
+            self._link.lock(address)
+            log.info("vehicle: autopilot %s at system %d component %d", msg.autopilot, *src)
+        if self._target is None or src[0] != self._target[0]:
+            if self._target is not None and src not in self._ignored and \
+                    kind not in ("HEARTBEAT", "RADIO_STATUS"):
+                self._ignored.add(src)
+                log.warning("ignoring MAVLink from system %d component %d: this link is locked "
+                            "onto the vehicle at system %d component %d", *src, *self._target)
+            return
+        if kind == "LOCAL_POSITION_NED" and src == self._target:
+            self._last_sample_s = self._clock.now()
+            self._publish_position(msg.time_boot_ms / 1000.0, (msg.x, msg.y, msg.z),
+                                   (msg.vx, msg.vy, msg.vz))
+        elif kind == "ATTITUDE_QUATERNION" and src == self._target:
+            self._q = np.array([msg.q1, msg.q2, msg.q3, msg.q4])
+            self._rates = np.array([msg.rollspeed, msg.pitchspeed, msg.yawspeed])
+            self._attitude_vehicle_s = msg.time_boot_ms / 1000.0
+        elif kind == "TIMESYNC" and msg.tc1 != 0:
+            sent = self._timesync_sent.answer(msg.ts1)
+            if sent is not None:
+                self._boot.observe_sync(sent, msg.tc1 / 1e9, self._clock.now())
+        mavsdk = self._mavsdk
+        if mavsdk is not None:
+            mavsdk._mavsdk.pass_received_raw_bytes(bytes(msg.get_msgbuf()))
 
     # ------------------------------------------------------------------------------------
     # Commands
@@ -167,7 +263,7 @@ class MavsdkDriver(MavlinkVehicle):
     def _check_alive(self) -> None:
         if self._error is not None:
             raise self._error
-        if self._system is None:
+        if self._system is None or self._target is None:
             raise ConnectionLost("not connected: call connect() first")
 
     def _require_action(self):
@@ -197,13 +293,14 @@ class MavsdkDriver(MavlinkVehicle):
         from mavsdk.asyncio.plugins.mavlink_direct import MavlinkMessage
 
         self._check_alive()
+        system, component = self._target
         p = [float(v) for v in params] + [0.0] * (7 - len(params))
-        fields = {"target_system": 1, "target_component": 1, "command": command,
+        fields = {"target_system": system, "target_component": component, "command": command,
                   "confirmation": 0, **{f"param{i + 1}": p[i] for i in range(7)}}
         try:
             ack = await self._direct.send_command(MavlinkMessage(
-                message_name="COMMAND_LONG", target_system_id=1, target_component_id=1,
-                fields_json=json.dumps(fields)))
+                message_name="COMMAND_LONG", target_system_id=system,
+                target_component_id=component, fields_json=json.dumps(fields)))
         except MavsdkError as exc:
             raise CommandTimeout(name, 2.0) from exc
         result = json.loads(ack.fields_json or "{}").get("result")
@@ -217,33 +314,16 @@ class MavsdkDriver(MavlinkVehicle):
     # Telemetry
     # ------------------------------------------------------------------------------------
 
-    async def _positions(self) -> None:
-        async for msg in self._direct.subscribe_message("LOCAL_POSITION_NED"):
-            f = json.loads(msg.fields_json)
-            self._last_sample_s = self._clock.now()
-            self._publish_position(f["time_boot_ms"] / 1000.0, (f["x"], f["y"], f["z"]),
-                                   (f["vx"], f["vy"], f["vz"]))
-
     async def _timesync(self) -> None:
-        from mavsdk.asyncio.plugins.mavlink_direct import MavlinkMessage
-
-        async def answers() -> None:
-            async for msg in self._direct.subscribe_message("TIMESYNC"):
-                f = json.loads(msg.fields_json)
-                if f.get("tc1"):
-                    self._boot.observe_sync(f["ts1"] / 1e9, f["tc1"] / 1e9, self._clock.now())
-
-        listener = asyncio.get_running_loop().create_task(answers())
-        try:
-            for count in itertools.count():
-                fields = {"tc1": 0, "ts1": int(self._clock.now() * 1e9), "target_system": 1,
-                          "target_component": 1}
-                await self._direct.send_message(MavlinkMessage(
-                    message_name="TIMESYNC", target_system_id=1, target_component_id=1,
-                    fields_json=json.dumps(fields)))
-                await asyncio.sleep(px4.timesync_period_s(count))
-        finally:
-            listener.cancel()
+        """Our own TIMESYNC requests (their answers are matched in :meth:`_from_vehicle`)."""
+        for count in itertools.count():
+            link = self._link
+            if link is not None:
+                now = self._clock.now()
+                ts1 = int(now * 1e9)
+                self._timesync_sent.sent(ts1, now)
+                link.send(link.mav.timesync_encode(0, ts1))
+            await asyncio.sleep(px4.timesync_period_s(count))
 
     async def _watchdog(self) -> None:
         while True:
@@ -258,14 +338,6 @@ class MavsdkDriver(MavlinkVehicle):
     async def _status_texts(self) -> None:
         async for status in self._telemetry_plugin.subscribe_status_text():
             self._status_text = (self._clock.now(), status.text)
-
-    async def _attitude(self) -> None:
-        async for q in self._telemetry_plugin.subscribe_attitude_quaternion():
-            self._q = np.array([q.w, q.x, q.y, q.z])
-
-    async def _body_rates(self) -> None:
-        async for w in self._telemetry_plugin.subscribe_attitude_angular_velocity_body():
-            self._rates = np.array([w.roll_rad_s, w.pitch_rad_s, w.yaw_rad_s])
 
     async def _armed_state(self) -> None:
         async for armed in self._telemetry_plugin.subscribe_armed():
@@ -298,3 +370,27 @@ class MavsdkDriver(MavlinkVehicle):
         async for d in self._telemetry_plugin.subscribe_distance_sensor():
             ok = d.minimum_distance_m <= d.current_distance_m <= d.maximum_distance_m
             self._range_m = d.current_distance_m if ok else math.nan
+
+
+class _Resigner:
+    """Signs the frames another MAVLink stack (MAVSDK) sends: each frame is decoded and encoded
+    again with the same sender, sequence number and payload, and a signature."""
+
+    def __init__(self, signing: Signing) -> None:
+        from pymavlink.dialects.v20 import common as mavlink
+
+        self._rx = mavlink.MAVLink(None)
+        self._rx.robust_parsing = True
+        self._tx = mavlink.MAVLink(None)
+        signing.apply(self._tx, mavlink.MAVLink(None))
+
+    def sign(self, data: bytes) -> list[bytes]:
+        out = []
+        for msg in self._rx.parse_buffer(data) or []:
+            if msg.get_type() == "BAD_DATA":
+                continue
+            tx = self._tx
+            tx.srcSystem, tx.srcComponent = msg.get_srcSystem(), msg.get_srcComponent()
+            tx.seq = msg.get_seq()
+            out.append(msg.pack(tx))
+        return out

@@ -1,10 +1,13 @@
 """A :class:`~drivers.base.Vehicle` over plain MAVLink (pymavlink's message set), for PX4 and
 ArduPilot Copter.
 
-Everything runs on the event loop: one UDP link (:mod:`drivers.mavlink.link`), messages parsed
-as they arrive, commands sent as COMMAND_LONG and matched to their COMMAND_ACK (re-sent up to
-``command_retries`` times, as MAVSDK does). Telemetry is assembled from HEARTBEAT, attitude,
-LOCAL_POSITION_NED, EXTENDED_SYS_STATE, SYS_STATUS, BATTERY_STATUS and DISTANCE_SENSOR; a
+Everything runs on the event loop: one link (:mod:`drivers.mavlink.link`: UDP, TCP or a serial
+port; locked onto the vehicle; signed with a key), messages parsed as they arrive, commands sent
+as COMMAND_LONG and matched to their COMMAND_ACK (re-sent up to ``command_retries`` times, as
+MAVSDK does). The first autopilot heard is the vehicle: messages from other systems on the link
+are ignored (one log line), and TIMESYNC answers count only if they echo our own requests.
+Telemetry is assembled from HEARTBEAT, attitude, LOCAL_POSITION_NED, EXTENDED_SYS_STATE,
+SYS_STATUS, BATTERY_STATUS and DISTANCE_SENSOR; a
 :class:`~drivers.base.VehicleState` is published on every LOCAL_POSITION_NED, stamped with its
 capture time mapped from the vehicle's ``time_boot_ms`` onto the local monotonic clock.
 
@@ -38,11 +41,13 @@ from drivers.base import (
     FlightMode,
     Health,
     Setpoint,
+    VehicleNotFound,
 )
 from drivers.geometry import quat_from_euler
 from drivers.mavlink import ardupilot, px4
 from drivers.mavlink.common import MavlinkVehicle, cancel_all
-from drivers.mavlink.link import MavlinkUdp
+from drivers.mavlink.link import MavlinkLink, TimesyncRequests
+from drivers.mavlink.signing import Signing
 
 log = logging.getLogger(__name__)
 
@@ -60,17 +65,21 @@ STREAM_RATES_HZ = {
 
 
 class PymavlinkDriver(MavlinkVehicle):
-    def __init__(self, url: str = "udpin://0.0.0.0:14540", *,
+    def __init__(self, url: str = "udpin://127.0.0.1:14540", *,
                  heartbeat_timeout_s: float = 3.0, command_timeout_s: float = 0.5,
                  command_retries: int = 3,
-                 ardupilot_hold: ardupilot.CopterMode = ardupilot.CopterMode.BRAKE) -> None:
+                 ardupilot_hold: ardupilot.CopterMode = ardupilot.CopterMode.BRAKE,
+                 signing: Signing | None = None) -> None:
         super().__init__()
         self.url = url
+        self.signing = signing
         self.heartbeat_timeout_s = heartbeat_timeout_s
         self.command_timeout_s = command_timeout_s
         self.command_retries = command_retries
         self.ardupilot_hold = ardupilot_hold
-        self._link: MavlinkUdp | None = None
+        self._link: MavlinkLink | None = None
+        self._timesync_sent = TimesyncRequests()
+        self._ignored_systems: set[tuple[int, int]] = set()
         self._target: tuple[int, int] | None = None  # (system, component) of the autopilot
         self.autopilot: int | None = None  # MAV_AUTOPILOT of the vehicle
         self._acks: dict[int, asyncio.Future] = {}
@@ -96,7 +105,7 @@ class PymavlinkDriver(MavlinkVehicle):
     async def connect(self, timeout_s: float = 10.0) -> None:
         if self._link is not None:
             return
-        self._link = await MavlinkUdp.open(self.url, self._receive)
+        self._link = await MavlinkLink.open(self.url, self._receive, signing=self.signing)
         loop = asyncio.get_running_loop()
         self._tasks = [loop.create_task(self._heartbeats(), name="mavlink-gcs-heartbeat"),
                        loop.create_task(self._watchdog(), name="mavlink-watchdog"),
@@ -105,8 +114,11 @@ class PymavlinkDriver(MavlinkVehicle):
             await asyncio.wait_for(self._heard.wait(), timeout_s)
         except TimeoutError:
             await self.close()
-            raise ConnectionLost(f"no autopilot heartbeat on {self.url} within "
+            raise VehicleNotFound(f"no autopilot heartbeat on {self.url} within "
                                  f"{timeout_s:g} s") from None
+        except BaseException:
+            await self.close()
+            raise
         for msg_id, rate in STREAM_RATES_HZ.items():
             self._send(self._command_long_msg(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL,
                                               msg_id, 1e6 / rate))
@@ -116,7 +128,7 @@ class PymavlinkDriver(MavlinkVehicle):
                 await asyncio.wait_for(anext(samples), timeout_s)
             except (TimeoutError, StopAsyncIteration):
                 await self.close()
-                raise ConnectionLost(f"no LOCAL_POSITION_NED from the vehicle on {self.url} "
+                raise VehicleNotFound(f"no LOCAL_POSITION_NED from the vehicle on {self.url} "
                                      f"within {timeout_s:g} s") from None
 
     async def arm(self) -> None:
@@ -167,6 +179,7 @@ class PymavlinkDriver(MavlinkVehicle):
         if self._link is not None:
             self._link.close()
             self._link = None
+            await asyncio.sleep(0)  # the transport lets go of its socket on the next turn
         self._end_telemetry(self._closed_error)
 
     # ------------------------------------------------------------------------------------
@@ -276,7 +289,10 @@ class PymavlinkDriver(MavlinkVehicle):
         count = 0
         while True:
             if self._link is not None and self._target is not None:
-                self._send(self._link.mav.timesync_encode(0, int(self._clock.now() * 1e9)))
+                now = self._clock.now()
+                ts1 = int(now * 1e9)
+                self._timesync_sent.sent(ts1, now)
+                self._send(self._link.mav.timesync_encode(0, ts1))
             count += 1
             await asyncio.sleep(px4.timesync_period_s(count))
 
@@ -298,7 +314,7 @@ class PymavlinkDriver(MavlinkVehicle):
     # Internals: receiving
     # ------------------------------------------------------------------------------------
 
-    def _receive(self, msg) -> None:
+    def _receive(self, msg, address) -> None:
         src = (msg.get_srcSystem(), msg.get_srcComponent())
         kind = msg.get_type()
         if kind == "HEARTBEAT":
@@ -307,8 +323,11 @@ class PymavlinkDriver(MavlinkVehicle):
             if self._target is None:
                 self._target = src
                 self.autopilot = msg.autopilot
-                log.info("autopilot %s at sysid %d compid %d", msg.autopilot, *src)
+                self._link.lock(address)
+                log.info("vehicle: autopilot %s at system %d component %d", msg.autopilot,
+                         *src)
             if src != self._target:
+                self._ignore(src)
                 return
             self._last_heartbeat_s = self._clock.now()
             self._armed = bool(msg.base_mode & px4.MAV_MODE_FLAG_SAFETY_ARMED)
@@ -318,10 +337,18 @@ class PymavlinkDriver(MavlinkVehicle):
             self._heard.set()
             return
         if src != self._target:
+            if self._target is not None and kind not in _ANYONE:
+                self._ignore(src)
             return
         handler = _HANDLERS.get(kind)
         if handler is not None:
             handler(self, msg)
+
+    def _ignore(self, src: tuple[int, int]) -> None:
+        if src not in self._ignored_systems:
+            self._ignored_systems.add(src)
+            log.warning("ignoring MAVLink from system %d component %d: this link is locked "
+                        "onto the vehicle at system %d component %d", *src, *self._target)
 
     def _on_ack(self, msg) -> None:
         future = self._acks.get(msg.command)
@@ -336,8 +363,11 @@ class PymavlinkDriver(MavlinkVehicle):
             future.set_result(float(msg.param_value))
 
     def _on_timesync(self, msg) -> None:
-        if msg.tc1 != 0:  # an answer to one of our requests (ts1 is our time, echoed)
-            self._boot.observe_sync(msg.ts1 / 1e9, msg.tc1 / 1e9, self._clock.now())
+        if msg.tc1 == 0:
+            return  # a request (PX4 sends its own); not ours to answer
+        sent = self._timesync_sent.answer(msg.ts1)
+        if sent is not None:  # an answer to one of our requests, not another client's
+            self._boot.observe_sync(sent, msg.tc1 / 1e9, self._clock.now())
 
     def _on_statustext(self, msg) -> None:
         text = msg.text if isinstance(msg.text, str) else msg.text.decode(errors="replace")
@@ -346,12 +376,14 @@ class PymavlinkDriver(MavlinkVehicle):
     def _on_attitude_quaternion(self, msg) -> None:
         self._q = np.array([msg.q1, msg.q2, msg.q3, msg.q4])
         self._rates = np.array([msg.rollspeed, msg.pitchspeed, msg.yawspeed])
+        self._attitude_vehicle_s = msg.time_boot_ms / 1000.0
 
     def _on_attitude(self, msg) -> None:
         if self.is_px4:
             return  # PX4 sends the quaternion; ATTITUDE is derived from it
         self._q = quat_from_euler(msg.roll, msg.pitch, msg.yaw)
         self._rates = np.array([msg.rollspeed, msg.pitchspeed, msg.yawspeed])
+        self._attitude_vehicle_s = msg.time_boot_ms / 1000.0
 
     def _on_extended_sys_state(self, msg) -> None:
         self._landed = px4.landed_state(msg.landed_state)
@@ -383,6 +415,9 @@ class PymavlinkDriver(MavlinkVehicle):
         self._publish_position(msg.time_boot_ms / 1000.0, (msg.x, msg.y, msg.z),
                                (msg.vx, msg.vy, msg.vz))
 
+
+#: messages from other systems that are expected on a shared link and not worth a warning
+_ANYONE = frozenset({"HEARTBEAT", "TIMESYNC", "RADIO_STATUS"})
 
 _HANDLERS = {
     "COMMAND_ACK": PymavlinkDriver._on_ack,

@@ -32,6 +32,7 @@ import numpy as np
 
 from drivers.base import (
     CameraInfo,
+    CameraUnavailable,
     CommandDenied,
     ConnectionLost,
     FlightMode,
@@ -115,7 +116,7 @@ class SimDriver(Vehicle):
                 self._clock.restart(self._sim.time_s)
         except RenderingUnavailable as exc:
             await self.close()
-            raise ConnectionLost(f"simulator cameras: {exc}") from exc
+            raise CameraUnavailable(f"simulator cameras: {exc}", "rendering") from exc
         self._wall_start = time.perf_counter()
         run = self._run_lockstep if self.lockstep else self._run_realtime
         self._task = loop.create_task(run(), name="sim-driver")

@@ -58,7 +58,9 @@ mujoco.set_mju_user_warning(_mujoco_warning)
 OutputKind = Literal["telemetry", "frame", "truth", "event", "mission", "photo"]
 #: The camera that takes the photos of missions and camera commands.
 PHOTO_CAMERA = "down"
-FAILURE_NAMES = ("gyro", "accel", "mag", "local_position")
+#: sensor failures a test can inject; "telemetry" stops the telemetry stream (the vehicle flies
+#: on, as when a companion computer's telemetry stalls while its commands still get through)
+FAILURE_NAMES = ("gyro", "accel", "mag", "local_position", "telemetry")
 _EPS = 1e-9
 _INSTABILITY_WARNINGS = np.array([
     int(mujoco.mjtWarning.mjWARN_BADQPOS),
@@ -384,6 +386,8 @@ class Simulator:
         )
 
     def _capture_telemetry(self, t: float) -> None:
+        if "telemetry" in self._failures:
+            return
         est = self._est
         tel = self.cfg.telemetry
         state = VehicleState(

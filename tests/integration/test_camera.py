@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 import pytest
 
-from drivers.base import ConnectionLost
+from drivers.base import CameraUnavailable
 from drivers.geometry import quat_from_euler, quat_to_matrix
 from drivers.sim import camera
 from drivers.sim.driver import SimDriver
@@ -167,5 +167,5 @@ def test_render_contexts_are_made_at_connect_and_missing_opengl_fails_it(sim_con
                                           "no EGL display")
 
     monkeypatch.setattr(camera, "_make_gl_context", no_gl)
-    with pytest.raises(ConnectionLost, match="simulator cameras: cannot render headless"):
+    with pytest.raises(CameraUnavailable, match="simulator cameras: cannot render headless"):
         run(SimDriver(sim_config).connect())

@@ -157,3 +157,37 @@ def test_stalled_control_stops_setpoints_and_the_vehicle_fails_safe(monkeypatch)
     assert 0.0 < probe.seen["last_send_s"] <= expiry + 0.05
     # ... and the vehicle's own offboard-loss failsafe took over
     assert probe.seen["hold_s"] == pytest.approx(expiry + loss, abs=0.1)
+
+
+def test_stale_telemetry_stops_setpoints_holds_and_lands(monkeypatch, tmp_path):
+    """The vehicle keeps flying but its telemetry stops (a stalled telemetry link): the runtime
+    must not fly on the old pose. It stops the motion setpoints, commands HOLD and lands."""
+    limit = load_mission("follow_ball").config.runtime.telemetry_max_age_s
+
+    async def stop_telemetry(runtime, probe, _task):
+        await runtime.clock.sleep_until(12.0)  # following by then
+        probe.seen["step"] = runtime._step
+        await runtime.vehicle.inject_failure("telemetry")
+        probe.seen["stopped_s"] = runtime.clock.now()
+
+    probe = _Probe(monkeypatch, stop_telemetry)
+    summary, orphans = _fly([], tmp_path)
+    assert probe.seen["step"] == "follow_ball"
+    assert summary["status"] == "failed"
+    assert orphans == []
+    from autopilot.flightlog.log import read_log
+
+    log = read_log(tmp_path / "flight.mcap")
+    stopped = probe.seen["stopped_s"]
+    events = [(e["time_s"], e["text"]) for e in log[ch.MISSION_EVENTS]]
+    stale_at = next(t for t, text in events if text.startswith("telemetry stale"))
+    # noticed within the age limit plus a control period, not later
+    assert 0.0 < stale_at - stopped <= limit + 0.1
+    # no motion setpoint computed after that ...
+    assert all(sp["time_s"] <= stale_at for sp in log[ch.SETPOINTS])
+    # ... HOLD, then the fallback's LAND; the vehicle (seen in the ground truth) came down
+    texts = [text for t, text in events if t >= stale_at]
+    assert "request hold" in texts
+    assert "request land" in texts
+    truth = log[ch.GROUND_TRUTH][-1]
+    assert truth["vehicle_position_ned_m"][2] > -0.2  # on the ground

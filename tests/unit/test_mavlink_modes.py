@@ -50,7 +50,7 @@ class FakeLink:
         if msg.get_type() == "COMMAND_LONG" and self.result is not None:
             ack = self.vehicle.command_ack_encode(msg.command, self.result)
             ack.pack(self.vehicle)  # sets the header (source ids)
-            asyncio.get_running_loop().call_soon(self.driver._receive, ack)
+            asyncio.get_running_loop().call_soon(self.driver._receive, ack, ("127.0.0.1", 14580))
         return True
 
     def close(self) -> None:

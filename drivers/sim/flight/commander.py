@@ -15,6 +15,12 @@ returns to what the user asked for. The same here:
   COM_LOW_BAT_ACT), loss of the local position in the air (land).
 * A failsafe action other than a warning or an immediate stop holds first for COM_FAIL_ACT_T
   seconds (PX4's "failsafe action delay": the user may take over), then acts.
+* Failsafes trigger on the rising edge of their condition, as PX4's ``CHECK_FAILSAFE``. Those
+  that do not end by themselves (data link, geofence, battery, position loss) end on a mode
+  change or disarm once their condition is gone (PX4's ``OnModeChangeOrDisarm``). A user's
+  mode change while the condition persists takes over: the failsafe stops deciding the mode
+  and does not act again until its condition has cleared and comes back (a vehicle outside
+  its geofence can be flown back in). A warning warns again at each new breach.
 
 There is no RC in the simulation: actions that need a pilot (COM_OBL_RC_ACT 0–2: position,
 altitude, manual mode) fall back to HOLD as on PX4 without manual control, and the RC-loss
@@ -79,6 +85,10 @@ class _Failsafe:
     clears_with_condition: bool
     #: the action comes after COM_FAIL_ACT_T of HOLD
     delayed: bool
+    #: the condition holds now (it was true at the last check)
+    present: bool = True
+    #: the user changed mode while it was present: it no longer decides the mode
+    taken_over: bool = False
 
 
 @dataclass(frozen=True, slots=True)
@@ -111,6 +121,7 @@ class Commander:
         self._landed_since: float | None = None
         self.terminated = False
         self._now = 0.0
+        self._failsafe_deciding = False  # a failsafe decided the mode at the last _apply
         #: called when the effective mode changes: (new mode, previous mode)
         self.on_mode_change: Callable[[FlightMode, FlightMode], None] = lambda new, old: None
         #: called when the vehicle disarms (the motors stop)
@@ -127,7 +138,8 @@ class Commander:
         return active.name if active is not None else None
 
     def _deciding(self) -> _Failsafe | None:
-        acting = [f for f in self._failsafes.values() if f.action > Action.WARN]
+        acting = [f for f in self._failsafes.values()
+                  if f.action > Action.WARN and not f.taken_over]
         return max(acting, key=lambda f: (f.action, -f.since_s)) if acting else None
 
     # ------------------------------------------------------------------------------------
@@ -174,9 +186,17 @@ class Commander:
         if can_run is not None:
             raise CommandRejected(can_run)
         # a user's choice ends the failsafes that a mode change may end (PX4: the user takes
-        # over); offboard loss stays while OFFBOARD is asked for without setpoints
-        for name in [n for n, f in self._failsafes.items() if f.action > Action.WARN]:
-            del self._failsafes[name]
+        # over): those that end with their condition are checked again at the next tick
+        # (offboard loss comes back while OFFBOARD is asked for without setpoints); the others
+        # end if their condition is gone, else stop deciding until it clears
+        for name, f in list(self._failsafes.items()):
+            if f.action <= Action.WARN:
+                continue
+            if f.clears_with_condition or not f.present:
+                del self._failsafes[name]
+            elif not f.taken_over:
+                f.taken_over = True
+                self._event(f"{name}: user took over")
         self.user_mode = mode
         self._apply()
 
@@ -213,8 +233,10 @@ class Commander:
                     OFFBOARD_LOSS_ACTIONS.get(int(p["COM_OBL_RC_ACT"]), Action.HOLD),
                     clears=True, delayed=False)
         dl_loss_s = p["COM_DL_LOSS_T"]
+        # PX4: the data-link loss action ends on a mode change or disarm, not when the link
+        # comes back (an RTL flies on)
         self._check(now, DATALINK_LOST, in_air and inp.gcs_silent_s > dl_loss_s,
-                    DATALINK_LOSS_ACTIONS.get(int(p["NAV_DLL_ACT"]), Action.NONE), clears=True)
+                    DATALINK_LOSS_ACTIONS.get(int(p["NAV_DLL_ACT"]), Action.NONE), clears=False)
         self._check(now, GEOFENCE, in_air and inp.geofence_breach is not None,
                     GEOFENCE_ACTIONS.get(int(p["GF_ACTION"]), Action.NONE), clears=False,
                     detail=inp.geofence_breach)
@@ -250,9 +272,16 @@ class Commander:
                             f"{self.params['COM_FAIL_ACT_T']:g} s")
             else:
                 self._event(f"{text} → {action.name.lower()}")
-        elif not condition and active is not None and active.clears_with_condition:
-            del self._failsafes[name]
-            self._event(f"{name}: cleared")
+        elif not condition and active is not None:
+            if active.clears_with_condition:
+                del self._failsafes[name]
+                self._event(f"{name}: cleared")
+            elif active.taken_over or active.action is Action.WARN:
+                del self._failsafes[name]  # a new breach acts (or warns) again
+            else:
+                active.present = False  # ends at the next mode change or disarm
+        elif condition and active is not None:
+            active.present = True
 
     def _apply(self) -> None:
         """Set the effective mode from the user's and the failsafes'."""
@@ -267,6 +296,8 @@ class Commander:
                 return
             waiting = f.delayed and self._now - f.since_s < self.params["COM_FAIL_ACT_T"]
             mode = FlightMode.HOLD if waiting else ACTION_MODES[f.action]
+        deciding_before, self._failsafe_deciding = self._failsafe_deciding, \
+            f is not None and self.armed
         if mode is not self.mode:
             old, self.mode = self.mode, mode
             if f is not None and mode is ACTION_MODES.get(f.action):
@@ -274,6 +305,12 @@ class Commander:
             else:
                 self._event(f"mode {old.value} → {mode.value}")
             self.on_mode_change(mode, old)
+        elif self._failsafe_deciding and not deciding_before:
+            # a failsafe takes over the mode the vehicle already flies (its HOLD during the
+            # user's HOLD with a DO_REPOSITION under way): the mode starts again from here,
+            # so the vehicle stops instead of flying on
+            self._event(f"failsafe: {f.name} → {mode.value}")
+            self.on_mode_change(mode, mode)
 
     def complete(self, mode: FlightMode, then: FlightMode) -> None:
         """An auto mode finished its job (takeoff reached its altitude): the user's mode

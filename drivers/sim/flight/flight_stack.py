@@ -368,6 +368,7 @@ class FlightStack:
         self._now = now_s
         self._est = est
         self._health = health
+        self.navigator.set_time(now_s)
 
     def update_outer(self, now_s: float, dt_s: float, est: EstimatedState, health: Health,
                      height_agl_m: float, battery_fraction: float) -> None:

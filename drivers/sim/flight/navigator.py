@@ -21,7 +21,11 @@ the ground, a mission first takes off (to the first waypoint's altitude, at leas
 MIS_TAKEOFF_ALT), as PX4 does. Paused (HOLD) and resumed, it continues with the current item.
 
 Geofence (:meth:`Navigator.geofence_breach`): GF_MAX_HOR_DIST and GF_MAX_VER_DIST from home
-(0: off), and the uploaded fence's inclusion/exclusion polygons and circles.
+(0: off), and the uploaded fence (MAVLink mission type 1, :class:`Fence`): the horizontal
+position must be inside at least one inclusion polygon or circle (if there is any) and outside
+every exclusion polygon and circle. NAV_FENCE_RETURN_POINT is stored but not used (RTL returns
+home). As PX4's mission feasibility check, a mission with a waypoint outside an uploaded fence
+cannot start ("Geofence violation for waypoint N").
 
 Positions are local NED; global items are placed with PX4's projection about the local origin
 (:class:`~drivers.geo.GlobalOrigin`), altitudes relative to home or above mean sea level by the
@@ -37,16 +41,19 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+import shapely
 
 from drivers.base import FlightMode
 from drivers.geo import GlobalOrigin
 from drivers.geometry import wrap_pi, yaw_from_quat
 from drivers.mission import (
     GLOBAL_FRAMES,
+    MISSION_ERROR,
     RELATIVE_ALT_FRAMES,
     Cmd,
     Frame,
     MissionItem,
+    MissionRejected,
     MissionType,
 )
 from drivers.sim.flight.params import Parameters
@@ -57,6 +64,7 @@ NAN = float("nan")
 _TAKEOFF_DONE_M = 0.1  # TAKEOFF hands over to HOLD this close to its altitude (profile done)
 _YAW_TO_TARGET_MIN_M = 1.0  # closer than this, the heading is kept (no spinning on the spot)
 _MAX_DO_ITEMS_PER_TICK = 100  # DO_JUMP loops without a nav item must not hang the vehicle
+_MIN_CORNER_SPEED_M_S = 0.5  # a waypoint to be passed slower than this is stopped at
 
 
 class MissionState(enum.IntEnum):
@@ -169,6 +177,9 @@ class Navigator:
         self._rtl_stage = "climb"
         self._rtl_alt_down = 0.0
 
+        #: the uploaded geofence areas (None: no fence uploaded, or an empty one)
+        self._fence: Fence | None = None
+
     # ------------------------------------------------------------------------------------
     # Mission storage (MAVLink mission protocol)
     # ------------------------------------------------------------------------------------
@@ -178,8 +189,15 @@ class Navigator:
 
     def set_items(self, items: Sequence[MissionItem], mission_type: int = MissionType.MISSION,
                   ) -> None:
+        """Store an uploaded list. A fence that cannot be built (a polygon with fewer than three
+        vertices or inconsistent vertex counts, a circle without a positive radius, an area
+        without a position) is refused with :class:`MissionRejected` (MISSION_ERROR, as PX4
+        answers a bad fence upload); the previous list and fence stay."""
         kind = MissionType(mission_type)
-        self._lists[kind] = [item for item in sorted(items, key=lambda i: i.seq)]
+        ordered = sorted(items, key=lambda i: i.seq)
+        if kind is MissionType.FENCE:
+            self._fence = Fence.from_items(ordered, self.origin)  # raises before any change
+        self._lists[kind] = ordered
         self._ids[kind] = _mission_id(self._lists[kind])
         if kind is MissionType.MISSION:
             self.current = 0
@@ -223,11 +241,23 @@ class Navigator:
             if distance > limit:
                 return (f"first waypoint too far: {distance:.0f} m from home "
                         f"(MIS_DIST_1WP {limit:g} m)")
+        if self._fence is not None and self.home is not None:
+            # PX4's MissionFeasibilityChecker::checkGeofence: with a fence uploaded, every
+            # item with a position must lie inside it (and within GF_MAX_HOR/VER_DIST)
+            for item in items:
+                if item.is_nav and item.has_position:
+                    why = self.geofence_breach(self._position_of(item, self.home))
+                    if why is not None:
+                        return f"Geofence violation for waypoint {item.seq + 1} ({why})"
         return None
 
     # ------------------------------------------------------------------------------------
     # Mode changes and the tick
     # ------------------------------------------------------------------------------------
+
+    def set_time(self, now_s: float) -> None:
+        """The time of the commands that follow (events they cause carry it)."""
+        self._now = now_s
 
     def activate(self, mode: FlightMode, est: Estimate, landed: bool) -> None:
         """The effective mode became ``mode``: set up what it flies."""
@@ -540,7 +570,7 @@ class Navigator:
             if landed:
                 self._reached(item.seq)
                 self.current += 1
-                self._finish(est)
+                self._finish(est, landed=True)
                 return NavSetpoint(self._hold_setpoint())
             return self._land_tick(est, height_agl_m, self._item_target[:2])
         if self._stage == "wait":
@@ -566,7 +596,7 @@ class Navigator:
         if math.isfinite(desired_yaw):
             self._hold_yaw = desired_yaw
         yaw = self._slew_yaw(self._hold_yaw, dt)
-        if self._is_reached(item, est, line):
+        if self._is_reached(item, est, line, end_speed):
             if self._item_reached_at is None:
                 self._item_reached_at = self._now
                 if item.command == Cmd.NAV_LAND:
@@ -599,19 +629,22 @@ class Navigator:
                                      max(0.0, float(np.dot(line.velocity,
                                                            self._line.direction))))
 
-    def _finish(self, est: Estimate) -> None:
+    def _finish(self, est: Estimate, landed: bool = False) -> None:
         items = self._lists[MissionType.MISSION]
         self.current = max(0, len(items) - 1)
         if self._state is not MissionState.COMPLETE:
             self._state = MissionState.COMPLETE
             self._stage = "done"
-            ref = self._line.position if self._line is not None else est.position_ned_m
+            ref = self._line.position if self._line is not None and not landed \
+                else est.position_ned_m
             self._hold_pos = np.asarray(ref, dtype=float).copy()
             self._line = None
             self.events.append(NavEvent(self._now, "finished", self.current))
-            self._event("mission finished, loitering")
+            # PX4's texts: "Mission finished, landed" after a NAV_LAND, else loitering
+            self._event("mission finished, landed" if landed else "mission finished, loitering")
 
-    def _is_reached(self, item: MissionItem, est: Estimate, line: LineTracker) -> bool:
+    def _is_reached(self, item: MissionItem, est: Estimate, line: LineTracker,
+                    end_speed: float) -> bool:
         p = self.params
         target = self._item_target
         acc_rad = item.param2 if item.command == Cmd.NAV_WAYPOINT and _or(item.param2, 0) > 0 \
@@ -622,7 +655,7 @@ class Navigator:
             return False
         # a waypoint flown through counts when the vehicle is within the radius; one that is
         # stopped at, once the reference has arrived too
-        return self._corner_speed(item, 1.0) > 0 or line.done
+        return end_speed > 0 or line.done
 
     def _corner_speed(self, item: MissionItem, v_max: float) -> float:
         """Speed to pass ``item`` at: 0 to stop there, more when it is flown through towards
@@ -637,8 +670,11 @@ class Navigator:
         if float(np.linalg.norm(after)) < 1e-3:
             return 0.0
         cos_turn = float(np.dot(self._line.direction, _unit(after)))
-        return v_max * max(0.0, cos_turn) ** 2 * 0.5 + 0.5 * max(0.0, cos_turn) * \
+        speed = v_max * max(0.0, cos_turn) ** 2 * 0.5 + 0.5 * max(0.0, cos_turn) * \
             min(v_max, math.sqrt(self.params["MPC_ACC_HOR"] * self.params["NAV_ACC_RAD"]))
+        # a corner this slow is a stop: without the threshold a right angle off by a rounding
+        # error counted as flown through, reached a whole NAV_ACC_RAD early at cruise speed
+        return speed if speed >= _MIN_CORNER_SPEED_M_S else 0.0
 
     def _next_nav(self, start: int) -> MissionItem | None:
         items = self._lists[MissionType.MISSION]
@@ -839,9 +875,14 @@ class Navigator:
             return f"{horizontal:.0f} m from home, GF_MAX_HOR_DIST {max_h:g} m"
         if max_v > 0 and height > max_v:
             return f"{height:.0f} m above home, GF_MAX_VER_DIST {max_v:g} m"
-        return self._fence.breach(position_ned_m) if self._fence is not None else None
+        fence = self._fence
+        return fence.breach(float(position_ned_m[0]), float(position_ned_m[1])) \
+            if fence is not None else None
 
-    _fence = None
+    @property
+    def fence(self) -> Fence | None:
+        """The uploaded geofence's areas (None: none)."""
+        return self._fence
 
     def _publish(self) -> None:
         items = self._lists[MissionType.MISSION]
@@ -853,6 +894,141 @@ class Navigator:
 
     def _status(self) -> MissionStatus:
         return MissionStatus(0, 0, MissionState.NO_MISSION, False, 0, 0, 0)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class FenceArea:
+    """One inclusion or exclusion area of an uploaded geofence, in local NED (north, east)."""
+
+    inclusion: bool
+    shape: str  # "polygon" | "circle"
+    #: the area's number among the fence's polygons (or circles), in upload order
+    index: int
+    #: the mission items it was made of (sequence numbers)
+    seqs: tuple[int, ...]
+    #: polygons: a prepared shapely geometry (a self-intersecting outline is made valid with
+    #: the even-odd rule, as PX4's crossing-number test sees it)
+    geometry: shapely.Geometry | None = None
+    center_ne_m: tuple[float, float] = (0.0, 0.0)
+    radius_m: float = 0.0
+
+    @property
+    def name(self) -> str:
+        return f"{'inclusion' if self.inclusion else 'exclusion'} {self.shape} {self.index}"
+
+    def contains(self, north_m: float, east_m: float) -> bool:
+        """Whether the point is in the area. The boundary counts as allowed: inside an
+        inclusion area, outside an exclusion area."""
+        if self.geometry is None:
+            inside = math.hypot(north_m - self.center_ne_m[0], east_m - self.center_ne_m[1])
+            return inside <= self.radius_m if self.inclusion else inside < self.radius_m
+        if self.inclusion:
+            return bool(shapely.intersects_xy(self.geometry, north_m, east_m))
+        return bool(shapely.contains_xy(self.geometry, north_m, east_m))
+
+
+class Fence:
+    """An uploaded geofence (MAVLink mission type 1), built once per upload: the horizontal
+    position is inside when it is in at least one inclusion area (or there is none) and in no
+    exclusion area, as PX4's ``Geofence::isInsidePolygonOrCircle``."""
+
+    def __init__(self, areas: Sequence[FenceArea]) -> None:
+        self.areas = tuple(areas)
+        self.inclusions = tuple(a for a in self.areas if a.inclusion)
+        self.exclusions = tuple(a for a in self.areas if not a.inclusion)
+
+    @classmethod
+    def from_items(cls, items: Sequence[MissionItem], origin: GlobalOrigin) -> Fence | None:
+        """The fence of a list of fence items (sorted by seq); None if it has no area.
+        Raises :class:`MissionRejected` (MISSION_ERROR) for a malformed list."""
+        areas: list[FenceArea] = []
+        counts = {"polygon": 0, "circle": 0}
+        i = 0
+        while i < len(items):
+            item = items[i]
+            cmd = item.command
+            if cmd in (Cmd.NAV_FENCE_POLYGON_VERTEX_INCLUSION,
+                       Cmd.NAV_FENCE_POLYGON_VERTEX_EXCLUSION):
+                group = _polygon_group(items, i)
+                vertices = [_fence_point(v, origin) for v in group]
+                areas.append(FenceArea(cmd == Cmd.NAV_FENCE_POLYGON_VERTEX_INCLUSION, "polygon",
+                                       counts["polygon"], tuple(v.seq for v in group),
+                                       geometry=_polygon_geometry(vertices, group[0].seq)))
+                counts["polygon"] += 1
+                i += len(group)
+                continue
+            if cmd in (Cmd.NAV_FENCE_CIRCLE_INCLUSION, Cmd.NAV_FENCE_CIRCLE_EXCLUSION):
+                radius = item.param1
+                if not (math.isfinite(radius) and radius > 0):
+                    raise MissionRejected(f"fence item {item.seq}: circle radius (param1) must "
+                                          f"be positive, got {radius:g}", MISSION_ERROR,
+                                          item.seq)
+                areas.append(FenceArea(cmd == Cmd.NAV_FENCE_CIRCLE_INCLUSION, "circle",
+                                       counts["circle"], (item.seq,),
+                                       center_ne_m=_fence_point(item, origin),
+                                       radius_m=float(radius)))
+                counts["circle"] += 1
+            elif cmd != Cmd.NAV_FENCE_RETURN_POINT:  # the return point is not used
+                raise MissionRejected(f"fence item {item.seq}: command {cmd} is not a fence "
+                                      "item", MISSION_ERROR, item.seq)
+            i += 1
+        return cls(areas) if areas else None
+
+    def breach(self, north_m: float, east_m: float) -> str | None:
+        """Why the horizontal position is outside the fence (None: inside)."""
+        if self.inclusions and not any(a.contains(north_m, east_m) for a in self.inclusions):
+            if len(self.inclusions) == 1:
+                return f"outside the {self.inclusions[0].name}"
+            return "outside every inclusion area (" + ", ".join(
+                a.name.removeprefix("inclusion ") for a in self.inclusions) + ")"
+        for area in self.exclusions:
+            if area.contains(north_m, east_m):
+                return f"inside the {area.name}"
+        return None
+
+
+def _polygon_group(items: Sequence[MissionItem], start: int) -> list[MissionItem]:
+    """The vertices of the polygon that starts at ``items[start]`` (param1: vertex count)."""
+    first = items[start]
+    count = first.param1
+    if not (math.isfinite(count) and count == int(count) and count >= 3):
+        raise MissionRejected(f"fence item {first.seq}: a polygon needs at least 3 vertices "
+                              f"(param1 = {count:g})", MISSION_ERROR, first.seq)
+    group = list(items[start:start + int(count)])
+    for vertex in group:
+        if vertex.command != first.command or vertex.param1 != count:
+            raise MissionRejected(f"fence item {vertex.seq}: polygon from item {first.seq} "
+                                  f"should have {int(count)} vertices of command "
+                                  f"{first.command}", MISSION_ERROR, vertex.seq)
+    if len(group) < count:
+        raise MissionRejected(f"fence item {first.seq}: polygon of {int(count)} vertices has "
+                              f"only {len(group)}", MISSION_ERROR, first.seq)
+    return group
+
+
+def _fence_point(item: MissionItem, origin: GlobalOrigin) -> tuple[float, float]:
+    """(north, east) of a fence item's position."""
+    if not item.has_position:
+        raise MissionRejected(f"fence item {item.seq}: no position", MISSION_ERROR, item.seq)
+    if item.frame in GLOBAL_FRAMES:
+        north, east, _ = origin.to_ned(item.x, item.y, origin.alt_amsl_m)
+        return north, east
+    if item.frame == Frame.LOCAL_NED:
+        return float(item.x), float(item.y)
+    raise MissionRejected(f"fence item {item.seq}: frame {item.frame} is not supported",
+                          MISSION_ERROR, item.seq)
+
+
+def _polygon_geometry(vertices: list[tuple[float, float]], seq: int) -> shapely.Geometry:
+    geometry = shapely.make_valid(shapely.Polygon(vertices))
+    if not geometry.geom_type.endswith("Polygon"):  # e.g. lines left of a degenerate outline
+        parts = [g for g in shapely.get_parts(geometry) if g.geom_type == "Polygon"]
+        geometry = shapely.MultiPolygon(parts) if parts else shapely.Polygon()
+    if geometry.is_empty or geometry.area <= 1e-6:
+        raise MissionRejected(f"fence item {seq}: the polygon encloses no area",
+                              MISSION_ERROR, seq)
+    shapely.prepare(geometry)
+    return geometry
 
 
 def estimate_of(position_ned_m, velocity_ned_m_s, q_ned_frd) -> Estimate:

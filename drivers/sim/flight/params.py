@@ -47,6 +47,10 @@ class ParamSpec:
 
     def check(self, value: float) -> float:
         """``value`` as this parameter stores it; :class:`ParamError` if it cannot be."""
+        try:
+            value = float(value)
+        except (TypeError, ValueError):
+            raise ParamError(self.name, f"{value!r} is not a number") from None
         if not math.isfinite(value):
             raise ParamError(self.name, f"{value} is not a number")
         if self.type is ParamType.INT32:

@@ -1,0 +1,210 @@
+"""``autopilot doctor``: the preflight check of a companion computer's setup.
+
+Before a flight (or at boot, from systemd), it checks what a mission will rely on and prints one
+line per item with PASS, WARN or FAIL:
+
+* the MAVLink link: a vehicle answers (autopilot, type, ids), its telemetry comes at the rates
+  the autopilot needs, TIMESYNC round trips work, the vehicle reports itself armable, and the
+  link is signed where it crosses a network;
+* each camera: frames arrive at its rate and size, the intrinsics come from a calibration,
+  and how capture times are known (the vehicle's clock, RTCP, or arrival minus latency);
+* the clock (synchronised to NTP, so that logs and photos carry true times);
+* free disk space where runs are written.
+
+It flies nothing and commands nothing. Exit code 0 when nothing failed.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import dataclasses
+import math
+import shutil
+import subprocess
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+from autopilot.mission import MissionPlan
+from drivers.base import VehicleError
+
+#: telemetry the autopilot flies on: position samples per second (PASS at or above, FAIL below
+#: the second figure)
+POSITION_RATE_HZ = (20.0, 5.0)
+TIMESYNC_RTT_S = (0.05, 0.2)
+DISK_FREE_B = (5 << 30, 1 << 30)
+
+
+@dataclass(frozen=True, slots=True)
+class Check:
+    item: str
+    status: str  # PASS | WARN | FAIL
+    detail: str
+
+    def line(self) -> str:
+        return f"{self.status:<4}  {self.item:<16} {self.detail}"
+
+
+async def run_doctor(plan: MissionPlan, *, connect: str | None = None,
+                     video: str | None = None, calibration: Path | None = None,
+                     signing_key: Path | None = None, duration_s: float = 5.0,
+                     runs_dir: Path = Path("runs"),
+                     report: Callable[[Check], None] = lambda check: None) -> list[Check]:
+    """All the checks, each passed to ``report`` as it is made."""
+    from autopilot.run import make_vehicle
+
+    checks: list[Check] = []
+
+    def add(item: str, status: str, detail: str) -> None:
+        check = Check(item, status, detail)
+        checks.append(check)
+        report(check)
+
+    add(*_clock_check())
+    add(*_disk_check(runs_dir))
+    link = plan.config.link
+    url = connect or link.connect
+    vehicle, _ = make_vehicle(plan, connect=connect, video=video, calibration=calibration,
+                              signing_key=signing_key)
+    try:
+        await vehicle.connect(link.connect_timeout_s)
+    except VehicleError as exc:
+        add("link", "FAIL", str(exc))
+        await vehicle.close()
+        return checks
+    except OSError as exc:
+        add("link", "FAIL", str(exc))
+        return checks
+    try:
+        await _link_checks(vehicle, url, duration_s, add, signing=bool(
+            signing_key or link.signing_key))
+        for name in vehicle.cameras:
+            await _camera_checks(vehicle, name, video or link.video, duration_s,
+                                 calibration is not None, add)
+    finally:
+        await vehicle.close()
+    return checks
+
+
+async def _link_checks(vehicle, url: str, duration_s: float, add, *, signing: bool) -> None:
+    from drivers.base import FlightMode
+
+    autopilot = {12: "PX4", 3: "ArduPilot"}.get(getattr(vehicle, "autopilot", None) or 12,
+                                                "MAVLink")
+    target = getattr(vehicle, "_target", None)
+    ids = f"system {target[0]} component {target[1]}" if target else "ids unknown"
+    add("link", "PASS", f"{autopilot} vehicle, {ids}, on {url}")
+    samples, attitudes = [], set()
+    async with contextlib.aclosing(vehicle.telemetry(buffer=256)) as stream:
+        end = time.monotonic() + duration_s
+        with contextlib.suppress(TimeoutError):
+            async with asyncio.timeout(duration_s):
+                async for state in stream:
+                    samples.append(state)
+                    attitudes.add(state.attitude_time_s)
+                    if time.monotonic() > end:
+                        break
+    rate = len(samples) / duration_s
+    lo_pass, lo_fail = POSITION_RATE_HZ
+    status = "PASS" if rate >= lo_pass else "WARN" if rate >= lo_fail else "FAIL"
+    add("telemetry", status, f"position {rate:.0f} Hz, attitude updates "
+        f"{len(attitudes) / duration_s:.0f} Hz (the autopilot wants ≥ {lo_pass:g} Hz)")
+    rtt = getattr(vehicle, "time_sync_round_trip_s", math.inf)
+    good, bad = TIMESYNC_RTT_S
+    if math.isfinite(rtt):
+        status = "PASS" if rtt <= good else "WARN" if rtt <= bad else "FAIL"
+        add("time sync", status, f"TIMESYNC round trip {rtt * 1e3:.1f} ms; vehicle clock "
+            f"mapped with ±{rtt * 5e2:.1f} ms")
+    else:
+        add("time sync", "WARN", "no TIMESYNC answer: capture times use telemetry arrival "
+            "(less exact)")
+    if samples:
+        s = samples[-1]
+        health = s.health
+        problems = ", ".join(health.problems())
+        add("vehicle", "PASS" if health.armable else "WARN",
+            f"mode {s.mode.value}, {'armed' if s.armed else 'disarmed'}, "
+            f"battery {s.battery.remaining_fraction * 100:.0f} %, "
+            + ("armable" if health.armable else f"not armable: {problems}"))
+        if s.mode is FlightMode.UNKNOWN:
+            add("modes", "WARN", "the vehicle's flight mode is not one this autopilot knows")
+    network = not (url.startswith("serial:") or "127.0.0.1" in url or "localhost" in url)
+    if signing:
+        add("signing", "PASS", "MAVLink 2 signing on (unsigned messages are dropped)")
+    else:
+        add("signing", "WARN" if network else "PASS",
+            "unsigned, on a network address: anyone on that network can command the vehicle"
+            if network else "unsigned (local link)")
+
+
+async def _camera_checks(vehicle, name: str, url: str, duration_s: float, calibrated: bool,
+                         add) -> None:
+    info = vehicle.cameras[name]
+    frames = []
+    async with contextlib.aclosing(vehicle.frames(name)) as stream:
+        with contextlib.suppress(TimeoutError):
+            async with asyncio.timeout(duration_s):
+                async for frame in stream:
+                    frames.append((frame, vehicle.clock.now()))
+    if not frames:
+        source = getattr(vehicle, "video_sources", {}).get(name)
+        error = getattr(source, "error", None)
+        add(f"camera {name}", "FAIL", f"no frame from {url} in {duration_s:g} s"
+            + (f" ({error})" if error else ""))
+        return
+    rate = len(frames) / duration_s
+    height, width = frames[-1][0].image.shape[:2]
+    intr = info.intrinsics
+    size_ok = (width, height) == (intr.width_px, intr.height_px)
+    status = "PASS" if rate >= 0.8 * info.rate_hz and size_ok else "WARN"
+    add(f"camera {name}", status, f"{rate:.1f} fps of {info.rate_hz:g}, {width}×{height}"
+        + ("" if size_ok else f" (intrinsics are for {intr.width_px}×{intr.height_px})"))
+    add("calibration", "PASS" if calibrated else "WARN",
+        "from --calibration" if calibrated else "from the configuration's camera section "
+        "(nominal, not this camera's): pass --calibration FILE")
+    delays = sorted(arrived - frame.time_s for frame, arrived in frames)
+    source = getattr(vehicle, "video_sources", {}).get(name)
+    timing = getattr(source, "timing", None)
+    mode = str(getattr(timing, "mode", "arrival"))
+    detail = f"capture times from {mode}; capture → arrival p50 " \
+             f"{delays[len(delays) // 2] * 1e3:.0f} ms"
+    add("capture times", "PASS" if "arrival" not in mode else "WARN",
+        detail + ("" if "arrival" not in mode else
+                  " (assumed: link.camera_latency_s; measure it, see the README)"))
+
+
+def _clock_check() -> tuple[str, str, str]:
+    synced = None
+    if shutil.which("timedatectl"):
+        with contextlib.suppress(OSError, subprocess.SubprocessError):
+            out = subprocess.run(["timedatectl", "show", "-p", "NTPSynchronized", "--value"],
+                                 capture_output=True, text=True, timeout=5).stdout.strip()
+            synced = {"yes": True, "no": False}.get(out)
+    if synced is None and Path("/run/systemd/timesync/synchronized").exists():
+        synced = True
+    wall = time.strftime("%Y-%m-%d %H:%M:%S %Z")
+    if synced:
+        return "clock", "PASS", f"{wall}, synchronised (NTP)"
+    return "clock", "WARN", (f"{wall}, not known to be synchronised: logs and photos carry "
+                             "this machine's time (enable NTP, or a GPS time source)")
+
+
+def _disk_check(runs_dir: Path) -> tuple[str, str, str]:
+    where = runs_dir if runs_dir.exists() else Path.cwd()
+    free = shutil.disk_usage(where).free
+    good, bad = DISK_FREE_B
+    status = "PASS" if free >= good else "WARN" if free >= bad else "FAIL"
+    minutes = free / (50 << 20)  # a flight log with frames: ~50 MB a minute
+    return "disk", status, (f"{free / (1 << 30):.1f} GB free at {where.resolve()} "
+                            f"(~{minutes:.0f} min of flight logs with frames)")
+
+
+def summary_line(checks: list[Check]) -> str:
+    counts = {s: sum(c.status == s for c in checks) for s in ("PASS", "WARN", "FAIL")}
+    return f"{counts['PASS']} passed, {counts['WARN']} warnings, {counts['FAIL']} failed"
+
+
+def as_dicts(checks: list[Check]) -> list[dict]:
+    return [dataclasses.asdict(c) for c in checks]

@@ -1,0 +1,53 @@
+"""``autopilot doctor`` against the simulator served as a MAVLink vehicle with its video, and
+against nothing (real time, loopback, bounded by timeouts)."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+
+from autopilot.cli import main
+from autopilot.config import load_config
+from autopilot.doctor import run_doctor
+from autopilot.mission import load_mission
+from autopilot.sim_server import serve
+
+INSTANCE = 8
+VIDEO = "udp://127.0.0.1:5608"
+CONNECT = f"udpin://127.0.0.1:{14540 + INSTANCE}"
+
+
+def test_doctor_passes_a_healthy_vehicle_and_camera():
+    plan = load_mission("follow_ball", ["driver=pymavlink"])
+
+    async def main_():
+        stop = asyncio.Event()
+        server = asyncio.ensure_future(serve(
+            load_config(overrides=["sim.cameras.down.enabled=false"]), None, instance=INSTANCE,
+            video_url=VIDEO, log=lambda line: None, stop=stop))
+        try:
+            await asyncio.sleep(3.0)  # the simulator boots
+            return await run_doctor(plan, connect=CONNECT, video=VIDEO, duration_s=3.0)
+        finally:
+            stop.set()
+            await server
+
+    checks = {c.item: c for c in asyncio.run(main_())}
+    for item in ("link", "telemetry", "time sync", "vehicle", "signing", "camera front",
+                 "capture times"):
+        assert checks[item].status == "PASS", checks[item]
+    assert "system 9" in checks["link"].detail  # PX4 SITL: instance 8 is system 9
+    assert "vehicle-clock" in checks["capture times"].detail
+    assert checks["calibration"].status == "WARN"  # no --calibration given
+    assert "FAIL" not in {c.status for c in checks.values()}
+
+
+def test_doctor_fails_clearly_without_a_vehicle(capsys):
+    code = main(["doctor", "--connect", CONNECT, "--duration-s", "1", "--json",
+                 "--set", "link.connect_timeout_s=1"])
+    assert code == 1
+    report = json.loads(capsys.readouterr().out)
+    assert report["ok"] is False
+    link = next(c for c in report["checks"] if c["item"] == "link")
+    assert link["status"] == "FAIL"
+    assert "no autopilot heartbeat" in link["detail"]
