@@ -226,6 +226,11 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
         "stats": vars(runtime.stats) if runtime is not None else {},
         "log": "flight.mcap" if out_dir is not None else None,
     }
+    sources = getattr(vehicle, "video_sources", {})
+    if sources:  # how each network camera's capture times were known, and what arrived
+        summary["video"] = {name: {"timing": source.timing.as_dict(),
+                                   "stats": dataclasses.asdict(source.stats)}
+                            for name, source in sources.items()}
     if log.error is not None:
         summary["log_error"] = f"{type(log.error).__name__}: {log.error}"
     if runtime is not None:  # frames the log took, and those it had to drop

@@ -526,6 +526,7 @@ class FlightStack:
         self._phase = "ground"
         self._landing = False
         self._reset_controllers()
+        self.navigator.disarmed()
 
     def _event(self, text: str) -> None:
         self.events.append((self._now, text))

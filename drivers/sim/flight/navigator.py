@@ -156,6 +156,7 @@ class Navigator:
         self._state = MissionState.NO_MISSION
         self._stage = "idle"  # idle | takeoff | fly | wait | land | loiter | done
         self._inserted_takeoff = False  # the takeoff stage climbs before the first item
+        self._restart = False  # flown, then disarmed: the next MISSION starts at item 0
         self._line: LineTracker | None = None
         self._wait_until = math.inf
         self._item_target = np.zeros(3)
@@ -255,6 +256,13 @@ class Navigator:
     # Mode changes and the tick
     # ------------------------------------------------------------------------------------
 
+    def disarmed(self) -> None:
+        """The vehicle disarmed: a mission that was flown starts again from its first item
+        when MISSION is next activated (PX4's mission restart), at the default cruise speed."""
+        if self._state in (MissionState.ACTIVE, MissionState.PAUSED, MissionState.COMPLETE):
+            self._restart = True
+        self._speed_override = NAN
+
     def set_time(self, now_s: float) -> None:
         """The time of the commands that follow (events they cause carry it)."""
         self._now = now_s
@@ -270,14 +278,16 @@ class Navigator:
             self._reposition = None
             self._enter_hold(est, landed)
         elif mode is FlightMode.TAKEOFF:
+            self._speed_override = NAN  # PX4 resets the cruise speed on takeoff and RTL
             self._start_takeoff(est, self.takeoff_altitude_m())
         elif mode is FlightMode.LAND:
             self._land_xy = self._stopping_point(est, landed)[:2]
             self._hold_yaw = est.yaw_rad
         elif mode is FlightMode.MISSION:
-            if self._state is MissionState.COMPLETE:  # started again: from the beginning
+            if self._state is MissionState.COMPLETE or self._restart:  # from the beginning
                 self.current = 0
                 self._jumps.clear()
+                self._restart = False
             self._state = MissionState.ACTIVE
             self._stage = "idle"
             if landed:
