@@ -693,3 +693,35 @@ def test_commander_data_link_loss_action_stays_until_a_mode_change():
     cmd.update(_inputs(3.0, None))
     assert cmd.mode is FlightMode.HOLD
     assert cmd.failsafe is None
+
+
+@pytest.mark.parametrize(("action", "mode"), [(0, None), (2, FlightMode.LAND),
+                                              (3, FlightMode.RETURN)])
+def test_battery_critical_follows_com_low_bat_act(no_camera_config, action, mode):
+    """BAT_CRIT_THR reached in flight: COM_LOW_BAT_ACT 0 warns, 2 lands, 3 returns, after the
+    failsafe delay's hold. (Starts just above a raised threshold, so that a few seconds of
+    hover drain it.)"""
+    from ..conftest import sim_with
+
+    config = sim_with(no_camera_config, **{"battery.initial_fraction": 0.205,
+                                           "battery.low_fraction": 0.12,
+                                           "battery.critical_fraction": 0.20})
+
+    async def main():
+        async with flight(config, COM_LOW_BAT_ACT=action, COM_FAIL_ACT_T=1.0) as (drv, rec):
+            await drv.arm()
+            await drv.takeoff(3.0)
+            state = await wait_for_state(drv, lambda s: s.battery.remaining_fraction <= 0.20,
+                                         60.0, "battery critical")
+            assert state.in_air
+            await drv.clock.sleep(1.0 + 0.5)  # COM_FAIL_ACT_T, then the action
+            texts = [t for _, t in rec.texts]
+            assert any("battery critical" in t for t in texts), texts
+            if mode is None:
+                assert drv.latest_state.mode is FlightMode.HOLD  # warned, nothing else
+                assert not drv.latest_state.failsafe
+            else:
+                await wait_for_state(drv, lambda s: s.mode is mode and s.failsafe, 2.0,
+                                     f"{mode.value} after the delay")
+
+    run(main())

@@ -13,8 +13,9 @@ returns to what the user asked for. The same here:
   COM_DISARM_PRFLT), and the failsafe checks — offboard loss (COM_OF_LOSS_T → COM_OBL_RC_ACT),
   data-link loss (COM_DL_LOSS_T → NAV_DLL_ACT), geofence (GF_ACTION), battery (BAT_*_THR →
   COM_LOW_BAT_ACT), loss of the local position in the air (land).
-* A failsafe action other than a warning or an immediate stop holds first for COM_FAIL_ACT_T
-  seconds (PX4's "failsafe action delay": the user may take over), then acts.
+* A failsafe that returns or lands holds first for COM_FAIL_ACT_T seconds (PX4's "failsafe
+  action delay": the user may take over), then acts; offboard loss and a lost position act
+  at once, as in PX4.
 * Failsafes trigger on the rising edge of their condition, as PX4's ``CHECK_FAILSAFE``. Those
   that do not end by themselves (data link, geofence, battery, position loss) end on a mode
   change or disarm once their condition is gone (PX4's ``OnModeChangeOrDisarm``). A user's
@@ -243,12 +244,12 @@ class Commander:
         low_bat_act = int(p["COM_LOW_BAT_ACT"])
         critical = inp.battery_fraction <= p["BAT_CRIT_THR"]
         emergency = inp.battery_fraction <= p["BAT_EMERGEN_THR"]
-        critical_action = {0: Action.WARN, 2: Action.LAND, 3: Action.RTL}.get(low_bat_act,
+        critical_action = {1: Action.RTL, 2: Action.LAND, 3: Action.RTL}.get(low_bat_act,
                                                                              Action.WARN)
         self._check(now, BATTERY_CRITICAL, in_air and critical, critical_action, clears=False)
         self._check(now, BATTERY_EMERGENCY, in_air and emergency,
-                    Action.LAND if low_bat_act in (2, 3) else Action.WARN, clears=False,
-                    delayed=False)
+                    {1: Action.RTL, 2: Action.LAND, 3: Action.LAND}.get(low_bat_act, Action.WARN),
+                    clears=False)
         self._check(now, POSITION_LOST, in_air and not inp.health.local_position_ok,
                     Action.LAND, clears=False, delayed=False)
         if self.user_mode is FlightMode.RETURN and not inp.has_home:
