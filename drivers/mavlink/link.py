@@ -388,6 +388,22 @@ class _Datagrams(asyncio.DatagramProtocol):
         log.debug("MAVLink link: %s", exc)
 
 
+def unheard(message: str, link: MavlinkLink | None) -> str:
+    """``message`` (nothing heard from a vehicle), with what the link did hear instead."""
+    stats = link.stats if link is not None else None
+    if stats is None:
+        return message
+    if stats.bad_signature:
+        return (f"{message} ({stats.bad_signature} messages dropped for a missing or wrong "
+                "signature: is the signing key the vehicle's?)")
+    if stats.ignored:
+        return f"{message} ({stats.ignored} datagrams from other senders ignored)"
+    if stats.bad_data:
+        return (f"{message} ({stats.bad_data} unreadable frames: wrong baud rate, or not "
+                "MAVLink 2?)")
+    return message
+
+
 def _where(address) -> str:
     if isinstance(address, tuple) and len(address) == 2:
         return f"{address[0]}:{address[1]}"

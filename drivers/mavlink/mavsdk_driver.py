@@ -46,7 +46,7 @@ from drivers.base import (
 )
 from drivers.mavlink import px4
 from drivers.mavlink.common import MavlinkVehicle, cancel_all
-from drivers.mavlink.link import MavlinkLink, TimesyncRequests
+from drivers.mavlink.link import MavlinkLink, TimesyncRequests, unheard
 from drivers.mavlink.signing import Signing
 
 log = logging.getLogger(__name__)
@@ -116,8 +116,8 @@ class MavsdkDriver(MavlinkVehicle):
                 lambda data: loop.call_soon_threadsafe(self._to_vehicle, bytes(data)))
             self._system = await self._mavsdk.first_autopilot(timeout_s=timeout_s)
             if self._system is None:
-                raise VehicleNotFound(f"no autopilot heartbeat on {self.url} within "
-                                      f"{timeout_s:g} s")
+                raise VehicleNotFound(unheard(f"no autopilot heartbeat on {self.url} within "
+                                              f"{timeout_s:g} s", self._link))
             self._action = ActionAsync(self._system)
             self._telemetry_plugin = TelemetryAsync(self._system)
             self._direct = MavlinkDirectAsync(self._system)

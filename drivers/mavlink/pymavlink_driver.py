@@ -46,7 +46,7 @@ from drivers.base import (
 from drivers.geometry import quat_from_euler
 from drivers.mavlink import ardupilot, px4
 from drivers.mavlink.common import MavlinkVehicle, cancel_all
-from drivers.mavlink.link import MavlinkLink, TimesyncRequests
+from drivers.mavlink.link import MavlinkLink, TimesyncRequests, unheard
 from drivers.mavlink.signing import Signing
 
 log = logging.getLogger(__name__)
@@ -113,9 +113,10 @@ class PymavlinkDriver(MavlinkVehicle):
         try:
             await asyncio.wait_for(self._heard.wait(), timeout_s)
         except TimeoutError:
+            message = unheard(f"no autopilot heartbeat on {self.url} within {timeout_s:g} s",
+                              self._link)
             await self.close()
-            raise VehicleNotFound(f"no autopilot heartbeat on {self.url} within "
-                                 f"{timeout_s:g} s") from None
+            raise VehicleNotFound(message) from None
         except BaseException:
             await self.close()
             raise

@@ -188,7 +188,7 @@ def test_signing_with_a_wrong_key_or_none_is_refused(no_camera_config, driver_cl
     async def main():
         async with served(no_camera_config, signing=KEY) as (vehicle, face):
             # a wrong key: the driver hears nothing it can trust, the vehicle obeys nothing
-            with pytest.raises(ConnectionLost):
+            with pytest.raises(ConnectionLost, match="wrong signature: is the signing key"):
                 await driver_class(CLIENT_URL, signing=WRONG_KEY).connect(timeout_s=2.0)
             # no key at all: the driver hears the vehicle, but the vehicle drops what it sends
             keyless = driver_class(CLIENT_URL)
