@@ -208,7 +208,7 @@ def _dispatch(args: argparse.Namespace) -> int:
 
 def _failure_exit_code(exc: BaseException) -> int | None:
     """The exit code for a failure that is the world's, not a bug: one line, no traceback."""
-    from drivers.base import CameraUnavailable, VehicleNotFound
+    from drivers.base import CameraUnavailable, ConnectionLost, VehicleNotFound
 
     if isinstance(exc, VehicleNotFound):
         exc.args = (f"{exc}: is the vehicle on and sending there? (PX4 SITL and 'autopilot "
@@ -218,6 +218,8 @@ def _failure_exit_code(exc: BaseException) -> int | None:
         return EXIT_NO_VEHICLE
     if isinstance(exc, CameraUnavailable):
         return EXIT_RENDERING if exc.cause == "rendering" else EXIT_NO_VIDEO
+    if isinstance(exc, ConnectionLost):  # lost before the flight could start
+        return EXIT_NO_VEHICLE
     if isinstance(exc, ConnectionError | OSError) and _is_link_error(exc):
         return EXIT_LINK
     if isinstance(exc, RuntimeError) and "MUJOCO_GL" in str(exc):

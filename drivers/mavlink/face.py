@@ -45,7 +45,7 @@ from drivers.mavlink.face_mission import MissionServer
 from drivers.mavlink.face_params import ParamServer
 from drivers.mavlink.face_telemetry import DEFAULT_RATES_HZ, TelemetryEncoder, base_mode
 from drivers.mavlink.link import pack
-from drivers.mavlink.signing import Signing
+from drivers.mavlink.signing import Signing, refresh
 
 log = logging.getLogger(__name__)
 
@@ -116,6 +116,7 @@ class _Link(asyncio.DatagramProtocol):
     def send(self, msg) -> None:
         if self.transport is None or self.transport.is_closing():
             return
+        refresh(self.mav)
         self.transport.sendto(pack(self.mav, msg), self.peer)
 
 

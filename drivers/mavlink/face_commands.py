@@ -86,9 +86,14 @@ class CommandHandler:
             if q[0] >= 0.5:
                 await v.disarm(force=True)
             return ACCEPTED
-        if command in (mavlink.MAV_CMD_IMAGE_START_CAPTURE, mavlink.MAV_CMD_DO_DIGICAM_CONTROL):
-            shoot = command == mavlink.MAV_CMD_IMAGE_START_CAPTURE or q[4] >= 0.5
-            if shoot:
+        if command == mavlink.MAV_CMD_IMAGE_START_CAPTURE:  # p2 interval s, p3 count (0: ∞)
+            await v.start_photos(q[1], int(q[2]))
+            return ACCEPTED
+        if command == mavlink.MAV_CMD_IMAGE_STOP_CAPTURE:
+            await v.stop_photos()
+            return ACCEPTED
+        if command == mavlink.MAV_CMD_DO_DIGICAM_CONTROL:
+            if q[4] >= 0.5:  # param5: shoot
                 await v.take_photo()
             return ACCEPTED
         if command == mavlink.MAV_CMD_DO_SET_CAM_TRIGG_DIST:

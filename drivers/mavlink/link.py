@@ -27,6 +27,7 @@ import logging
 import math
 import os
 import re
+import socket
 import termios
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -34,7 +35,7 @@ from urllib.parse import urlsplit
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from drivers.mavlink.signing import Signing
+from drivers.mavlink.signing import Signing, refresh
 
 log = logging.getLogger(__name__)
 
@@ -42,7 +43,11 @@ log = logging.getLogger(__name__)
 GCS_SYSTEM_ID = 245
 ONBOARD_COMPONENT_ID = 191
 DEFAULT_BAUD = 57600
-_SERIAL = re.compile(r"^serial://(?P<device>/[^:]+)(?::(?P<baud>\d+))?$")
+_SERIAL = re.compile(r"^serial://(?P<device>/.+?)(?::(?P<baud>\d+))?$")
+#: what may wait for a slow port before newer frames are dropped (a 57600-baud radio moves
+#: ~5.7 kB/s: older setpoints queued behind more would arrive seconds late)
+MAX_PENDING_B = 8 << 10
+TCP_CONNECT_TIMEOUT_S = 10.0
 _URL_FORMS = ("udpin://HOST:PORT, udpout://HOST:PORT, tcpout://HOST:PORT, tcpin://HOST:PORT "
               "or serial:///dev/DEVICE[:BAUD]")
 
@@ -112,6 +117,8 @@ class LinkStats:
     bad_signature: int = 0
     #: datagrams from senders other than the locked-on vehicle
     ignored: int = 0
+    #: frames not sent because a slow serial or TCP link had too much waiting
+    dropped_out: int = 0
 
 
 class MavlinkLink:
@@ -184,10 +191,18 @@ class MavlinkLink:
             self._transport, _ = await loop.create_datagram_endpoint(
                 lambda: _Datagrams(self), local_addr=local)
             if e.kind == "udpout":
-                self.peer = (e.host, e.port)
+                # replies come from a numeric address: lock onto that, not onto a host name
+                infos = await loop.getaddrinfo(e.host, e.port, family=socket.AF_INET,
+                                               type=socket.SOCK_DGRAM)
+                self.peer = infos[0][4][:2]
                 self.lock(self.peer)  # only the vehicle we were told to talk to
         elif e.kind == "tcpout":
-            reader, writer = await asyncio.open_connection(e.host, e.port)
+            try:
+                reader, writer = await asyncio.wait_for(
+                    asyncio.open_connection(e.host, e.port), TCP_CONNECT_TIMEOUT_S)
+            except TimeoutError:
+                raise OSError(errno.ETIMEDOUT, f"no answer within {TCP_CONNECT_TIMEOUT_S:g} s") \
+                    from None
             self._stream(reader, writer)
         elif e.kind == "tcpin":
             connected = loop.create_future()
@@ -211,13 +226,16 @@ class MavlinkLink:
         self.peer = writer.get_extra_info("peername")
 
         async def read() -> None:
-            while True:
-                data = await reader.read(4096)
-                if not data:
-                    log.warning("%s: the vehicle closed the connection", self.endpoint)
+            try:
+                while data := await reader.read(4096):
+                    self._feed(data, self.peer)
+                log.warning("%s: the vehicle closed the connection", self.endpoint)
+            except OSError as exc:
+                log.warning("%s: the connection failed: %s", self.endpoint, exc)
+            finally:  # a listening link takes the vehicle's next connection
+                writer.close()
+                if self._transport is writer:
                     self._transport = None
-                    return
-                self._feed(data, self.peer)
 
         self._reader_task = asyncio.get_running_loop().create_task(read(), name="mavlink-tcp")
 
@@ -252,10 +270,17 @@ class MavlinkLink:
         except BlockingIOError:
             return
         except OSError as exc:
-            self._once("serial", logging.WARNING, "%s: %s", self.endpoint, exc)
-            return
+            data, error = b"", exc
+        else:
+            error = "hung up"
         if data:
             self._feed(data, self.peer)
+            return
+        # unplugged, or the other end closed: stop listening (a readable fd that never gives
+        # data would spin the loop); the driver's heartbeat watchdog declares the link lost
+        log.warning("%s: the serial port is gone (%s)", self.endpoint, error)
+        with contextlib.suppress(Exception):
+            asyncio.get_event_loop().remove_reader(self._serial_fd)
 
     def close(self) -> None:
         self._closed = True
@@ -324,6 +349,7 @@ class MavlinkLink:
         """Send ``msg`` (False if there is nobody to send it to yet, or the link is closed)."""
         if not self._can_send():
             return False
+        refresh(self.mav)
         return self._write(pack(self.mav, msg))
 
     def send_frame(self, frame: bytes) -> bool:
@@ -340,12 +366,18 @@ class MavlinkLink:
     def _write(self, data: bytes) -> bool:
         t = self._transport
         if self._serial_fd is not None:
+            if len(self._serial_out) > MAX_PENDING_B:
+                self.stats.dropped_out += 1  # the port is not keeping up: newer frames lose
+                return False
             self._serial_out += data
             self._serial_flush()
             return True
         if t.is_closing():
             return False
         if isinstance(t, asyncio.StreamWriter):
+            if t.transport.get_write_buffer_size() > MAX_PENDING_B:
+                self.stats.dropped_out += 1
+                return False
             t.write(data)
         else:  # a datagram transport (asyncio's own class does not derive DatagramTransport)
             t.sendto(data, self.peer)
@@ -368,8 +400,6 @@ class MavlinkLink:
             self._serial_out.clear()
         with contextlib.suppress(Exception):
             loop.remove_writer(fd)
-        if len(self._serial_out) > 1 << 20:  # a stuck port must not eat the memory
-            self._serial_out.clear()
 
     def _once(self, key: str, level: int, message: str, *args) -> None:
         if key not in self._warned:

@@ -47,7 +47,7 @@ from drivers.base import (
 from drivers.mavlink import px4
 from drivers.mavlink.common import MavlinkVehicle, cancel_all
 from drivers.mavlink.link import MavlinkLink, TimesyncRequests, unheard
-from drivers.mavlink.signing import Signing
+from drivers.mavlink.signing import Signing, refresh
 
 log = logging.getLogger(__name__)
 
@@ -59,6 +59,9 @@ _MODES = {"HOLD": FlightMode.HOLD, "TAKEOFF": FlightMode.TAKEOFF, "LAND": Flight
 _LOST = {"NO_SYSTEM", "CONNECTION_ERROR"}
 _GCS_OR_COMPANION = (6, 18)  # MAV_TYPE_GCS, MAV_TYPE_ONBOARD_CONTROLLER
 _MAV_AUTOPILOT_INVALID = 8
+#: MAV_COMP_ID_AUTOPILOT1: the flight controller (as MAVSDK, we take no other component for it:
+#: a gimbal or camera with its own heartbeat is not the vehicle)
+_AUTOPILOT_COMPONENT = 1
 
 
 class MavsdkDriver(MavlinkVehicle):
@@ -196,6 +199,8 @@ class MavsdkDriver(MavlinkVehicle):
         await cancel_all(self._tasks)
         self._tasks = []
         await self._close_cameras()
+        # no send may still be running on MAVSDK's objects when they are destroyed
+        await asyncio.to_thread(self._sender.shutdown, True, cancel_futures=True)
         if self._mavsdk is not None:
             mavsdk, self._mavsdk = self._mavsdk, None
             with contextlib.suppress(Exception):
@@ -208,7 +213,6 @@ class MavsdkDriver(MavlinkVehicle):
             self._link.close()
             self._link = None
             await asyncio.sleep(0)  # the transport lets go of its socket on the next turn
-        self._sender.shutdown(wait=False, cancel_futures=True)
         self._end_telemetry(self._error)
 
     # ------------------------------------------------------------------------------------
@@ -228,7 +232,7 @@ class MavsdkDriver(MavlinkVehicle):
     def _from_vehicle(self, msg, address) -> None:
         src = (msg.get_srcSystem(), msg.get_srcComponent())
         kind = msg.get_type()
-        if kind == "HEARTBEAT" and self._target is None and \
+        if kind == "HEARTBEAT" and self._target is None and src[1] == _AUTOPILOT_COMPONENT and \
                 msg.autopilot != _MAV_AUTOPILOT_INVALID and msg.type not in _GCS_OR_COMPANION:
             self._target = src
             self._link.lock(address)
@@ -392,5 +396,6 @@ class _Resigner:
             tx = self._tx
             tx.srcSystem, tx.srcComponent = msg.get_srcSystem(), msg.get_srcComponent()
             tx.seq = msg.get_seq()
+            refresh(tx)
             out.append(msg.pack(tx))
         return out

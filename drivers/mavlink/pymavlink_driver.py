@@ -53,6 +53,8 @@ log = logging.getLogger(__name__)
 
 MAV_AUTOPILOT_ARDUPILOTMEGA = 3
 MAV_AUTOPILOT_INVALID = 8
+#: MAV_COMP_ID_AUTOPILOT1: the flight controller (a gimbal or camera heartbeats too)
+AUTOPILOT_COMPONENT = 1
 #: Streams asked for on connect (message id → Hz).
 STREAM_RATES_HZ = {
     mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 30.0,
@@ -131,6 +133,9 @@ class PymavlinkDriver(MavlinkVehicle):
                 await self.close()
                 raise VehicleNotFound(f"no LOCAL_POSITION_NED from the vehicle on {self.url} "
                                      f"within {timeout_s:g} s") from None
+            except BaseException:
+                await self.close()
+                raise
 
     async def arm(self) -> None:
         await self._command("arm", mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1)
@@ -319,8 +324,9 @@ class PymavlinkDriver(MavlinkVehicle):
         src = (msg.get_srcSystem(), msg.get_srcComponent())
         kind = msg.get_type()
         if kind == "HEARTBEAT":
-            if msg.autopilot == MAV_AUTOPILOT_INVALID or msg.type in (6, 18):
-                return  # a ground station or companion computer, not the autopilot
+            if msg.autopilot == MAV_AUTOPILOT_INVALID or msg.type in (6, 18) or \
+                    (self._target is None and src[1] != AUTOPILOT_COMPONENT):
+                return  # a ground station, companion computer, gimbal…: not the autopilot
             if self._target is None:
                 self._target = src
                 self.autopilot = msg.autopilot
@@ -352,6 +358,11 @@ class PymavlinkDriver(MavlinkVehicle):
                         "onto the vehicle at system %d component %d", *src, *self._target)
 
     def _on_ack(self, msg) -> None:
+        target = (getattr(msg, "target_system", 0), getattr(msg, "target_component", 0))
+        ours = (self._link.mav.srcSystem, self._link.mav.srcComponent) if self._link else None
+        if (ours is not None and target[0] not in (0, ours[0])) or \
+                (ours is not None and target[1] not in (0, ours[1])):
+            return  # another client's answer on a shared link
         future = self._acks.get(msg.command)
         if future is not None and not future.done():
             future.set_result(msg.result)

@@ -15,7 +15,9 @@ from __future__ import annotations
 
 import hashlib
 import re
+import struct
 import time
+import types
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -59,7 +61,7 @@ class Signing:
 
     def apply(self, tx, rx) -> None:
         """Sign what ``tx`` (a pymavlink MAVLink) sends; accept only signed messages on ``rx``
-        (which may be the same object)."""
+        (which may be the same object). Call :func:`refresh` on ``tx`` before each send."""
         now = signing_timestamp()
         tx.signing.secret_key = self.key
         tx.signing.sign_outgoing = True
@@ -68,10 +70,43 @@ class Signing:
         rx.signing.secret_key = self.key
         rx.signing.timestamp = max(rx.signing.timestamp, now)
         rx.signing.allow_unsigned_callback = _allow_unsigned
+        # verify before believing a frame's timestamp (see _check_signature)
+        rx.check_signature = types.MethodType(_check_signature, rx)
+
+
+def refresh(mav) -> None:
+    """Keep a signing sender's timestamp on the clock: pymavlink only adds one tick per frame,
+    so a quiet or slow link would fall behind real time, and a peer that starts listening a
+    minute later would take its frames for replays."""
+    if mav.signing.sign_outgoing:
+        mav.signing.timestamp = max(mav.signing.timestamp, signing_timestamp())
 
 
 def _allow_unsigned(mav, msg_id: int) -> bool:
     return msg_id in UNSIGNED_ALLOWED
+
+
+def _check_signature(mav, msgbuf, src_system: int, src_component: int) -> bool:
+    """pymavlink's check, in the safe order: the signature first, the stream's timestamp after.
+    (pymavlink records a frame's timestamp before it checks the signature, so one forged frame
+    claiming the vehicle's ids and a far-future time would make every genuine frame after it
+    look like a replay.)"""
+    signing = mav.signing
+    digest = hashlib.sha256(signing.secret_key + bytes(msgbuf[:-6])).digest()[:6]
+    if digest != bytes(msgbuf[-6:]):
+        return False
+    low, high = struct.unpack("<IH", bytes(msgbuf[-12:-6]))
+    timestamp = low + (high << 32)
+    stream = (msgbuf[-13], src_system, src_component)
+    last = signing.stream_timestamps.get(stream)
+    if last is not None:
+        if timestamp <= last:
+            return False  # a replay
+    elif timestamp + 6_000_000 < max(signing.timestamp, signing_timestamp()):
+        return False  # a new stream more than a minute old
+    signing.stream_timestamps[stream] = timestamp
+    signing.timestamp = max(signing.timestamp, timestamp)
+    return True
 
 
 def key_from_bytes(raw: bytes, where: str = "key") -> bytes:

@@ -136,9 +136,9 @@ class SimDriver(Vehicle):
         await self._command("disarm", force)
 
     async def takeoff(self, altitude_m: float | None = None) -> None:
-        if altitude_m is not None:
-            await self._call("takeoff", self._require_sim().set_takeoff_altitude, altitude_m)
-        await self._command("takeoff")
+        """TAKEOFF to ``altitude_m`` for this takeoff (as NAV_TAKEOFF's altitude on PX4: the
+        MIS_TAKEOFF_ALT parameter is not changed), or to MIS_TAKEOFF_ALT."""
+        await self._command("takeoff", altitude_m)
 
     async def land(self) -> None:
         await self._command("land")
@@ -219,6 +219,14 @@ class SimDriver(Vehicle):
 
     async def take_photo(self) -> None:
         await self._command("take_photo")
+
+    async def start_photos(self, interval_s: float, count: int) -> None:
+        """IMAGE_START_CAPTURE: one photo, or ``count`` every ``interval_s`` (0: until
+        :meth:`stop_photos`)."""
+        await self._command("start_photos", interval_s, count)
+
+    async def stop_photos(self) -> None:
+        await self._command("stop_photos")
 
     async def set_trigger_distance(self, distance_m: float, trigger_now: bool = False) -> None:
         sim = self._require_sim()

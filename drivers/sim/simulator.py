@@ -35,7 +35,7 @@ from drivers.base import CameraInfo, ConnectionLost, Frame, Health, Setpoint, Ve
 from drivers.geo import GlobalOrigin
 from drivers.sim.camera import CameraRig, SimCamera
 from drivers.sim.config import SimConfig
-from drivers.sim.flight.flight_stack import CommandRejected, FlightStack
+from drivers.sim.flight.flight_stack import FlightStack
 from drivers.sim.flight.navigator import NavEvent
 from drivers.sim.flight.params import Parameters, config_defaults
 from drivers.sim.frames import q_enu_flu_to_ned_frd, quat_ned_frd_to_enu_flu
@@ -433,11 +433,6 @@ class Simulator:
         set_mission, set_mission_current, take_photo, gcs_heartbeat."""
         self.flight.observe(self.time_s, self._est, self.health())
         return getattr(self.flight, name)(*args)
-
-    def set_takeoff_altitude(self, altitude_m: float) -> None:
-        if not altitude_m > 0:
-            raise CommandRejected(f"takeoff altitude must be positive, got {altitude_m}")
-        self.set_param("MIS_TAKEOFF_ALT", altitude_m)
 
     def set_param(self, name: str, value: float) -> float:
         """Set a PX4 parameter (raises ParamError if refused); returns the stored value."""

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from autopilot.flight_ops import wait_for_state
-from drivers.base import CommandDenied, FlightMode, Health, VehicleState
+from drivers.base import CommandDenied, FlightMode, Health, Setpoint, VehicleState
 from drivers.geo import GlobalOrigin
 from drivers.mission import Cmd, Frame, MissionItem, MissionRejected, MissionType
 from drivers.sim.driver import SimDriver
@@ -21,7 +21,7 @@ from drivers.sim.flight.commander import Commander, Inputs
 from drivers.sim.flight.navigator import Estimate, MissionState, Navigator
 from drivers.sim.flight.params import ParamError, Parameters
 
-from .simtools import armable, run, simulator, take_off
+from .simtools import Offboard, armable, run, simulator, take_off
 
 NAN = float("nan")
 
@@ -723,5 +723,42 @@ def test_battery_critical_follows_com_low_bat_act(no_camera_config, action, mode
             else:
                 await wait_for_state(drv, lambda s: s.mode is mode and s.failsafe, 2.0,
                                      f"{mode.value} after the delay")
+
+    run(main())
+
+
+def test_camera_commands_and_trigger_distance_outside_missions(no_camera_config):
+    """IMAGE_START_CAPTURE as a command (interval and count), and DO_SET_CAM_TRIGG_DIST while a
+    companion computer flies in OFFBOARD: photos are not a mission-only thing."""
+    async def main():
+        async with flight(no_camera_config) as (drv, rec):
+            await take_off(drv, 3.0)
+            await drv.start_photos(1.0, 3)
+            await drv.clock.sleep(4.0)
+            times = [p.time_s for p in rec.photos]
+            assert len(times) == 3
+            assert np.diff(times) == pytest.approx([1.0, 1.0], abs=0.03)
+            offboard = Offboard(drv)
+            await offboard.start_holding_here()
+            await drv.set_trigger_distance(4.0)
+            offboard.setpoint = Setpoint.velocity_ned(2.0, 0.0, 0.0, yaw_rad=0.0)
+            await drv.clock.sleep(10.0)  # about 18 m north
+            await offboard.aclose()
+            distance = [p for p in rec.photos[3:]]
+            assert 3 <= len(distance) <= 5
+            gaps = np.diff([p.position_ned_m[0] for p in distance])
+            assert gaps == pytest.approx([4.0] * len(gaps), abs=0.2)
+
+    run(main())
+
+
+def test_a_takeoff_altitude_is_for_that_takeoff_only(no_camera_config):
+    async def main():
+        async with flight(no_camera_config) as (drv, _rec):
+            default = drv.param("MIS_TAKEOFF_ALT")
+            await take_off(drv, 4.0)
+            assert drv.latest_state.altitude_m == pytest.approx(4.0 + 0.095, abs=0.2)  # home
+            assert drv.param("MIS_TAKEOFF_ALT") == default  # NAV_TAKEOFF's altitude, not the
+            # parameter (a ground station's 30 m takeoff must not raise every mission's)
 
     run(main())

@@ -223,6 +223,9 @@ class FlightStack:
         self.commander.disarm("disarmed" + (" (forced)" if force else ""))
 
     def takeoff(self, altitude_m: float | None = None) -> None:
+        """TAKEOFF to ``altitude_m`` above home (this takeoff only; None: MIS_TAKEOFF_ALT)."""
+        if altitude_m is not None and not altitude_m > 0:
+            raise CommandRejected(f"takeoff altitude must be positive, got {altitude_m}")
         if not self.armed:
             raise CommandRejected("not armed")
         if not self._health.local_position_ok:
@@ -286,6 +289,12 @@ class FlightStack:
 
     def take_photo(self) -> None:
         self.navigator.take_photo()
+
+    def start_photos(self, interval_s: float, count: int) -> None:
+        self.navigator.start_photos(interval_s, count)
+
+    def stop_photos(self) -> None:
+        self.navigator.stop_photos()
 
     def gcs_heartbeat(self) -> None:
         """A ground station's HEARTBEAT arrived (for the data-link loss failsafe)."""
@@ -391,6 +400,8 @@ class FlightStack:
             gcs_silent_s=gcs_silent, geofence_breach=self.geofence_breach,
             has_home=self.navigator.home is not None))
         yaw_now = nav_est.yaw_rad
+        if self.armed:
+            self.navigator.camera_tick(now, nav_est)
         if not self.armed:
             self._phase = "ground"
             self._landing = False

@@ -202,6 +202,7 @@ class Navigator:
         self._ids[kind] = _mission_id(self._lists[kind])
         if kind is MissionType.MISSION:
             self.current = 0
+            self._restart = False
             self._jumps.clear()
             self._speed_override = NAN
             self._state = MissionState.NOT_STARTED if items else MissionState.NO_MISSION
@@ -219,6 +220,7 @@ class Navigator:
                              f"{len(items)} items)")
         self.current = seq
         self._jumps.clear()
+        self._restart = False  # the user's choice of item stands
         if self._state is MissionState.COMPLETE:
             self._state = MissionState.NOT_STARTED
         self._stage = "idle"
@@ -324,7 +326,6 @@ class Navigator:
         self._now = now
         self._est = est
         self._flying = flying
-        self._camera(now, est)
         mode = self._mode
         if mode is FlightMode.TAKEOFF:
             return self._takeoff_tick(dt, est, FlightMode.TAKEOFF)
@@ -630,8 +631,10 @@ class Navigator:
         self._reached(item.seq)
         self.current += 1
         self._events_current()
-        line = self._line
+        line, mode = self._line, self._mode
         self._run_do_items(est)
+        if self._mode is not mode:
+            return  # the next item changed the mode (NAV_RETURN_TO_LAUNCH): it flies on
         if self._line is not None and line is not None and self._line is not line and \
                 self._stage == "fly":
             # fly through: the new segment starts where the reference is, at its speed
@@ -732,6 +735,20 @@ class Navigator:
     # ------------------------------------------------------------------------------------
     # Camera triggering
     # ------------------------------------------------------------------------------------
+
+    def camera_tick(self, now: float, est: Estimate) -> None:
+        """Interval and distance triggering: every position-loop tick in flight, whatever the
+        mode (a survey flown in OFFBOARD triggers too)."""
+        self._now = now
+        self._camera(now, est)
+
+    def start_photos(self, interval_s: float, count: int) -> None:
+        """IMAGE_START_CAPTURE as a command: one photo, or ``count`` every ``interval_s``
+        (count 0: until IMAGE_STOP_CAPTURE)."""
+        self._start_photos(interval_s=interval_s, count=count)
+
+    def stop_photos(self) -> None:
+        self._photo_interval_s, self._photo_next_s, self._photos_left = 0.0, math.inf, 0
 
     def take_photo(self) -> None:
         self.events.append(NavEvent(self._now, "photo", self._photo_index))
