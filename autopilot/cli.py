@@ -57,9 +57,10 @@ def build_parser() -> argparse.ArgumentParser:
                      "udpout://HOST:PORT, tcpout://HOST:PORT, tcpin://HOST:PORT or "
                      "serial:///dev/DEVICE[:BAUD] (default link.connect, "
                      "udpin://127.0.0.1:14540)")
-    run.add_argument("--video", metavar="URL",
-                     help="the forward camera's video stream for MAVLink drivers (default "
-                     "link.video, udp://127.0.0.1:5600)")
+    run.add_argument("--video", action="append", metavar="[CAMERA=]URL",
+                     help="a camera's video stream for MAVLink drivers (repeatable; a bare URL "
+                     "is the mission's first camera's; default vehicle.cameras.NAME.video: "
+                     "front udp://127.0.0.1:5600, down udp://127.0.0.1:5601)")
     run.add_argument("--signing-key", metavar="FILE",
                      help="sign MAVLink 2 with this key and accept only signed messages "
                      "(64 hex digits, 32 raw bytes or a passphrase)")
@@ -69,9 +70,11 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--verbose", action="store_true",
                      help="show every log message (MAVSDK's and FFmpeg's too) on the terminal; "
                      "they always go to DIR/autopilot.log")
-    run.add_argument("--calibration", metavar="FILE",
-                     help="the video camera's intrinsics (OpenCV or ROS calibration YAML); "
-                     "default: the configuration's camera section")
+    run.add_argument("--calibration", action="append", metavar="[CAMERA=]FILE",
+                     help="a camera's intrinsics and distortion (OpenCV or ROS calibration "
+                     "YAML, e.g. from 'autopilot calibrate'; repeatable; a bare FILE is the "
+                     "mission's first camera's); default vehicle.cameras.NAME.calibration, "
+                     "else the nominal pinhole (with a warning)")
     _add_config_options(run)
 
     sim = commands.add_parser(
@@ -80,10 +83,12 @@ def build_parser() -> argparse.ArgumentParser:
                      help="put this mission's scenario (e.g. the moving ball) in the world")
     sim.add_argument("--instance", type=int, default=0, metavar="N",
                      help="PX4 SITL instance number: ports 14580+N, 18570+N (default 0)")
-    sim.add_argument("--video", default="udp://127.0.0.1:5600", metavar="URL",
-                     help="where the forward camera streams (H.264 in MPEG-TS; "
-                     "default udp://127.0.0.1:5600)")
-    sim.add_argument("--no-video", action="store_true", help="do not stream the camera")
+    sim.add_argument("--video", action="append", metavar="[CAMERA=]URL",
+                     help="where a camera streams (RTP H.264; repeatable; default: every "
+                     "camera to the address its vehicle.cameras.NAME.video names — front "
+                     "udp://127.0.0.1:5600, down udp://127.0.0.1:5601); a bare URL is the "
+                     "front camera's, and only the cameras given stream")
+    sim.add_argument("--no-video", action="store_true", help="do not stream any camera")
     sim.add_argument("--out", metavar="DIR", help="record ground truth into DIR/truth.mcap "
                      "(for 'autopilot score') and photos into DIR/photos/")
     sim.add_argument("--bind", default="127.0.0.1", metavar="HOST",
@@ -103,8 +108,10 @@ def build_parser() -> argparse.ArgumentParser:
     doctor.add_argument("--driver", choices=("mavsdk", "pymavlink"),
                         help="the MAVLink driver (default: the configuration's, else pymavlink)")
     doctor.add_argument("--connect", metavar="URL", help="MAVLink connection (as for run)")
-    doctor.add_argument("--video", metavar="URL", help="the camera's stream (as for run)")
-    doctor.add_argument("--calibration", metavar="FILE", help="the camera's intrinsics")
+    doctor.add_argument("--video", action="append", metavar="[CAMERA=]URL",
+                        help="a camera's stream (as for run)")
+    doctor.add_argument("--calibration", action="append", metavar="[CAMERA=]FILE",
+                        help="a camera's intrinsics (as for run)")
     doctor.add_argument("--signing-key", metavar="FILE", help="MAVLink 2 signing key")
     doctor.add_argument("--duration-s", type=float, default=5.0, metavar="S",
                         help="how long to measure rates (default 5)")
@@ -141,6 +148,52 @@ def build_parser() -> argparse.ArgumentParser:
                         help="the simulator's truth.mcap")
     _add_config_options(sim)
 
+    calibrate = commands.add_parser(
+        "calibrate", help="estimate a camera's intrinsics and lens distortion from views of a "
+        "chessboard or ChArUco board; writes OpenCV and ROS calibration YAML",
+        description="Find the board in every frame, keep sharp, varied views (no "
+        "near-duplicates), calibrate (dropping views that do not fit the others), report "
+        "the reprojection error and how much of the image and of the tilts the views "
+        "covered, and write the calibration.")
+    calibrate.add_argument(
+        "source", metavar="SOURCE", help="an image folder, a video file, or a live video: "
+        "udp://HOST:PORT (RTP H.264, as PX4 cameras and 'autopilot sim' send it), or "
+        "anything else OpenCV opens (rtsp://..., /dev/video0, a device number)")
+    calibrate.add_argument(
+        "--board", required=True, metavar="SPEC",
+        help="chessboard:COLSxROWS:SQUARE_M or charuco:COLSxROWS:SQUARE_M:MARKER_M:DICT. "
+        "COLS and ROWS count squares, not inner corners (for both: a chessboard with 9x6 "
+        "inner corners is 10x7); sizes in metres; DICT is OpenCV's (DICT_5X5_100, ...). "
+        "E.g. chessboard:10x7:0.025, charuco:11x8:0.03:0.022:DICT_5X5_100")
+    calibrate.add_argument(
+        "--out", required=True, metavar="FILE",
+        help="the OpenCV calibration YAML to write (what --calibration and "
+        "vehicle.cameras.NAME.calibration take); ROS's camera_info YAML is written next to "
+        "it as NAME_ros.yaml (cam.yaml: cam_ros.yaml) unless --ros-out says otherwise")
+    calibrate.add_argument("--ros-out", metavar="FILE",
+                           help="where the ROS camera_info YAML goes instead")
+    calibrate.add_argument("--camera-name", default="camera", metavar="NAME",
+                           help="camera_name in the ROS file (default camera)")
+    calibrate.add_argument(
+        "--frames", type=int, metavar="N",
+        help="read at most N frames (a live source: default 900, then it stops)")
+    calibrate.add_argument(
+        "--duration-s", type=float, metavar="S",
+        help="read for at most S seconds (a live source: default 60; Ctrl-C stops early and "
+        "calibrates with what was seen)")
+    calibrate.add_argument("--every", type=int, default=1, metavar="N",
+                           help="use every N-th frame or image only (default 1: all)")
+    calibrate.add_argument("--max-views", type=int, default=40, metavar="N",
+                           help="calibrate with at most N views, the most varied (default 40)")
+    calibrate.add_argument("--min-views", type=int, default=10, metavar="N",
+                           help="fail with fewer usable views than N (default 10)")
+    calibrate.add_argument("--fix-k3", action="store_true",
+                           help="fit k1 k2 p1 p2 only (k3 = 0: narrow lenses, few views)")
+    calibrate.add_argument("--rational", action="store_true",
+                           help="OpenCV's rational model, 8 coefficients (wide-angle lenses)")
+    calibrate.add_argument("--json", action="store_true",
+                           help="print one JSON object on stdout (progress still on stderr)")
+
     commands.add_parser("missions", help="list the shipped missions")
 
     bench = commands.add_parser("bench", help="run a benchmark")
@@ -151,13 +204,45 @@ def build_parser() -> argparse.ArgumentParser:
     sitl.add_argument("--realtime", action="store_true",
                       help="run against the wall clock instead of lockstep")
     _add_config_options(sitl)
-    follow = benches.add_parser(
-        "follow_ball", help="follow_ball, default and figure-8 2 m/s gusts scenarios: our "
-        "controller against the seed 001 and 003 rules")
-    follow.add_argument("--json", action="store_true", help="print one JSON object on stdout")
-    follow.add_argument("--mission", default="follow_ball", metavar="NAME|FILE")
-    follow.add_argument("--set", dest="overrides", action="append", default=[],
-                        metavar="KEY=VALUE", help="override a mission or configuration key")
+    for name, baselines in (("follow_ball", "the seed 001 and 003 rules"),
+                            ("follow_marker", "the seed 002 rule")):
+        follow = benches.add_parser(
+            name, help=f"{name}: default, hard (figure eight in gusts) and stress (random walk "
+            f"at 2.5 m/s, 3 m/s gusts) scenarios, our controller against {baselines}")
+        follow.add_argument("--json", action="store_true",
+                            help="print one JSON object on stdout")
+        follow.add_argument("--mission", default=name, metavar="NAME|FILE")
+        follow.add_argument("--scenario", dest="scenarios", action="append", default=None,
+                            metavar="NAME", help="only this scenario (repeatable)")
+        follow.add_argument("--set", dest="overrides", action="append", default=[],
+                            metavar="KEY=VALUE", help="override a mission or configuration key")
+
+    perception = benches.add_parser(
+        "perception", help="each detector on frames rendered from known poses, against truth: "
+        "ball (centre, range) and marker at 1, 3, 5 m and 0-60 degrees obliquity (position, "
+        "orientation, detection rate, time per frame)")
+    perception.add_argument("--json", action="store_true",
+                            help="print one JSON object on stdout")
+    perception.add_argument("--quick", action="store_true",
+                            help="a few frames per cell (what the test suite runs)")
+    perception.add_argument("--detector", dest="detectors", action="append", default=None,
+                            metavar="NAME", help="only this detector (repeatable: ball, marker)")
+    _add_config_options(perception)
+
+    calibration = benches.add_parser(
+        "calibration", help="'autopilot calibrate' on views of a ChArUco board and a "
+        "chessboard rendered by the simulated front camera (distortion, noise, motion blur) "
+        "from known poses: focal length, principal point and distortion against the truth, "
+        "reprojection error")
+    calibration.add_argument("--json", action="store_true",
+                             help="print one JSON object on stdout")
+    calibration.add_argument("--quick", action="store_true",
+                             help="the ChArUco board only, fewer views (what the test suite "
+                             "runs)")
+    calibration.add_argument("--save-views", metavar="DIR",
+                             help="also write the rendered views as PNG files, a folder per "
+                             "board (DIR/charuco, DIR/chessboard), for 'autopilot calibrate'")
+    _add_config_options(calibration)
 
     logging_bench = benches.add_parser(
         "logging", help="what writing flight.mcap (camera frames included) costs a lockstep "
@@ -201,7 +286,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def _dispatch(args: argparse.Namespace) -> int:
     handlers = {"run": _run, "sim": _sim, "doctor": _doctor, "report": _report, "video": _video,
-                "replay": _replay, "score": _score, "bench": _bench,
+                "replay": _replay, "score": _score, "bench": _bench, "calibrate": _calibrate,
                 "missions": lambda _args: _missions(), "validate": lambda a: _validate(a.file)}
     return handlers[args.command](args)
 
@@ -259,12 +344,12 @@ def _run(args: argparse.Namespace) -> int:
     print(f"mission {plan.mission.name} ({plan.source}); log in {out}", file=sys.stderr)
     summary = asyncio.run(fly(plan, out, realtime=args.realtime, progress=progress,
                               handle_signals=True, connect=args.connect, video=args.video,
-                              calibration=Path(args.calibration) if args.calibration else None,
+                              calibration=args.calibration,
                               record_video=args.record_video,
                               signing_key=Path(args.signing_key) if args.signing_key else None))
     if sys.stderr.isatty():
         sys.stderr.write("\n")
-    follow = summary["metrics"]["follow"]
+    follow = summary["metrics"].get("follow") or {}
     rtf = summary["metrics"]["sim"].get("real_time_factor")
     timing = (f"simulated {summary['sim_time_s']:.1f} s in {summary['wall_time_s']:.1f} s "
               f"(× {rtf:.1f})" if rtf else f"flew for {summary['wall_time_s']:.1f} s")
@@ -272,13 +357,14 @@ def _run(args: argparse.Namespace) -> int:
                                                 else ""), timing + _steal(summary)]
     if follow:
         lines.append("follow: " + ", ".join(
-            f"{k}={_fmt(follow[k])}" for k in ("detection_rate", "rms_range_error_m",
-                                               "rms_image_error_px", "max_lost_s")))
+            f"{k}={_fmt(follow.get(k))}" for k in ("detection_rate", "rms_range_error_m",
+                                                   "rms_image_error_px", "max_lost_s")))
     estimation = summary["metrics"].get("estimation") or {}
     if estimation:
-        lines.append("estimate: " + ", ".join(
-            f"{k}={_fmt(estimation[k])}" for k in ("rms_position_error_m",
-                                                   "rms_velocity_error_m_s", "within_2sigma")))
+        lines.append("estimate (as flown on): " + ", ".join(
+            f"{k}={_fmt(estimation.get(k))}" for k in (
+                "rms_position_error_m", "rms_velocity_error_m_s", "within_2sigma",
+                "coasting_share", "lost_share")))
     lat = summary["metrics"]["latency_ms"]
     if lat["samples"]:
         lines.append(f"latency: p50 {lat['p50']:.1f} ms, p95 {lat['p95']:.1f} ms")
@@ -356,8 +442,12 @@ def _sim(args: argparse.Namespace) -> int:
 
     route_library_logs()
     yield_cpu_to_other_processes()  # the vehicle's own hardware would not share our CPU
-    asyncio.run(serve(config, scenario, instance=args.instance,
-                      video_url=None if args.no_video else args.video,
+    from autopilot.cameras import parse_camera_options
+    from autopilot.sim_server import FROM_CONFIG
+
+    videos = None if args.no_video else (
+        parse_camera_options(args.video, "--video", "front") if args.video else FROM_CONFIG)
+    asyncio.run(serve(config, scenario, instance=args.instance, videos=videos,
                       out_dir=Path(args.out) if args.out else None,
                       log=lambda line: print(line, file=sys.stderr, flush=True),
                       host=args.bind, signing=signing))
@@ -378,8 +468,7 @@ def _doctor(args: argparse.Namespace) -> int:
     report = (lambda check: None) if args.json else (lambda check: print(check.line(),
                                                                          flush=True))
     checks = asyncio.run(run_doctor(
-        plan, connect=args.connect, video=args.video,
-        calibration=Path(args.calibration) if args.calibration else None,
+        plan, connect=args.connect, video=args.video, calibration=args.calibration,
         signing_key=Path(args.signing_key) if args.signing_key else None,
         duration_s=args.duration_s, report=report))
     if args.json:
@@ -430,10 +519,15 @@ def _score(args: argparse.Namespace) -> int:
     from autopilot.score import score
 
     metrics = score(Path(args.run_dir), Path(args.truth))
-    if not metrics:
-        print("no follow_ball step in this run, or no truth overlapping it", file=sys.stderr)
+    groups = {name: group for name, group in metrics.items()
+              if name != "steps" and isinstance(group, dict) and group}
+    if not groups:
+        print("no scored step in this run (follow_ball, follow_marker, …), or no truth "
+              "overlapping it", file=sys.stderr)
         return EXIT_FAILED
-    print("follow: " + ", ".join(f"{k}={_fmt(v)}" for k, v in metrics.items()))
+    for name, group in groups.items():
+        print(f"{name}: " + ", ".join(f"{k}={_fmt(v)}" for k, v in group.items()
+                                     if not isinstance(v, (dict, list))))
     print(f"updated {Path(args.run_dir) / 'summary.json'}")
     return EXIT_OK
 
@@ -471,15 +565,71 @@ def _validate(file: str) -> int:
     return EXIT_OK
 
 
+def _calibrate(args: argparse.Namespace) -> int:
+    from autopilot.calibrate import CalibrationOptions, format_summary, run
+
+    if args.max_views < 3 or args.min_views < 3 or args.min_views > args.max_views:
+        raise InputError(f"--min-views {args.min_views} / --max-views {args.max_views}: both "
+                         "at least 3, and --min-views not above --max-views")
+    options = CalibrationOptions(max_views=args.max_views, min_views=args.min_views,
+                                 fix_k3=args.fix_k3, rational=args.rational)
+
+    def log(message: str) -> None:
+        print(message, file=sys.stderr, flush=True)
+
+    result, out, ros = run(args.source, args.board, args.out, ros_out=args.ros_out,
+                           camera_name=args.camera_name, max_frames=args.frames,
+                           duration_s=args.duration_s, every=args.every, options=options,
+                           log=log)
+    if args.json:
+        print(json.dumps({**result.as_dict(), "source": args.source, "out": str(out),
+                          "ros_out": str(ros)}))
+    else:
+        print(format_summary(result))
+        print(f"wrote {out} (OpenCV) and {ros} (ROS camera_info)")
+    return EXIT_OK
+
+
 def _bench(args: argparse.Namespace) -> int:
     log = (lambda message: None) if args.json else \
         (lambda message: print(f"  {message}", file=sys.stderr, flush=True))
-    if args.bench == "follow_ball":
-        from autopilot.bench import follow_ball
+    if args.bench in ("follow_ball", "follow_marker"):
+        from autopilot.bench import follow
 
-        result = follow_ball.run_bench(args.mission, args.overrides, log)
-        print(json.dumps(result) if args.json else follow_ball.format_table(result))
+        known = follow.BENCHES[args.bench].scenarios
+        unknown = [s for s in args.scenarios or () if s not in known]
+        if unknown:
+            raise InputError(f"--scenario {unknown[0]}: no such scenario (known: "
+                             f"{', '.join(known)})")
+        result = follow.run_bench(args.bench, args.mission, args.overrides, log,
+                                  args.scenarios)
+        print(json.dumps(result) if args.json else follow.format_table(result))
         return EXIT_OK
+
+    if args.bench == "perception":
+        from autopilot.bench import perception as perception_bench
+
+        unknown = [d for d in args.detectors or () if d not in perception_bench.BENCHES]
+        if unknown:
+            raise InputError(f"--detector {unknown[0]}: no such detector (known: "
+                             f"{', '.join(perception_bench.BENCHES)})")
+        config = load_config(args.config, args.overrides)
+        result = perception_bench.run_bench(log, quick=args.quick, detectors=args.detectors,
+                                            config=config)
+        print(json.dumps(result) if args.json else perception_bench.format_table(result))
+        return EXIT_OK
+
+    if args.bench == "calibration":
+        from pathlib import Path
+
+        from autopilot.bench import calibration as calibration_bench
+
+        config = load_config(args.config, args.overrides)
+        result = calibration_bench.run_bench(
+            log, quick=args.quick, config=config,
+            save_dir=Path(args.save_views) if args.save_views else None)
+        print(json.dumps(result) if args.json else calibration_bench.format_table(result))
+        return EXIT_OK if all(r["met"] for r in result["required"].values()) else EXIT_FAILED
 
     if args.bench == "logging":
         from autopilot.bench import logging as logging_bench

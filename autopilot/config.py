@@ -3,7 +3,7 @@
 Validation happens once, at the boundary, before anything flies. Every problem is reported with
 the file, the line and the dotted key path, and what was expected, e.g.::
 
-    config.yaml:57: sim.cameras.front.width_px: Input should be greater than or equal to 16 (got 8)
+    config.yaml:17: vehicle.cameras.front.width_px: Input should be greater than or equal to 16
 """
 
 from __future__ import annotations
@@ -15,11 +15,20 @@ from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    ValidationInfo,
+    field_validator,
+    model_validator,
+)
+from pydantic_core import PydanticCustomError
 
 from autopilot.perception.colors import COLORS
 from autopilot.resources import default_config_path
-from drivers.sim.config import SimConfig
+from drivers.sim.config import CameraConfig, SimConfig
 
 KeyPath = tuple[str | int, ...]
 Positive = Annotated[float, Field(gt=0)]
@@ -60,8 +69,34 @@ class BallPerceptionConfig(_Model):
     min_fill_ratio: Annotated[float, Field(ge=0, le=1)]
 
 
+class MarkerPerceptionConfig(_Model):
+    """The followed fiducial marker (seed 002: ArUco id 36, 16 cm) and how it is found."""
+
+    camera: str
+    backend: Literal["aruco", "apriltag"]
+    #: OpenCV dictionary (DICT_ARUCO_ORIGINAL, DICT_4X4_50, DICT_APRILTAG_36h11, …) or an
+    #: AprilTag family (tag36h11, tag25h9, tag16h5)
+    dictionary: str
+    id: Annotated[int, Field(ge=0)]
+    size_m: Positive  # side of the black square
+    corner_refinement: Literal["edges", "subpix", "apriltag", "contour", "none"]
+    min_perimeter_px: Positive
+
+    @field_validator("dictionary")
+    @classmethod
+    def _known_dictionary(cls, name: str, info: ValidationInfo) -> str:
+        from autopilot.perception.marker import apriltag_family_name, aruco_dictionary_name
+
+        if info.data.get("backend") == "apriltag":
+            apriltag_family_name(name)
+        else:
+            aruco_dictionary_name(name)
+        return name
+
+
 class PerceptionConfig(_Model):
     ball: BallPerceptionConfig
+    marker: MarkerPerceptionConfig
 
 
 class TargetEstimationConfig(_Model):
@@ -77,15 +112,36 @@ class TargetEstimationConfig(_Model):
     confirm_after: Annotated[int, Field(ge=1, le=60)]
 
 
+class NavigationUncertaintyConfig(_Model):
+    """The vehicle's own pose errors (slowly varying), which every target placed in the world
+    with that pose inherits."""
+
+    position_std_m: NonNegative
+    attitude_std_deg: NonNegative  # roll and pitch
+    yaw_std_deg: NonNegative
+
+
+class MarkerEstimationConfig(_Model):
+    """Measurement noise of marker detections (the motion model is ``estimation.target``'s)."""
+
+    pixel_noise_px: Positive  # bearing noise of the marker's centre
+    size_noise_px: Positive  # noise of its side length in the image (range noise)
+    heading_noise_deg: Positive  # direction of its face, one clear detection
+    ambiguous_heading_noise_deg: Positive  # … when the two poses fit about equally well
+    heading_accel_noise_deg_s2: Positive  # how hard the face may turn
+
+
 class EstimationConfig(_Model):
     target: TargetEstimationConfig
+    marker: MarkerEstimationConfig
+    navigation: NavigationUncertaintyConfig
 
 
 class FollowControlConfig(_Model):
     mode: Literal["yaw", "lateral"]
     standoff_m: Annotated[float, Field(gt=0.3, le=20)]
     position_gain: Positive
-    yaw_gain: Positive
+    yaw_lead_s: NonNegative
     max_speed_m_s: Positive
     max_vertical_speed_m_s: Positive
     max_accel_m_s2: Positive
@@ -93,6 +149,7 @@ class FollowControlConfig(_Model):
     altitude_floor_m: NonNegative
     accel_lead_s: NonNegative
     accel_filter_s: Positive
+    sideways_feedforward: Annotated[float, Field(ge=0, le=1)]
     lost_after_s: Positive
     lost_hold_s: NonNegative
     search_yaw_rate_deg_s: Positive
@@ -114,17 +171,34 @@ class LogConfig(_Model):
 
 
 class LinkConfig(_Model):
-    """How the MAVLink drivers reach a vehicle and its camera (``--connect``, ``--video``)."""
+    """How the MAVLink drivers reach a vehicle (``--connect``); its cameras are in
+    ``vehicle.cameras``."""
 
     connect: str  # MAVLink URL: udpin://, udpout://, tcp://, serial://
     connect_timeout_s: Annotated[float, Field(gt=0, le=300)]
     #: a file holding the MAVLink 2 signing key (None: unsigned)
     signing_key: str | None = None
-    video: str  # the forward camera's stream (RTP H.264 udp://HOST:PORT, rtsp://, a device)
+
+
+class VehicleCameraConfig(CameraConfig):
+    """A camera of the vehicle: its geometry (what the simulator renders, and the nominal
+    intrinsics of an uncalibrated real camera), and how a MAVLink driver gets its frames."""
+
+    #: its video stream over MAVLink (RTP H.264 udp://HOST:PORT, rtsp://, a device)
+    video: str | None = None
     #: accept video only from this host (or host:port); None: lock onto the first sender
     video_source: str | None = None
-    #: capture → arrival of a camera whose stream carries no usable clock (see the README)
-    camera_latency_s: Annotated[float, Field(ge=0, lt=2)]
+    #: capture → arrival, for a stream whose packets carry no usable clock (see the README)
+    stream_latency_s: Annotated[float, Field(ge=0, lt=2)] = 0.0
+    #: OpenCV or ROS calibration YAML: the intrinsics and distortion the autopilot uses over
+    #: MAVLink (None: the nominal pinhole of the keys above, and a warning)
+    calibration: str | None = None
+
+
+class VehicleSetup(_Model):
+    """The vehicle's cameras (``vehicle.cameras``), shared by the simulator and MAVLink drivers."""
+
+    cameras: dict[str, VehicleCameraConfig]
 
 
 class AppConfig(_Model):
@@ -132,12 +206,30 @@ class AppConfig(_Model):
 
     driver: Literal["sim", "mavsdk", "pymavlink"]
     link: LinkConfig
+    vehicle: VehicleSetup
     runtime: RuntimeConfig
     perception: PerceptionConfig
     estimation: EstimationConfig
     control: ControlConfig
     log: LogConfig
-    sim: SimConfig
+    sim: SimConfig  # its cameras are vehicle.cameras
+
+    @model_validator(mode="before")
+    @classmethod
+    def _cameras_moved(cls, data: Any) -> Any:
+        sim = data.get("sim") if isinstance(data, dict) else None
+        if isinstance(sim, dict) and sim.get("cameras"):
+            raise PydanticCustomError(
+                "moved", "moved to vehicle.cameras (one section for the simulator and MAVLink "
+                "drivers alike)", {"key_path": ("sim", "cameras")})
+        return data
+
+    @model_validator(mode="after")
+    def _simulator_cameras(self) -> AppConfig:
+        # the simulator renders the vehicle's cameras (validated here, once)
+        object.__setattr__(self, "sim", self.sim.model_copy(
+            update={"cameras": dict(self.vehicle.cameras)}))
+        return self
 
 
 @dataclass(frozen=True, slots=True)
@@ -295,11 +387,16 @@ def validate(model: type[BaseModel], located: Located) -> Any:
         problems = []
         for err in exc.errors(include_url=False):
             loc = tuple(err["loc"])
+            moved = (err.get("ctx") or {}).get("key_path")  # a whole-model check naming a key
+            if moved:
+                loc = tuple(moved)
             source, line = located.locate(loc)
             if err["type"] == "extra_forbidden":
                 message = "unknown key"
             elif err["type"] == "missing":
                 message = "missing required key"
+            elif moved:
+                message = err["msg"]
             else:
                 message = f"{err['msg']} (got {_short(err.get('input'))})"
             problems.append(Problem(source, line, _dotted(loc), message))

@@ -23,7 +23,7 @@ import math
 import shutil
 import subprocess
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -48,7 +48,8 @@ class Check:
 
 
 async def run_doctor(plan: MissionPlan, *, connect: str | None = None,
-                     video: str | None = None, calibration: Path | None = None,
+                     video: str | Sequence[str] | None = None,
+                     calibration: str | Path | Sequence[str] | None = None,
                      signing_key: Path | None = None, duration_s: float = 5.0,
                      runs_dir: Path = Path("runs"),
                      report: Callable[[Check], None] = lambda check: None) -> list[Check]:
@@ -80,9 +81,8 @@ async def run_doctor(plan: MissionPlan, *, connect: str | None = None,
     try:
         await _link_checks(vehicle, url, duration_s, add, signing=bool(
             signing_key or link.signing_key))
-        for name in vehicle.cameras:
-            await _camera_checks(vehicle, name, video or link.video, duration_s,
-                                 calibration is not None, add)
+        for name, setup in getattr(vehicle, "camera_setups", {}).items():
+            await _camera_checks(vehicle, name, setup.url, duration_s, setup.calibration, add)
     finally:
         await vehicle.close()
     return checks
@@ -139,8 +139,8 @@ async def _link_checks(vehicle, url: str, duration_s: float, add, *, signing: bo
             if network else "unsigned (local link)")
 
 
-async def _camera_checks(vehicle, name: str, url: str, duration_s: float, calibrated: bool,
-                         add) -> None:
+async def _camera_checks(vehicle, name: str, url: str, duration_s: float,
+                         calibration: str | None, add) -> None:
     info = vehicle.cameras[name]
     frames = []
     async with contextlib.aclosing(vehicle.frames(name)) as stream:
@@ -161,9 +161,10 @@ async def _camera_checks(vehicle, name: str, url: str, duration_s: float, calibr
     status = "PASS" if rate >= 0.8 * info.rate_hz and size_ok else "WARN"
     add(f"camera {name}", status, f"{rate:.1f} fps of {info.rate_hz:g}, {width}×{height}"
         + ("" if size_ok else f" (intrinsics are for {intr.width_px}×{intr.height_px})"))
-    add("calibration", "PASS" if calibrated else "WARN",
-        "from --calibration" if calibrated else "from the configuration's camera section "
-        "(nominal, not this camera's): pass --calibration FILE")
+    add(f"calibration {name}", "PASS" if calibration else "WARN",
+        f"from {calibration}" if calibration else "none: the nominal pinhole of "
+        f"vehicle.cameras.{name} (not this camera's, no lens distortion): calibrate it "
+        f"(autopilot calibrate) and pass --calibration {name}=FILE")
     delays = sorted(arrived - frame.time_s for frame, arrived in frames)
     source = getattr(vehicle, "video_sources", {}).get(name)
     timing = getattr(source, "timing", None)
@@ -172,7 +173,8 @@ async def _camera_checks(vehicle, name: str, url: str, duration_s: float, calibr
              f"{delays[len(delays) // 2] * 1e3:.0f} ms"
     add("capture times", "PASS" if "arrival" not in mode else "WARN",
         detail + ("" if "arrival" not in mode else
-                  " (assumed: link.camera_latency_s; measure it, see the README)"))
+                  f" (assumed: vehicle.cameras.{name}.stream_latency_s; measure it, see the "
+                  "README)"))
 
 
 def _clock_check() -> tuple[str, str, str]:

@@ -24,13 +24,12 @@ configuration.
 from __future__ import annotations
 
 import copy
-import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from pydantic import Field, ValidationError
+from pydantic import Field, ValidationError, model_validator
 
 from autopilot.behaviors.base import (
     Behavior,
@@ -40,16 +39,7 @@ from autopilot.behaviors.base import (
     Status,
     VehicleRequest,
 )
-from autopilot.behaviors.flight import (
-    Hold,
-    HoldParams,
-    Land,
-    LandParams,
-    SafeStop,
-    Takeoff,
-    TakeoffParams,
-)
-from autopilot.behaviors.follow_ball import FollowBall, FollowBallParams, LostTargetSettings
+from autopilot.behaviors.flight import SafeStop
 from autopilot.config import (
     AppConfig,
     ColorName,
@@ -63,8 +53,9 @@ from autopilot.config import (
     load_yaml,
     validate,
 )
-from autopilot.control.follow import FollowSettings
+from autopilot.pipeline import PipelineSpec
 from autopilot.resources import default_config_path, missions_dir
+from autopilot.steps import STEP_KINDS, StepContext, step_kind
 from drivers.base import CameraInfo, Setpoint
 
 MISSION_KEYS = ("name", "description", "steps", "fallback", "scenario", "config")
@@ -83,8 +74,30 @@ class BallScenario(_Model):
     height_m: Annotated[float, Field(gt=0.1, le=50)] = 1.5  # of the ball's centre
     start_distance_m: Annotated[float, Field(gt=0.5, le=50)] = 2.0  # ahead of the vehicle
     start_delay_s: NonNegative = 0.0  # the ball waits this long before moving
-    accel_mps2: Annotated[float, Field(gt=0, le=50)] = 2.0  # then gets up to speed this fast
+    #: it gets up to speed this fast; on a random walk, its greatest acceleration
+    accel_mps2: Annotated[float, Field(gt=0, le=50)] = 2.0
     size_m: Annotated[float, Field(gt=0.5, le=100)] = 8.0  # extent of the path
+
+
+class MarkerScenario(_Model):
+    """A fiducial marker on a board (seed 002: ArUco id 36, 16 cm), moving like the ball."""
+
+    dictionary: str = "DICT_ARUCO_ORIGINAL"  # OpenCV dictionary or AprilTag family
+    id: Annotated[int, Field(ge=0)] = 36
+    size_m: Annotated[float, Field(gt=0.02, le=2)] = 0.16  # side of the black square
+    board_m: Annotated[float, Field(gt=0.02, le=3)] = 0.3  # the white board around it
+    path: Literal["static", "circle", "figure8", "lissajous", "random_walk"] = "static"
+    speed_mps: Annotated[float, Field(ge=0, le=15)] = 0.0
+    height_m: Annotated[float, Field(gt=0.1, le=50)] = 1.5  # of the marker's centre
+    start_distance_m: Annotated[float, Field(gt=0.3, le=50)] = 2.0  # ahead of the vehicle
+    start_delay_s: NonNegative = 0.0
+    #: as the ball's: getting up to speed, and a random walk's greatest acceleration
+    accel_mps2: Annotated[float, Field(gt=0, le=50)] = 2.0
+    path_size_m: Annotated[float, Field(gt=0.5, le=100)] = 6.0  # extent of the path
+    #: which way the board turns its face: to the drone, along its travel, against it (to a
+    #: follower behind it), or a fixed heading (yaw_deg; default: back towards the start)
+    facing: Literal["drone", "travel", "trail", "fixed"] = "drone"
+    yaw_deg: float | None = None
 
 
 class WindScenario(_Model):
@@ -94,9 +107,24 @@ class WindScenario(_Model):
 
 class Scenario(_Model):
     seed: Annotated[int, Field(ge=0)] = 0
-    ball: BallScenario = BallScenario()
-    distractors: Annotated[int, Field(ge=0, le=30)] = 0
+    ball: BallScenario | None = BallScenario()  # null: no ball
+    distractors: Annotated[int, Field(ge=0, le=30)] = 0  # orange-ish objects near the ball
+    marker: MarkerScenario | None = None
+    #: decoy markers beside the marker's path: how many (ids drawn from its dictionary), or
+    #: their ids
+    decoys: Annotated[int, Field(ge=0, le=30)] | list[Annotated[int, Field(ge=0)]] = 0
     wind: WindScenario = WindScenario()
+
+    @model_validator(mode="after")
+    def _marker_dictionary(self) -> Scenario:
+        if self.marker is not None:
+            from autopilot.perception.marker import aruco_dictionary_name
+
+            try:
+                aruco_dictionary_name(self.marker.dictionary)
+            except ValueError as exc:
+                raise ValueError(f"marker.dictionary: {exc}") from None
+        return self
 
 
 class Mission(_Model):
@@ -124,13 +152,22 @@ class MissionPlan:
     source: Path
 
 
-#: behaviour name → its parameter model
-STEP_PARAMS: dict[str, type[Params]] = {
-    "takeoff": TakeoffParams,
-    "follow_ball": FollowBallParams,
-    "land": LandParams,
-    "hold": HoldParams,
-}
+    def pipelines(self, index: int) -> tuple[PipelineSpec, ...]:
+        """The perception pipelines step ``index`` needs while it runs."""
+        step = self.steps[index]
+        return step_kind(step.name).pipelines(step.params, self.config)
+
+    def cameras_used(self) -> list[str]:
+        """The cameras any step's pipelines read, in the order the steps first use them."""
+        return list(dict.fromkeys(spec.camera for spec in self.all_pipelines().values()))
+
+    def all_pipelines(self) -> dict[str, PipelineSpec]:
+        """Every pipeline any step needs, by key (steps that share one share its state)."""
+        found: dict[str, PipelineSpec] = {}
+        for i in range(len(self.steps)):
+            for spec in self.pipelines(i):
+                found.setdefault(spec.key, spec)
+        return found
 
 
 # ------------------------------------------------------------------------------------------
@@ -211,13 +248,13 @@ def _validate_steps(raw_steps: list[dict[str, Any]], located: Located) -> tuple[
                                     "'- takeoff: {altitude_m: 2}'"))
             continue
         (name, params), = raw.items()
-        if name not in STEP_PARAMS:
+        if name not in STEP_KINDS:
             source, line = located.locate((*where, name))
             problems.append(Problem(source, line, _dotted((*where, name)),
-                                    f"unknown behaviour (known: {', '.join(STEP_PARAMS)})"))
+                                    f"unknown step kind (known: {', '.join(STEP_KINDS)})"))
             continue
         try:
-            steps.append(Step(name, STEP_PARAMS[name].model_validate(params or {})))
+            steps.append(Step(name, STEP_KINDS[name].params.model_validate(params or {})))
         except ValidationError as exc:
             for err in exc.errors(include_url=False):
                 loc = (*where, name, *err["loc"])
@@ -262,38 +299,8 @@ def _merge_located(base: Located, other: Located, prefix: tuple[str, ...]) -> Lo
 
 
 def build_behavior(step: Step, config: AppConfig, cameras: Mapping[str, CameraInfo]) -> Behavior:
-    if step.name == "takeoff":
-        return Takeoff(step.params)
-    if step.name == "land":
-        return Land(step.params)
-    if step.name == "hold":
-        return Hold(step.params)
-    if step.name == "follow_ball":
-        params: FollowBallParams = step.params
-        f = config.control.follow
-        camera_name = config.perception.ball.camera
-        if camera_name not in cameras:
-            raise ConfigError([Problem("config", None, "perception.ball.camera",
-                                       f"the vehicle has no camera {camera_name!r} "
-                                       f"(it has {', '.join(cameras) or 'none'})")])
-        follow = FollowSettings(
-            mode=params.mode or f.mode,
-            standoff_m=params.standoff_m or f.standoff_m,
-            position_gain=f.position_gain,
-            yaw_gain=f.yaw_gain,
-            max_speed_m_s=f.max_speed_m_s,
-            max_vertical_speed_m_s=f.max_vertical_speed_m_s,
-            max_accel_m_s2=f.max_accel_m_s2,
-            max_yaw_rate_rad_s=math.radians(f.max_yaw_rate_deg_s),
-            altitude_floor_m=f.altitude_floor_m,
-            accel_lead_s=f.accel_lead_s,
-            accel_filter_s=f.accel_filter_s,
-        )
-        lost = LostTargetSettings(f.lost_after_s, f.lost_hold_s,
-                                  math.radians(f.search_yaw_rate_deg_s), f.lost_timeout_s)
-        return FollowBall(params, follow, lost, cameras[camera_name],
-                          config.perception.ball.diameter_m)
-    raise AssertionError(f"no behaviour {step.name}")
+    """The behaviour that flies a step, as its registered kind builds it."""
+    return step_kind(step.name).behavior(step.params, StepContext(config, cameras))
 
 
 # ------------------------------------------------------------------------------------------
@@ -302,14 +309,33 @@ def build_behavior(step: Step, config: AppConfig, cameras: Mapping[str, CameraIn
 
 
 @dataclass(frozen=True, slots=True)
+class MissionEvent:
+    """Something the mission did, as the flight log keeps it (``/mission/events``).
+
+    ``kind``: ``step_started``, ``step_succeeded``, ``step_failed``, ``fallback_started``,
+    ``fallback_ended``, ``mission_completed``, ``aborted``, ``request_refused`` (the mission),
+    ``request`` and ``runtime`` (the runtime's own); ``step_index`` is the step's place in the
+    plan (−1 for the fallback and the mission as a whole); ``text`` is for people."""
+
+    kind: str
+    step_index: int
+    step: str
+    text: str
+
+    def __str__(self) -> str:
+        return self.text
+
+
+@dataclass(frozen=True, slots=True)
 class MissionOutput:
     setpoint: Setpoint | None
     requests: tuple[VehicleRequest, ...]
-    events: tuple[str, ...]
+    events: tuple[MissionEvent, ...]
     finished: bool
     status: str  # running | completed | failed | aborted
     step: str
     phase: str
+    step_index: int = -1  # the running step's place in the plan (−1: the fallback, or none)
 
 
 @dataclass
@@ -350,14 +376,23 @@ class MissionExecutor:
         if self._current is None:
             return self._output(None, (), [], "")
         return self._handle(self._current.request_failed(request, reason), inputs,
-                            [f"{request.kind.value} refused: {reason}"])
+                            [self._event("request_refused",
+                                         f"{request.kind.value} refused: {reason}")])
 
     def abort(self, reason: str, inputs: BehaviorInputs) -> MissionOutput:
         if self._in_fallback or self._current is None:
-            return self._output(None, (), [f"abort requested ({reason}): already stopping"], "")
+            return self._output(None, (), [self._event(
+                "aborted", f"abort requested ({reason}): already stopping")], "")
         self._status = "aborted"
         self._failure = reason
-        return self._enter_fallback(inputs, [f"aborted: {reason}"])
+        return self._enter_fallback(inputs, [self._event("aborted", f"aborted: {reason}")])
+
+    @property
+    def step_index(self) -> int:
+        return -1 if self._in_fallback or self._current is None else self._index
+
+    def _event(self, kind: str, text: str) -> MissionEvent:
+        return MissionEvent(kind, self.step_index, self.step_name, text)
 
     # -- internals --------------------------------------------------------------------------
 
@@ -367,17 +402,19 @@ class MissionExecutor:
             return self._output(out.setpoint, out.requests, events, out.phase)
         name = self._current.name
         if self._in_fallback:
-            events.append(f"{name} {out.status.value}" + (f": {out.reason}" if out.reason else ""))
+            events.append(self._event("fallback_ended", f"{name} {out.status.value}"
+                                      + (f": {out.reason}" if out.reason else "")))
             if out.status is Status.FAILED:
                 self._status = "failed"
             self._current = None
             return self._output(out.setpoint, out.requests, events, out.phase, finished=True)
         if out.status is Status.SUCCEEDED:
-            events.append(f"step {name} succeeded")
+            events.append(self._event("step_succeeded", f"step {name} succeeded"))
             return self._advance(inputs, events, out.setpoint)
         self._status = "failed"
         self._failure = f"{name}: {out.reason}"
-        return self._enter_fallback(inputs, [*events, f"step {name} failed: {out.reason}"])
+        return self._enter_fallback(inputs, [*events, self._event(
+            "step_failed", f"step {name} failed: {out.reason}")])
 
     def _advance(self, inputs: BehaviorInputs, events: list[str],
                  setpoint: Setpoint | None = None) -> MissionOutput:
@@ -386,18 +423,18 @@ class MissionExecutor:
             self._current = None
             if self._status == "running":
                 self._status = "completed"
-            events.append("mission completed")
+            events.append(MissionEvent("mission_completed", -1, "", "mission completed"))
             return self._output(setpoint, (), events, "", finished=True)
         self._current = self.behaviors[self._index]
-        events.append(f"step {self._current.name} started")
+        events.append(self._event("step_started", f"step {self._current.name} started"))
         return self._handle(self._current.activate(inputs), inputs, events)
 
-    def _enter_fallback(self, inputs: BehaviorInputs, events: list[str]) -> MissionOutput:
+    def _enter_fallback(self, inputs: BehaviorInputs, events: list) -> MissionOutput:
         self._in_fallback = True
         self._current = self.fallback()
-        events.append(f"fallback {self._current.name} started")
+        events.append(self._event("fallback_started", f"fallback {self._current.name} started"))
         return self._handle(self._current.activate(inputs), inputs, events)
 
     def _output(self, setpoint, requests, events, phase, finished=False) -> MissionOutput:
         return MissionOutput(setpoint, tuple(requests), tuple(events), finished, self._status,
-                             self.step_name, phase)
+                             self.step_name, phase, self.step_index)

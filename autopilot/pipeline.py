@@ -1,135 +1,93 @@
-"""Perception and estimation of the followed target, as one synchronous object.
+"""Perception pipelines: one camera's frames → detections → a tracked target.
 
-The runtime drives it in flight (detection in an executor, the rest on the loop) and
-``autopilot replay`` drives it over a logged flight, in the same order and with the same code:
+A pipeline is one synchronous object that the runtime drives in flight (detection in an
+executor, the rest on the loop) and ``autopilot replay`` drives over a logged flight, in the
+same order and with the same code:
 
-1. :meth:`TargetPipeline.hint` — where the tracked target should appear in a frame, from the
-   filter and the vehicle's pose at the frame's capture time (the detector searches there
+1. :meth:`Pipeline.hint` — where the tracked target should appear in a frame, from the
+   estimate and the vehicle's pose at the frame's capture time (the detector searches there
    first);
-2. :meth:`TargetPipeline.detect` — the ball in the frame (CPU-heavy, thread-safe to run
-   off the loop while nothing else touches the pipeline's detector);
-3. :meth:`TargetPipeline.estimate` — the detection placed in the world with the pose at capture
-   time, through the Kalman filter; returns the estimate record that the flight log keeps.
+2. :meth:`Pipeline.detect` — the target in the frame (CPU-heavy, thread-safe to run off the loop
+   while nothing else touches the pipeline's detector);
+3. :meth:`Pipeline.estimate` — the detection placed in the world with the pose at capture time,
+   through the pipeline's filter; returns the estimate record the flight log keeps;
+4. :meth:`Pipeline.target` — the estimate extrapolated to a moment (what a behaviour flies on).
 
-Telemetry reaches it through :meth:`TargetPipeline.add_state` as it arrives.
+Telemetry reaches it through :meth:`Pipeline.add_state` as it arrives. Each pipeline logs its
+per-frame records on ``/perception/<name>`` (:meth:`Pipeline.detection_record`) and its
+estimates on ``/estimation/target`` (with its name). Kinds of pipeline (ball, marker, …) are
+registered here by name (:func:`register`), so that steps declare the ones they need and replay
+can rebuild them from a log.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 
 from autopilot.config import AppConfig
-from autopilot.estimation.pose_history import PoseHistory
-from autopilot.estimation.target import TargetFilter, TargetFilterSettings, camera_measurement
-from autopilot.perception.ball import BallDetection, BallDetector, BallDetectorSettings
-from autopilot.perception.colors import COLORS
+from autopilot.estimation.target import TargetEstimate
 from drivers.base import CameraInfo, VehicleState
-from drivers.geometry import quat_to_matrix
+
+
+class Pipeline(Protocol):
+    name: str  # unique in a run; the log channel /perception/<name>
+    kind: str  # the registered kind ("ball", "marker", …)
+    camera: str  # the camera it reads
+
+    def add_state(self, state: VehicleState) -> None: ...
+
+    def hint(self, time_s: float, camera: CameraInfo) -> object | None: ...
+
+    def detect(self, image_bgr: np.ndarray, camera: CameraInfo, time_s: float,
+               hint: object | None) -> object | None: ...
+
+    def estimate(self, time_s: float, camera: CameraInfo, detection: object) -> dict | None: ...
+
+    def target(self, time_s: float) -> TargetEstimate | None: ...
+
+    def detection_record(self, seq: int, time_s: float, camera: str, detection: object | None,
+                         hint: object | None) -> dict: ...
+
+    def hint_from_record(self, record: dict) -> object | None:
+        """The hint a logged per-frame record carries (for replay)."""
 
 
 @dataclass(frozen=True, slots=True)
-class Hint:
-    """Where the tracker expects the ball in a frame, and how big."""
+class PipelineSpec:
+    """A pipeline a step needs: its kind, the camera it reads, and what scoring needs to know
+    of its target in the simulator's ground truth (the truth body's name, its size)."""
 
-    u_px: float
-    v_px: float
-    radius_px: float
+    kind: str
+    camera: str
+    truth_body: str = ""
+    target_size_m: float = 0.0
+    name: str = ""  # default: the kind
 
-
-def detector_settings(cfg: AppConfig) -> BallDetectorSettings:
-    ball = cfg.perception.ball
-    ranges = tuple(tuple(map(tuple, r)) for r in ball.hsv_ranges) if ball.hsv_ranges \
-        else COLORS[ball.color][1]
-    return BallDetectorSettings(
-        hsv_ranges=ranges, diameter_m=ball.diameter_m, open_kernel_px=ball.open_kernel_px,
-        close_kernel_px=ball.close_kernel_px, min_radius_px=ball.min_radius_px,
-        max_radius_px=ball.max_radius_px, min_circularity=ball.min_circularity,
-        min_fill_ratio=ball.min_fill_ratio)
+    @property
+    def key(self) -> str:
+        return self.name or self.kind
 
 
-def filter_settings(cfg: AppConfig) -> TargetFilterSettings:
-    t = cfg.estimation.target
-    return TargetFilterSettings(
-        accel_noise_m_s2=t.accel_noise_m_s2, gate_chi2=t.gate_chi2,
-        stale_after_s=t.stale_after_s, initial_velocity_std_m_s=t.initial_velocity_std_m_s,
-        max_extrapolation_s=t.max_extrapolation_s, pixel_noise_px=t.pixel_noise_px,
-        radius_noise_px=t.radius_noise_px, restart_after=t.restart_after,
-        confirm_after=t.confirm_after)
+Factory = Callable[[AppConfig, PipelineSpec], Pipeline]
+_FACTORIES: dict[str, Factory] = {}
 
 
-class TargetPipeline:
-    def __init__(self, cfg: AppConfig) -> None:
-        self.detector = BallDetector(detector_settings(cfg))
-        self.filter_settings = filter_settings(cfg)
-        self.filter = TargetFilter(self.filter_settings)
-        self.history = PoseHistory()
-        self.border_noise_scale = cfg.estimation.target.border_noise_scale
-
-    def add_state(self, state: VehicleState) -> None:
-        self.history.add(state)
-
-    def hint(self, time_s: float, camera: CameraInfo) -> Hint | None:
-        """Where the tracked target should appear in a frame captured at ``time_s``."""
-        if self.filter.is_stale(time_s):
-            return None
-        est = self.filter.estimate(time_s)
-        pose = self.history.pose_at(time_s)
-        if est is None or pose is None:
-            return None
-        r_wb = quat_to_matrix(pose.attitude_q)
-        p_cam = camera.rotation_body_cam.T @ (
-            r_wb.T @ (est.position_ned_m - pose.position_ned_m) - camera.position_body_m)
-        if p_cam[2] <= 0.1:
-            return None
-        u, v = camera.intrinsics.project(p_cam)
-        radius = camera.intrinsics.fx * self.detector.settings.diameter_m / 2.0 / \
-            float(np.linalg.norm(p_cam))
-        return Hint(float(u), float(v), radius)
-
-    def detect(self, image_bgr: np.ndarray, camera: CameraInfo, time_s: float,
-               hint: Hint | None) -> BallDetection | None:
-        if hint is None:
-            return self.detector.detect(image_bgr, camera, time_s)
-        return self.detector.detect(image_bgr, camera, time_s, (hint.u_px, hint.v_px),
-                                    hint.radius_px)
-
-    def estimate(self, time_s: float, camera: CameraInfo,
-                 detection: BallDetection) -> dict | None:
-        """Fuse a detection; the flight log's estimate record, or None when the vehicle's pose
-        at capture time is unknown (the detection is then not used)."""
-        pose = self.history.pose_at(time_s)
-        if pose is None:
-            return None
-        meas = camera_measurement(
-            detection.position_cam_m, detection.range_m, detection.radius_px, camera, pose,
-            self.filter_settings, time_s,
-            noise_scale=self.border_noise_scale if detection.cut_by_border else 1.0)
-        result = self.filter.update(meas)
-        est = self.filter.estimate(time_s)
-        std = np.sqrt(np.diag(est.covariance))
-        return {"time_s": time_s, "measurement_time_s": time_s,
-                "accepted": result.accepted, "reinitialised": result.reinitialised,
-                "mahalanobis2": result.mahalanobis2,
-                "measured_position_ned_m": meas.position_ned_m,
-                "position_ned_m": est.position_ned_m, "velocity_ned_m_s": est.velocity_ned_m_s,
-                "position_std_m": std[:3], "velocity_std_m_s": std[3:],
-                "position_cov_m2": est.covariance[:3, :3].reshape(-1),
-                "updates": est.updates}
+def register(kind: str, factory: Factory) -> None:
+    _FACTORIES[kind] = factory
 
 
-def detection_record(seq: int, time_s: float, camera: str, det: BallDetection | None,
-                     hint: Hint | None) -> dict:
-    """The flight log's record of one processed frame."""
-    record = {"time_s": time_s, "seq": seq, "camera": camera, "detected": det is not None,
-              "hint_u_px": hint.u_px if hint else None,
-              "hint_v_px": hint.v_px if hint else None,
-              "hint_radius_px": hint.radius_px if hint else None}
-    if det is None:
-        return {**record, "u_px": None, "v_px": None, "radius_px": None, "range_m": None,
-                "position_cam_m": [None] * 3, "score": None, "candidates": 0,
-                "cut_by_border": False}
-    return {**record, "u_px": det.u_px, "v_px": det.v_px, "radius_px": det.radius_px,
-            "range_m": det.range_m, "position_cam_m": det.position_cam_m, "score": det.score,
-            "candidates": det.candidates, "cut_by_border": det.cut_by_border}
+def make_pipeline(config: AppConfig, spec: PipelineSpec) -> Pipeline:
+    try:
+        factory = _FACTORIES[spec.kind]
+    except KeyError:
+        raise ValueError(f"no perception pipeline of kind {spec.kind!r} "
+                         f"(known: {', '.join(sorted(_FACTORIES))})") from None
+    return factory(config, spec)
+
+
+def pipeline_kinds() -> list[str]:
+    return sorted(_FACTORIES)

@@ -5,12 +5,15 @@ The flight cannot change (the vehicle flew where it flew), so what a replay can 
 detector and the filter would have seen *that* flight: the detection metrics and the estimate
 errors (against the simulator's ground truth, when the log has it).
 
-It drives the same :class:`~autopilot.pipeline.TargetPipeline` the runtime drives, in the order
-the runtime did: telemetry is added as it arrived (its logged arrival time), the detector's
-search hint is taken when the frame arrived, the estimate after the detection finished. The
-frames are the logged JPEGs, not the camera's raw images, so detections can differ by a
-fraction of a pixel; without overrides the detection figures come out the same and the
-estimate errors within a percent (``tests/integration/test_replay.py``).
+It rebuilds every perception pipeline the flight's steps used (from the plan record: kind,
+camera; settings from the — possibly changed — configuration) and drives each in the order the
+runtime did: telemetry is added as it arrived (its logged arrival time), the detector's search
+hint is taken when the frame arrived, the estimate after the detection finished, and the target
+is taken at each logged control tick as the behaviour would have seen it. The frames are the
+logged JPEGs, not the camera's raw images, so detections can differ by a fraction of a pixel;
+without overrides the detection figures come out the same and the estimate errors within a
+percent (``tests/integration/test_replay.py``). Metrics are chosen per step by the registry, as
+for the flight.
 """
 
 from __future__ import annotations
@@ -33,8 +36,9 @@ from autopilot.config import (
 )
 from autopilot.flightlog import records as ch
 from autopilot.flightlog.log import read_images, read_log_checked
-from autopilot.flightlog.metrics import estimation_metrics, follow_metrics
-from autopilot.pipeline import TargetPipeline, detection_record
+from autopilot.pipeline import Pipeline, PipelineSpec, make_pipeline
+from autopilot.steps import STEP_KINDS
+from autopilot.steps.metrics import mission_metrics, plan_steps
 
 #: The follow metrics a replay recomputes (the others describe the flight itself).
 DETECTION_KEYS = ("detection_rate", "frames_in_view", "frames_processed",
@@ -52,26 +56,115 @@ def replay(run_dir: Path, overrides: Sequence[str] = ()) -> dict:
         raise ReplayError(f"{path}: no such file (a run folder holds flight.mcap)")
     records, complete = read_log_checked(path)
     plan = (records.get(ch.MISSION_PLAN) or [None])[0]
-    if plan is None or not isinstance(plan.get("config"), dict):
+    if plan is None or not isinstance(plan.get("config"), dict) or not plan_steps(records):
         raise ReplayError(f"{path}: the log has no {ch.MISSION_PLAN} record with the flight's "
-                          "configuration (written by an older autopilot?)")
+                          "configuration and steps (written by an older autopilot?)")
     source = f"{path} (the flight's configuration)"
-    cfg: AppConfig = validate(AppConfig, apply_overrides(Located(plan["config"], source, {}),
+    logged = dict(plan["config"])
+    sim = logged.get("sim")
+    if isinstance(sim, dict) and sim.get("cameras"):
+        # the simulator's cameras are vehicle.cameras: a log from before they moved there
+        # kept them under sim (and a log never needs both)
+        sim = dict(sim)
+        cameras = sim.pop("cameras")
+        logged["sim"] = sim
+        if not (logged.get("vehicle") or {}).get("cameras"):
+            logged["vehicle"] = {**(logged.get("vehicle") or {}), "cameras": cameras}
+    cfg: AppConfig = validate(AppConfig, apply_overrides(Located(logged, source, {}),
                                                          overrides))
-    camera_name = plan["camera"]
-    if cfg.perception.ball.camera != camera_name:
-        raise ConfigError([Problem("--set", None, "perception.ball.camera",
-                                   f"a replay uses the flight's camera ({camera_name!r})")])
-    info = next((c for c in records.get(ch.CAMERA_INFO, []) if c["name"] == camera_name), None)
-    if info is None:
-        raise ReplayError(f"{path}: no {ch.CAMERA_INFO} record for camera {camera_name!r}")
-    camera = ch.camera_info_from_record(info)
+    specs = _flown_pipelines(records, cfg)
+    if not specs:
+        raise ReplayError(f"{path}: no step of this flight used a perception pipeline")
+    replayed = dict(records)
+    estimates, ticks = [], []
+    frames_replayed = frames_flown = 0
+    for spec in specs.values():
+        result = _replay_pipeline(path, records, make_pipeline(cfg, spec), spec)
+        replayed[ch.detection_topic(spec.key)] = result.detections
+        estimates += result.estimates
+        ticks += result.ticks
+        frames_replayed += len(result.detections)
+        frames_flown += result.flown
+    if not frames_replayed:
+        cameras = ", ".join(sorted({s.camera for s in specs.values()}))
+        raise ReplayError(f"{path}: no logged camera frames of {cameras} to replay "
+                          "(frames are logged by default in the simulator; on a vehicle set "
+                          "log.frames.vehicle_rate_hz)")
+    replayed[ch.TARGET_ESTIMATES] = sorted(estimates, key=lambda r: r["time_s"])
+    replayed[ch.CONTROL_TARGET] = sorted(ticks, key=lambda r: r["time_s"])
+    # the flight's own figures over the same frames (equal to summary.json's when every
+    # frame was logged)
+    as_flown = dict(records)
+    for key in specs:
+        done = {ch.time_key(r["time_s"]) for r in replayed[ch.detection_topic(key)]}
+        as_flown[ch.detection_topic(key)] = [
+            r for r in records.get(ch.detection_topic(key), []) if ch.time_key(r["time_s"]) in done]
+    now, then = mission_metrics(replayed), mission_metrics(as_flown)
+    return {
+        "status": "replayed",
+        "mission": plan.get("mission"),
+        "source": str(run_dir),
+        "overrides": list(overrides),
+        "log_complete": complete,
+        "frames": {"replayed": frames_replayed, "in_flight": frames_flown},
+        "metrics": _replay_groups(now),
+        "flight_metrics": _replay_groups(then),
+    }
 
-    flown = {ch.time_key(r["time_s"]): r for r in records.get(ch.BALL_DETECTIONS, [])}
+
+def _replay_groups(metrics: dict) -> dict:
+    """The groups a replay can tell about: detection figures and the estimation."""
+    follow = metrics.get("follow") or {}
+    return {"follow": {k: follow.get(k) for k in DETECTION_KEYS} if follow else {},
+            "estimation": metrics.get("estimation") or {}}
+
+
+def _flown_pipelines(records, cfg: AppConfig) -> dict[str, PipelineSpec]:
+    """The pipelines the flight's steps used, as logged; a configuration change that would
+    move one to another camera is refused (the frames are the flight's)."""
+    specs: dict[str, PipelineSpec] = {}
+    for step in plan_steps(records):
+        for p in step.get("pipelines") or []:
+            spec = PipelineSpec(p["kind"], p["camera"], p.get("truth_body", ""),
+                                p.get("size_m") or 0.0, p["name"])
+            specs.setdefault(spec.key, spec)
+        kind = STEP_KINDS.get(step["name"])
+        if kind is None:
+            continue
+        try:
+            params = kind.params.model_validate(step.get("params") or {})
+        except ValueError:
+            continue
+        for now in kind.pipelines(params, cfg):
+            flown = specs.get(now.key)
+            if flown is not None and flown.camera != now.camera:
+                raise ConfigError([Problem("--set", None, f"{now.kind} camera",
+                                           f"a replay uses the flight's camera "
+                                           f"({flown.camera!r}), not {now.camera!r}")])
+    return specs
+
+
+class _Replayed:
+    def __init__(self) -> None:
+        self.detections: list[dict] = []
+        self.estimates: list[dict] = []
+        self.ticks: list[dict] = []
+        self.flown = 0
+
+
+def _replay_pipeline(path: Path, records, pipeline: Pipeline, spec: PipelineSpec) -> _Replayed:
+    out = _Replayed()
+    info = next((c for c in records.get(ch.CAMERA_INFO, []) if c["name"] == spec.camera), None)
+    if info is None:
+        raise ReplayError(f"{path}: no {ch.CAMERA_INFO} record for camera {spec.camera!r}")
+    camera = ch.camera_info_from_record(info)
+    flown_rows = records.get(ch.detection_topic(spec.key), [])
+    out.flown = len(flown_rows)
+    flown = {ch.time_key(r["time_s"]): r for r in flown_rows}
     states = records.get(ch.VEHICLE_STATE, [])  # in arrival order
     arrival = [s.get("received_s", s["time_s"]) for s in states]
-    pipeline = TargetPipeline(cfg)
-    next_state = 0
+    ticks = [r for r in records.get(ch.CONTROL_TARGET, []) if r.get("pipeline") == spec.key]
+    next_state = next_tick = 0
 
     def telemetry_until(time_s: float) -> None:
         nonlocal next_state
@@ -79,53 +172,46 @@ def replay(run_dir: Path, overrides: Sequence[str] = ()) -> dict:
             pipeline.add_state(ch.vehicle_state_from_record(states[next_state]))
             next_state += 1
 
-    detections, estimates, replayed_ns = [], [], set()
-    for image in read_images(path, camera_name):
+    def control_until(time_s: float) -> None:
+        """The control ticks before ``time_s``: the target as the behaviour would have had it."""
+        nonlocal next_tick
+        while next_tick < len(ticks) and ticks[next_tick]["time_s"] < time_s:
+            tick = ticks[next_tick]
+            out.ticks.append(_tick_record(tick, pipeline.target(tick["time_s"])))
+            next_tick += 1
+
+    for image in read_images(path, spec.camera):
         live = flown.get(ch.time_key(image.time_s))
         if live is None:
-            continue  # logged but never processed in flight (the run ended)
+            continue  # logged but never processed in flight (the step was not running)
         frame = cv2.imdecode(np.frombuffer(image.jpeg, np.uint8), cv2.IMREAD_COLOR)
         if frame is None:
             raise ReplayError(f"{path}: the frame at {image.time_s:.3f} s is not a valid JPEG")
         telemetry_until(live.get("received_s", image.time_s))
         hint = pipeline.hint(image.time_s, camera)
         detection = pipeline.detect(frame, camera, image.time_s, hint)
-        telemetry_until(live.get("detected_s", image.time_s))
-        detections.append(detection_record(live["seq"], image.time_s, camera.name, detection,
-                                           hint))
-        replayed_ns.add(ch.time_key(image.time_s))
+        detected_s = live.get("detected_s", image.time_s)
+        telemetry_until(detected_s)
+        control_until(detected_s)
+        out.detections.append(pipeline.detection_record(live["seq"], image.time_s, camera.name,
+                                                        detection, hint))
         if detection is not None:
             estimate = pipeline.estimate(image.time_s, camera, detection)
             if estimate is not None:
-                estimates.append(estimate)
-    if not detections:
-        raise ReplayError(f"{path}: no logged camera frames of {camera_name!r} to replay "
-                          "(frames are logged by default in the simulator; on a vehicle set "
-                          "log.frames.vehicle_rate_hz)")
+                out.estimates.append(estimate)
+    control_until(math.inf)
+    return out
 
-    flight_frames = [r for r in records.get(ch.BALL_DETECTIONS, [])
-                     if ch.time_key(r["time_s"]) in replayed_ns]
-    replayed = {**records, ch.BALL_DETECTIONS: detections, ch.TARGET_ESTIMATES: estimates}
-    as_flown = {**records, ch.BALL_DETECTIONS: flight_frames}
-    follow = follow_metrics(replayed)
-    return {
-        "status": "replayed",
-        "mission": plan.get("mission"),
-        "source": str(run_dir),
-        "overrides": list(overrides),
-        "log_complete": complete,
-        "frames": {"replayed": len(detections), "in_flight": len(flown)},
-        "metrics": {
-            "follow": {k: follow.get(k) for k in DETECTION_KEYS} if follow else {},
-            "estimation": estimation_metrics(replayed),
-        },
-        # the same frames as flown, for comparison (equal to summary.json's when every
-        # frame was logged)
-        "flight_metrics": {
-            "follow": {k: v for k, v in follow_metrics(as_flown).items() if k in DETECTION_KEYS},
-            "estimation": estimation_metrics(records),
-        },
-    }
+
+def _tick_record(tick: dict, est) -> dict:
+    record = {k: tick.get(k) for k in ("time_s", "pipeline", "step", "step_index")}
+    record["present"] = est is not None
+    if est is not None:
+        record.update(position_ned_m=est.position_ned_m.tolist(),
+                      velocity_ned_m_s=est.velocity_ned_m_s.tolist(),
+                      position_std_m=est.position_std_m.tolist(), age_s=est.age_s,
+                      stale=est.stale, confirmed=est.confirmed)
+    return record
 
 
 def format_replay(result: dict) -> str:

@@ -10,17 +10,19 @@ import json
 import math
 import signal
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
+from autopilot.cameras import camera_setups, parse_camera_options
 from autopilot.config import ConfigError, Problem
 from autopilot.flightlog import records as ch
 from autopilot.flightlog.log import FlightLog
-from autopilot.flightlog.metrics import estimation_metrics, follow_metrics, latency_metrics
+from autopilot.flightlog.metrics import latency_metrics
 from autopilot.flightlog.records import clean
 from autopilot.mission import MissionPlan
 from autopilot.process import StealMeter
 from autopilot.runtime import Runtime
+from autopilot.steps.metrics import mission_metrics
 from drivers.base import CameraUnavailable, Vehicle
 
 
@@ -37,15 +39,19 @@ def default_out_dir(plan: MissionPlan, root: Path = Path("runs")) -> Path:
 
 
 def make_vehicle(plan: MissionPlan, *, realtime: bool = False, connect: str | None = None,
-                 video: str | None = None, calibration: Path | None = None,
-                 signing_key: Path | None = None) -> tuple[Vehicle, int | None]:
+                 video: str | Sequence[str] | None = None,
+                 calibration: str | Path | Sequence[str] | None = None,
+                 signing_key: Path | None = None,
+                 warn: Callable[[str], None] | None = None) -> tuple[Vehicle, int | None]:
     """The vehicle the configuration's ``driver`` names, and the simulator's seed (if any).
 
-    MAVLink drivers get the forward camera as a network video stream; its intrinsics come from
-    ``calibration`` (an OpenCV or ROS calibration file) if given, else from the configuration's
-    camera section, which also gives its mounting. Everything given is checked here, before
-    anything opens: a malformed URL or an unreadable key file is an input error
-    (:class:`~autopilot.config.ConfigError`) that names the option and what was expected."""
+    MAVLink drivers get each camera the mission uses as its own network video stream
+    (:mod:`autopilot.cameras`: ``vehicle.cameras.NAME.video``, or ``video``), with the
+    intrinsics of its calibration file (``calibration``, or ``vehicle.cameras.NAME.calibration``)
+    or, uncalibrated, the nominal ones and a warning (passed to ``warn``). Everything given is
+    checked here, before anything opens: a malformed URL or an unreadable key file is an input
+    error (:class:`~autopilot.config.ConfigError`) that names the option and what was
+    expected."""
     driver = plan.config.driver
     if driver == "sim":
         from autopilot.scenario import build_world  # MuJoCo loads only when the simulator flies
@@ -56,57 +62,52 @@ def make_vehicle(plan: MissionPlan, *, realtime: bool = False, connect: str | No
     if driver in ("pymavlink", "mavsdk"):
         from drivers.mavlink.link import Endpoint, UrlError
         from drivers.mavlink.signing import Signing, SigningKeyError
-        from drivers.video import VideoSource, check_video_url
+        from drivers.video import VideoSource
 
         link = plan.config.link
         url = connect or link.connect
-        video_url = video or link.video
         key = signing_key or (Path(link.signing_key) if link.signing_key else None)
+        problems = []
         try:
             Endpoint.parse(url)
         except UrlError as exc:
-            raise ConfigError([Problem("command line", None, "--connect", str(exc))]) from None
+            problems.append(Problem("command line", None, "--connect", str(exc)))
+        used = plan.cameras_used()
+        first = used[0] if used else None
+        setups = []
         try:
-            check_video_url(video_url)
-        except ValueError as exc:
-            raise ConfigError([Problem("command line", None, "--video", str(exc))]) from None
+            calibrations = [str(calibration)] if isinstance(calibration, Path) else calibration
+            setups = camera_setups(
+                plan.config, used,
+                videos=parse_camera_options(video, "--video", first),
+                calibrations=parse_camera_options(calibrations, "--calibration", first))
+        except ConfigError as exc:
+            problems += exc.problems
         signing = None
         if key is not None:
             try:
                 signing = Signing.load(key)
             except SigningKeyError as exc:
-                raise ConfigError([Problem("command line", None, "--signing-key",
-                                           str(exc))]) from None
+                problems.append(Problem("command line", None, "--signing-key", str(exc)))
+        if problems:
+            raise ConfigError(problems)
         if driver == "mavsdk":
             from drivers.mavlink.mavsdk_driver import MavsdkDriver as Driver
         else:
             from drivers.mavlink.pymavlink_driver import PymavlinkDriver as Driver
         vehicle = Driver(url, signing=signing)
-        info = _camera_info(plan, calibration)
-        vehicle.add_camera(VideoSource(video_url, info,
-                                       to_local=vehicle.vehicle_time_to_local,
-                                       clock=vehicle.clock.now,
-                                       latency_s=link.camera_latency_s,
-                                       source=link.video_source))
+        for setup in setups:
+            if warn is not None and setup.warning():
+                warn(setup.warning())
+            vehicle.add_camera(VideoSource(setup.url, setup.info,
+                                           to_local=vehicle.vehicle_time_to_local,
+                                           clock=vehicle.clock.now,
+                                           latency_s=setup.stream_latency_s,
+                                           source=setup.video_source))
+        vehicle.camera_setups = {setup.name: setup for setup in setups}
         return vehicle, None
     raise ConfigError([Problem("config", None, "driver",
                                f"unknown driver {driver!r} (sim, mavsdk, pymavlink)")])
-
-
-def _camera_info(plan: MissionPlan, calibration: Path | None):
-    from drivers.sim.model import camera_info
-
-    info = camera_info("front", plan.config.sim.cameras["front"])
-    if calibration is None:
-        return info
-    from drivers.calibration import CalibrationError, load_calibration
-
-    try:
-        intrinsics = load_calibration(calibration)
-    except CalibrationError as exc:
-        message = str(exc).removeprefix(f"{calibration}: ")
-        raise ConfigError([Problem(str(calibration), None, "calibration", message)]) from None
-    return dataclasses.replace(info, intrinsics=intrinsics)
 
 
 async def first_frame(vehicle: Vehicle, camera: str, timeout_s: float, where: str) -> None:
@@ -121,20 +122,21 @@ async def first_frame(vehicle: Vehicle, camera: str, timeout_s: float, where: st
             detail = f" (last error: {error})" if error is not None else ""
             raise CameraUnavailable(
                 f"no video from the {camera} camera on {where} within {timeout_s:g} s{detail}: "
-                "is the camera streaming to this address? (--video URL; a camera on another "
-                "machine: --video udp://0.0.0.0:5600 --set link.video_source=CAMERA_IP)",
-                "no_video") from None
+                f"is the camera streaming to this address? (--video {camera}=URL; a camera on "
+                f"another machine: --video {camera}=udp://0.0.0.0:PORT --set "
+                f"vehicle.cameras.{camera}.video_source=CAMERA_IP)", "no_video") from None
 
 
 def logged_cameras(plan: MissionPlan, video_camera: str,
                    cameras: Mapping[str, object]) -> dict[str, float]:
-    """Frames logged per second by camera: the followed camera at the configured rate, and
-    every frame of the video's camera (``""``: the followed one)."""
+    """Frames logged per second by camera: the cameras the steps use at the configured rate,
+    and every frame of the video's camera (``""``: the first step camera)."""
     cfg = plan.config
-    followed = cfg.perception.ball.camera
+    used = plan.cameras_used()
     frames = cfg.log.frames
-    rates = {followed: frames.sim_rate_hz if cfg.driver == "sim" else frames.vehicle_rate_hz}
-    name = video_camera or followed
+    rate = frames.sim_rate_hz if cfg.driver == "sim" else frames.vehicle_rate_hz
+    rates = {camera: rate for camera in used}
+    name = video_camera or (used[0] if used else next(iter(cameras), ""))
     if name not in cameras:
         raise ConfigError([Problem("--record-video", None, name,
                                    f"no such camera on this vehicle (it has: "
@@ -146,14 +148,23 @@ def logged_cameras(plan: MissionPlan, video_camera: str,
 async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False,
               progress: Callable[[str], None] | None = None,
               handle_signals: bool = False, connect: str | None = None,
-              video: str | None = None, calibration: Path | None = None,
+              video: str | Sequence[str] | None = None,
+              calibration: str | Path | Sequence[str] | None = None,
               record_video: str | None = None, signing_key: Path | None = None) -> dict:
     """Fly ``plan`` and return its summary (also written to ``out_dir/summary.json``).
 
     ``record_video`` names a camera whose every frame is logged (for ``onboard.mp4``; "" is
-    the followed camera)."""
+    the followed camera). Warnings (an uncalibrated camera) go to ``progress`` and into the
+    summary."""
+    warnings: list[str] = []
+
+    def warn(text: str) -> None:
+        warnings.append(text)
+        if progress is not None:
+            progress(f"warning: {text}")
+
     vehicle, seed = make_vehicle(plan, realtime=realtime, connect=connect, video=video,
-                                 calibration=calibration, signing_key=signing_key)
+                                 calibration=calibration, signing_key=signing_key, warn=warn)
     log_cameras = None
     if record_video is not None:
         log_cameras = logged_cameras(plan, record_video, vehicle.cameras)
@@ -178,10 +189,10 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
     try:
         await vehicle.connect(plan.config.link.connect_timeout_s if plan.config.driver != "sim"
                               else 10.0)
-        if plan.config.driver != "sim":  # a real camera must be streaming before takeoff
-            camera = plan.config.perception.ball.camera
-            await first_frame(vehicle, camera, plan.config.link.connect_timeout_s,
-                              video or plan.config.link.video)
+        setups = getattr(vehicle, "camera_setups", {})
+        for camera, setup in setups.items():  # the cameras the mission needs must be
+            await first_frame(vehicle, camera,  # streaming before anything takes off
+                              plan.config.link.connect_timeout_s, setup.url)
         runtime = Runtime(vehicle, plan, log, progress=progress, log_cameras=log_cameras)
         if handle_signals:
             for sig in signals:
@@ -216,14 +227,14 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
         "sim_time_s": sim_time,
         "wall_time_s": wall_time,
         "metrics": {
-            "follow": follow_metrics(log.records),
-            "estimation": estimation_metrics(log.records),
+            **mission_metrics(log.records),
             "sim": {"real_time_factor": sim_time / wall_time if sim_time and wall_time > 0
                     else None,
                     "cpu_steal_pct": steal.percent()},
             "latency_ms": latency_metrics(log.records),
         },
         "stats": vars(runtime.stats) if runtime is not None else {},
+        "warnings": warnings,
         "log": "flight.mcap" if out_dir is not None else None,
     }
     sources = getattr(vehicle, "video_sources", {})

@@ -2,23 +2,31 @@
 
 ::
 
-    vehicle.frames ─► detection (executor) ─► [slot] ─► estimation ─► [event] ─┐
-    vehicle.telemetry ─► pose history, latest state ────────────────────────────┤
+    vehicle.frames(camera) ─► detection (executor) ─► [slot] ─► estimation ─► [event] ─┐
+       (one lane per camera the active step uses; its pipelines run on each frame)         │
+    vehicle.telemetry ─► pose history (every pipeline), latest state ──────────────────────┤
                                                            control (≥ control_rate_hz,
                                                            and on every estimate)
                                                                    │ intent (expires)
                                                                    ▼
                                                       setpoint streaming ─► vehicle
 
+* What runs is what the active mission step declares (:mod:`autopilot.steps`): its perception
+  pipelines, grouped by camera into *lanes* (a detection and an estimation task per camera in
+  use). A step that needs no camera runs none. A pipeline lives for the whole run, so a target
+  tracked in one step is still tracked when a later step uses the same pipeline.
 * Frames and telemetry carry their capture times end to end: a detection is placed in the world
   with the vehicle pose at its frame's capture time, and the latency of each setpoint computed
-  from a frame (capture → sent) is logged.
+  from a frame (capture → sent) is logged. The target a behaviour flew on is logged at every
+  control tick (``/control/target``): that, not the filter right after an update, is what the
+  estimation metrics score.
 * A setpoint is an *intent with an expiry*: the streaming task re-sends it at
   ``setpoint_rate_hz`` only until ``setpoint_expiry_s`` after the control step made it. If the
   control task stalls, streaming stops, and the vehicle's own offboard-loss failsafe takes over.
 * :meth:`Runtime.request_stop` (Ctrl-C, SIGTERM) switches the mission to its safe stop — hold,
   land, disarm — bounded by ``shutdown_timeout_s``; every task belongs to one TaskGroup, so none
-  outlives the run.
+  outlives the run. Frame logging (:mod:`autopilot.framelog`) and progress lines
+  (:mod:`autopilot.progress`) are separate parts the runtime starts and owns.
 """
 
 from __future__ import annotations
@@ -26,22 +34,28 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import math
-import sys
 import time
-from collections import deque
 from collections.abc import Callable, Mapping
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
-import cv2
 import numpy as np
 
-from autopilot.behaviors.base import BehaviorInputs, RequestKind, VehicleRequest
+from autopilot.behaviors.base import BehaviorInputs, Percept, RequestKind, VehicleRequest
+from autopilot.estimation.target import TargetEstimate
 from autopilot.flightlog import records as ch
 from autopilot.flightlog.log import FlightLog
-from autopilot.mission import MissionExecutor, MissionOutput, MissionPlan, build_behavior
-from autopilot.perception.ball import BallDetection
-from autopilot.pipeline import TargetPipeline, detection_record
+from autopilot.framelog import FrameLogger
+from autopilot.mission import (
+    MissionEvent,
+    MissionExecutor,
+    MissionOutput,
+    MissionPlan,
+    build_behavior,
+)
+from autopilot.pipeline import Pipeline, make_pipeline
+from autopilot.progress import report_progress
+from autopilot.steps import step_kind
 from drivers.base import Frame, Setpoint, Vehicle, VehicleError, VehicleState
 from drivers.slots import LatestSlot
 
@@ -59,55 +73,53 @@ class Intent:
 
 @dataclass(frozen=True, slots=True)
 class ProcessedFrame:
+    """A camera frame and what each of its lane's pipelines detected in it (in lane order)."""
+
     time_s: float
     seq: int
     frame: Frame
-    detection: BallDetection | None
+    detections: tuple[object | None, ...]
+
+
+@dataclass(slots=True)
+class Track:
+    """What one pipeline has made of its frames so far."""
+
+    pipeline: Pipeline
+    detection: object | None = None  # in the newest processed frame
+    last_detection: object | None = None  # in the newest frame that had one
+    frame_seq: int = -1
+    frames: int = 0
+    detections: int = 0
+
+
+@dataclass(slots=True)
+class Lane:
+    """One camera in use: its pipelines, and the detection and estimation tasks that run them."""
+
+    camera: str
+    keys: tuple[str, ...]
+    frames: LatestSlot[ProcessedFrame] = field(default_factory=LatestSlot)
+    tasks: list[asyncio.Task] = field(default_factory=list)
 
 
 @dataclass
 class RunStats:
-    frames: int = 0
-    detections: int = 0
-    follow_frames: int = 0
-    follow_detections: int = 0
+    frames: int = 0  # camera frames processed by the active steps' pipelines
+    detections: int = 0  # pipeline detections in them
     setpoints_sent: int = 0
     frames_log_dropped: int = 0
-    stages_ms: list[float] = field(default_factory=list)
 
 
-FRAME_LOG_BUFFER = 32  # frames waiting for JPEG encoding; more are dropped (and counted)
-FRAME_LOG_PIPELINE = 3  # frames being encoded at once (each within this many frame periods)
-
-
-class FrameSampler:
-    """Which frames of a camera go to the log: ``rate_hz`` per second on average, evenly
-    spread; every frame when the rate is at or above the camera's."""
-
-    def __init__(self, rate_hz: float, camera_rate_hz: float) -> None:
-        self._period_s = 1.0 / rate_hz if rate_hz > 0 else math.inf
-        self._slack_s = 0.5 / camera_rate_hz if camera_rate_hz > 0 else 0.0
-        self._due_s = -math.inf
-
-    def take(self, time_s: float) -> bool:
-        if math.isinf(self._period_s) or time_s < self._due_s - self._slack_s:
-            return False
-        # the next one is due a period after this one was due (the rate holds on average);
-        # after a gap (or at the start), a period after this one
-        due = self._due_s + self._period_s
-        self._due_s = due if due >= time_s else time_s + self._period_s
-        return True
-
-
-def encode_jpeg(image_bgr: np.ndarray, quality: int) -> bytes:
-    """JPEG without chroma subsampling (4:4:4): colour detection lives on the chroma, and
-    halving its resolution moves a ball's edge by a few tenths of a pixel."""
-    ok, buffer = cv2.imencode(".jpg", image_bgr, [
-        cv2.IMWRITE_JPEG_QUALITY, quality,
-        cv2.IMWRITE_JPEG_SAMPLING_FACTOR, cv2.IMWRITE_JPEG_SAMPLING_FACTOR_444])
-    if not ok:
-        raise ValueError("JPEG encoding failed")
-    return buffer.tobytes()
+def _detect_all(pipelines: list[Pipeline], frame: Frame, hints: list[object | None]
+                ) -> list[tuple[object | None, float]]:
+    """Each pipeline's detection in one frame, with its processing time (ms)."""
+    out = []
+    for pipeline, hint in zip(pipelines, hints, strict=True):
+        started = time.perf_counter()
+        det = pipeline.detect(frame.image, frame.camera, frame.time_s, hint)
+        out.append((det, (time.perf_counter() - started) * 1e3))
+    return out
 
 
 class Runtime:
@@ -120,20 +132,19 @@ class Runtime:
         self.log = log
         self.clock = vehicle.clock
         cfg = plan.config
-        self.pipeline = TargetPipeline(cfg)
-        self.filter = self.pipeline.filter
-        self.history = self.pipeline.history
-        self.camera_name = cfg.perception.ball.camera
+        specs = plan.all_pipelines()
+        self.pipelines: dict[str, Pipeline] = {
+            key: make_pipeline(cfg, spec) for key, spec in specs.items()}
+        self.tracks = {key: Track(p) for key, p in self.pipelines.items()}
+        self._step_keys = [tuple(spec.key for spec in plan.pipelines(i))
+                           for i in range(len(plan.steps))]
         self.stats = RunStats()
         self.status = "running"
         self.reason = ""
         self.errors: list[BaseException] = []
         self._progress = progress
         self._state: VehicleState | None = None
-        self._frames: LatestSlot[ProcessedFrame] = LatestSlot()
         self._estimated: LatestSlot[float] = LatestSlot()  # capture time of the frame used
-        self._last_frame: ProcessedFrame | None = None
-        self._last_detection: BallDetection | None = None
         self._intent: Intent | None = None
         self._last_send_s = -math.inf
         self._stop_reason: str | None = None
@@ -141,20 +152,18 @@ class Runtime:
         self._stale = False  # the pose went stale: no more motion setpoints this run
         self._executor: MissionExecutor | None = None
         self._step = ""
+        self._step_index = -1
         self._phase = ""
+        self._active: tuple[str, ...] = ()  # the running step's pipelines (keys)
+        self._lanes: dict[str, Lane] = {}
+        self._group: asyncio.TaskGroup | None = None
         self._detect_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="detect")
-        # camera frames for the log: which cameras, how often; encoded off the loop
+        # camera frames for the log: by default the cameras the steps use, at the log's rate
         if log_cameras is None:
             frames = cfg.log.frames
             rate = frames.sim_rate_hz if cfg.driver == "sim" else frames.vehicle_rate_hz
-            log_cameras = {self.camera_name: rate}
-        cams = vehicle.cameras
-        self._samplers = {} if log.path is None else {
-            name: FrameSampler(rate, cams[name].rate_hz)
-            for name, rate in log_cameras.items() if rate > 0 and name in cams}
-        self._to_log: asyncio.Queue[Frame] = asyncio.Queue(maxsize=FRAME_LOG_BUFFER)
-        self._log_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="frame-log")
-        self._encoding: deque[tuple[Frame, asyncio.Future[bytes]]] = deque()
+            log_cameras = {spec.camera: rate for spec in specs.values()}
+        self.frame_logger = FrameLogger(vehicle, log, log_cameras, cfg.log.frames.jpeg_quality)
 
     # ------------------------------------------------------------------------------------
     # Control from outside
@@ -175,27 +184,27 @@ class Runtime:
         """Fly the mission; returns ``completed``, ``failed`` or ``aborted``."""
         self._log_plan()
         cameras = self.vehicle.cameras
+        for camera in cameras.values():
+            self.log.write(ch.CAMERA_INFO, self.clock.now(), ch.camera_info_record(camera))
         behaviors = [build_behavior(step, self.config, cameras) for step in self.plan.steps]
         self._executor = MissionExecutor(behaviors)
         try:
             async with asyncio.TaskGroup() as tasks:
+                self._group = tasks
                 background = [
                     tasks.create_task(self._telemetry(), name="telemetry"),
-                    tasks.create_task(self._detection(), name="detection"),
-                    tasks.create_task(self._estimation(), name="estimation"),
                     tasks.create_task(self._streaming(), name="setpoint-streaming"),
                     *self._simulator_tasks(tasks),
+                    *self.frame_logger.tasks(tasks),
                 ]
-                if self._samplers:
-                    background.append(tasks.create_task(self._log_frames(), name="frame-log"))
-                    background += [
-                        tasks.create_task(self._other_camera(name), name=f"camera-{name}")
-                        for name in self._samplers if name != self.camera_name]
                 if self._progress is not None:
-                    background.append(tasks.create_task(self._report_progress(), name="progress"))
+                    background.append(tasks.create_task(report_progress(
+                        self.progress_line, self._progress,
+                        self.config.runtime.progress_interval_s), name="progress"))
                 try:
                     await self._control()
                 finally:
+                    self._use_pipelines(())
                     for task in background:
                         task.cancel()
         except* Exception as group:  # the link broke, or a bug: never leave the motors running
@@ -204,9 +213,10 @@ class Runtime:
             self.errors = list(group.exceptions)
             await self._last_resort()
         finally:
+            self._group = None
             self._detect_pool.shutdown(wait=True, cancel_futures=True)
-            self._drain_frame_log()
-            self._log_pool.shutdown(wait=True, cancel_futures=True)
+            self.frame_logger.close()
+            self.stats.frames_log_dropped = self.frame_logger.dropped
         return self.status
 
     async def _control(self) -> None:
@@ -219,13 +229,15 @@ class Runtime:
         while not out.finished:
             source = await self._next_tick(period)
             inputs = self._inputs(self._state)
+            self._log_control_target(inputs)
             stale = self._telemetry_stale()
             if stale is not None and not self._stale:
                 # flying blind: no motion setpoint may go out on an old pose; hold, and let
                 # the mission's fallback bring the vehicle down (as for a lost link)
                 self._stale = True
                 self._intent = None
-                self._event(self.clock.now(), f"telemetry stale: {stale}; setpoints stopped")
+                self._event(self.clock.now(), "runtime",
+                            f"telemetry stale: {stale}; setpoints stopped")
                 with contextlib.suppress(VehicleError, TimeoutError):
                     await self.clock.wait_for(self.vehicle.hold(), 2.0)
                 out = executor.abort(f"telemetry stale: {stale}", inputs)
@@ -246,9 +258,12 @@ class Runtime:
 
     async def _apply(self, out: MissionOutput, source_frame_s: float | None = None) -> None:
         now = self.clock.now()
-        for text in out.events:
-            self._event(now, text)
+        for event in out.events:
+            self._mission_event(now, event)
         self._step, self._phase = out.step, out.phase
+        if out.step_index != self._step_index:
+            self._step_index = out.step_index
+            self._use_pipelines(self._step_keys[out.step_index] if out.step_index >= 0 else ())
         if out.setpoint is not None and not self._stale:
             self._intent = Intent(out.setpoint, now, now + self.config.runtime.setpoint_expiry_s,
                                   source_frame_s, out.step, out.phase)
@@ -264,7 +279,7 @@ class Runtime:
 
     async def _perform(self, request: VehicleRequest) -> None:
         v = self.vehicle
-        self._event(self.clock.now(), f"request {request.kind.value}")
+        self._event(self.clock.now(), "request", f"request {request.kind.value}")
         if request.kind is RequestKind.ARM:
             await v.arm()
         elif request.kind is RequestKind.TAKEOFF:
@@ -287,104 +302,86 @@ class Runtime:
             await self.clock.wait_for(self.vehicle.land(), 2.0)
 
     # ------------------------------------------------------------------------------------
-    # Stages
+    # Perception lanes: what the active step uses
+    # ------------------------------------------------------------------------------------
+
+    def _use_pipelines(self, keys: tuple[str, ...]) -> None:
+        """Run exactly ``keys``' pipelines: one lane per camera; lanes whose pipelines do not
+        change keep running (their subscriptions and slots are not disturbed)."""
+        self._active = keys
+        wanted: dict[str, tuple[str, ...]] = {}
+        for key in keys:
+            camera = self.pipelines[key].camera
+            wanted[camera] = (*wanted.get(camera, ()), key)
+        for camera, lane in list(self._lanes.items()):
+            if wanted.get(camera) != lane.keys:
+                for task in lane.tasks:
+                    task.cancel()
+                del self._lanes[camera]
+        if self._group is None:
+            return
+        for camera, lane_keys in wanted.items():
+            if camera in self._lanes:
+                continue
+            lane = Lane(camera, lane_keys)
+            lane.tasks = [
+                self._group.create_task(self._detection(lane), name=f"detection-{camera}"),
+                self._group.create_task(self._estimation(lane), name=f"estimation-{camera}")]
+            self._lanes[camera] = lane
+
+    async def _detection(self, lane: Lane) -> None:
+        pipelines = [self.pipelines[key] for key in lane.keys]
+        budget = self.config.runtime.lockstep_detection_s * len(pipelines)
+        async with contextlib.aclosing(self.vehicle.frames(lane.camera)) as frames:
+            async for frame in frames:
+                received = self.clock.now()
+                hints = [p.hint(frame.time_s, frame.camera) for p in pipelines]
+                results = await self.clock.run_blocking(
+                    _detect_all, pipelines, frame, hints, executor=self._detect_pool,
+                    budget_s=budget)
+                lane.frames.put(ProcessedFrame(frame.time_s, frame.seq, frame,
+                                               tuple(det for det, _ in results)))
+                detected = self.clock.now()
+                for pipeline, hint, (det, elapsed_ms) in zip(pipelines, hints, results,
+                                                             strict=True):
+                    self.stats.frames += 1
+                    self.stats.detections += det is not None
+                    record = pipeline.detection_record(frame.seq, frame.time_s,
+                                                       frame.camera.name, det, hint)
+                    record.update(processing_ms=elapsed_ms, received_s=received,
+                                  detected_s=detected)
+                    self.log.write(ch.detection_topic(pipeline.name), frame.time_s, record)
+
+    async def _estimation(self, lane: Lane) -> None:
+        while True:
+            item = await lane.frames.get()
+            for key, det in zip(lane.keys, item.detections, strict=True):
+                track = self.tracks[key]
+                track.detection = det
+                track.frame_seq = item.seq
+                track.frames += 1
+                if det is not None:
+                    track.detections += 1
+                    track.last_detection = det
+                    record = track.pipeline.estimate(item.time_s, item.frame.camera, det)
+                    if record is not None:
+                        self.log.write(ch.TARGET_ESTIMATES, item.time_s, record)
+            self._estimated.put(item.time_s)
+
+    # ------------------------------------------------------------------------------------
+    # Telemetry, setpoints, the simulator's extras
     # ------------------------------------------------------------------------------------
 
     async def _telemetry(self) -> None:
+        pipelines = list(self.pipelines.values())
         async with contextlib.aclosing(self.vehicle.telemetry(buffer=64)) as samples:
             async for state in samples:
                 self._state = state
-                self.pipeline.add_state(state)
+                for pipeline in pipelines:
+                    pipeline.add_state(state)
                 record = ch.vehicle_state_record(state)
                 record["received_s"] = self.clock.now()
                 self.log.write(ch.VEHICLE_STATE, state.time_s, record)
-
-    async def _detection(self) -> None:
-        camera = self.vehicle.cameras[self.camera_name]
-        self.log.write(ch.CAMERA_INFO, self.clock.now(), ch.camera_info_record(camera))
-        async with contextlib.aclosing(self.vehicle.frames(self.camera_name)) as frames:
-            async for frame in frames:
-                received = self.clock.now()
-                self._offer_frame(frame)
-                hint = self.pipeline.hint(frame.time_s, frame.camera)
-                started = time.perf_counter()
-                detection = await self.clock.run_blocking(
-                    self.pipeline.detect, frame.image, frame.camera, frame.time_s, hint,
-                    executor=self._detect_pool, budget_s=self.config.runtime.lockstep_detection_s)
-                elapsed_ms = (time.perf_counter() - started) * 1e3
-                processed = ProcessedFrame(frame.time_s, frame.seq, frame, detection)
-                self._frames.put(processed)
-                self._count_frame(detection)
-                record = detection_record(frame.seq, frame.time_s, frame.camera.name, detection,
-                                          hint)
-                record.update(processing_ms=elapsed_ms, received_s=received,
-                              detected_s=self.clock.now())
-                self.log.write(ch.BALL_DETECTIONS, frame.time_s, record)
-
-    def _offer_frame(self, frame: Frame) -> None:
-        """Hand a frame to the frame log if its camera's rate wants it (never waits: a full
-        buffer drops the frame and counts it)."""
-        sampler = self._samplers.get(frame.camera.name)
-        if sampler is None or not sampler.take(frame.time_s):
-            return
-        try:
-            self._to_log.put_nowait(frame)
-        except asyncio.QueueFull:
-            self.stats.frames_log_dropped += 1
-
-    async def _log_frames(self) -> None:
-        """Encode frames for the log (JPEG, off the loop) and write them in order.
-
-        Up to ``FRAME_LOG_PIPELINE`` frames are in hand at once, each modelled (on the lockstep
-        clock) as encoded within that many frame periods: the encoder uses the CPU the rest
-        of the pipeline leaves idle instead of the simulator stopping for it every frame."""
-        quality = self.config.log.frames.jpeg_quality
-        pending = self._encoding
-        try:
-            while True:
-                frame = await self._to_log.get()
-                pending.append((frame, asyncio.ensure_future(self.clock.run_blocking(
-                    encode_jpeg, frame.image, quality, executor=self._log_pool,
-                    budget_s=FRAME_LOG_PIPELINE / frame.camera.rate_hz))))
-                while pending and (pending[0][1].done() or len(pending) >= FRAME_LOG_PIPELINE):
-                    done, job = pending[0]
-                    jpeg = await job
-                    pending.popleft()
-                    self.log.write_image(done.camera.name, done.time_s, jpeg)
-        finally:
-            for _, job in pending:
-                job.cancel()
-
-    def _drain_frame_log(self) -> None:
-        """Frames still waiting when the run ends are written now (the last second of a
-        flight belongs in its video)."""
-        quality = self.config.log.frames.jpeg_quality
-        waiting = [frame for frame, _ in self._encoding]
-        self._encoding.clear()
-        while not self._to_log.empty():
-            waiting.append(self._to_log.get_nowait())
-        for frame in waiting:
-            with contextlib.suppress(Exception):  # the run's outcome matters more than a frame
-                self.log.write_image(frame.camera.name, frame.time_s,
-                                     encode_jpeg(frame.image, quality))
-
-    async def _other_camera(self, name: str) -> None:
-        """Frames of a camera that nothing but the log uses (the video's chosen camera)."""
-        async with contextlib.aclosing(self.vehicle.frames(name)) as frames:
-            async for frame in frames:
-                self._offer_frame(frame)
-
-    async def _estimation(self) -> None:
-        while True:
-            item = await self._frames.get()
-            self._last_frame = item
-            det = item.detection
-            if det is not None:
-                self._last_detection = det
-                record = self.pipeline.estimate(item.time_s, item.frame.camera, det)
-                if record is not None:
-                    self.log.write(ch.TARGET_ESTIMATES, item.time_s, record)
-            self._estimated.put(item.time_s)
 
     async def _streaming(self) -> None:
         period = 1.0 / self.config.runtime.setpoint_rate_hz
@@ -468,38 +465,68 @@ class Runtime:
             f" (limit {limit:g} s)"
 
     def _inputs(self, state: VehicleState) -> BehaviorInputs:
+        """What the behaviours see now: the vehicle, and the running step's percepts (its
+        first pipeline's target as ``target``). At a step change, the new step is activated
+        with the inputs of the moment before it (its pipelines start with it)."""
         now = self.clock.now()
-        frame = self._last_frame
-        return BehaviorInputs(
-            now_s=now, state=state, target=self.filter.estimate(now),
-            detection=frame.detection if frame is not None else None,
-            last_detection=self._last_detection,
-            frame_seq=frame.seq if frame is not None else -1)
+        percepts = tuple(self._percept(key, now) for key in self._active)
+        first = percepts[0] if percepts else None
+        return BehaviorInputs(now_s=now, state=state,
+                              target=first.target if first is not None else None,
+                              percept=first, percepts=percepts)
 
-    def _count_frame(self, detection: BallDetection | None) -> None:
-        self.stats.frames += 1
-        self.stats.detections += detection is not None
-        if self._step == "follow_ball":
-            self.stats.follow_frames += 1
-            self.stats.follow_detections += detection is not None
+    def _percept(self, key: str, now: float) -> Percept:
+        track = self.tracks[key]
+        p = track.pipeline
+        return Percept(p.name, p.kind, track.detection, track.last_detection, track.frame_seq,
+                       p.target(now))
 
-    def _event(self, time_s: float, text: str) -> None:
-        self.log.write(ch.MISSION_EVENTS, time_s, {"time_s": time_s, "step": self._step,
+    def _log_control_target(self, inputs: BehaviorInputs) -> None:
+        """The target the behaviour is about to act on, as it saw it (scored by the metrics,
+        coasting and lost stretches included)."""
+        percept = inputs.percept
+        if percept is None:
+            return
+        est: TargetEstimate | None = inputs.target
+        record = {"time_s": inputs.now_s, "pipeline": percept.pipeline, "step": self._step,
+                  "step_index": self._step_index, "present": est is not None}
+        if est is not None:
+            record.update(position_ned_m=est.position_ned_m,
+                          velocity_ned_m_s=est.velocity_ned_m_s,
+                          position_std_m=est.position_std_m, age_s=est.age_s,
+                          stale=est.stale, confirmed=est.confirmed)
+        self.log.write(ch.CONTROL_TARGET, inputs.now_s, record)
+
+    def _mission_event(self, time_s: float, event: MissionEvent) -> None:
+        self._write_event(time_s, event.kind, event.step_index, event.step, event.text)
+
+    def _event(self, time_s: float, kind: str, text: str) -> None:
+        """The runtime's own events (``request``, ``runtime``), in the running step."""
+        self._write_event(time_s, kind, self._step_index, self._step, text)
+
+    def _write_event(self, time_s: float, kind: str, index: int, step: str, text: str) -> None:
+        self.log.write(ch.MISSION_EVENTS, time_s, {"time_s": time_s, "kind": kind,
+                                                    "step_index": index, "step": step,
                                                     "text": text})
-        if self._progress is not None and not text.startswith("request "):
+        if self._progress is not None and kind != "request":
             self._progress(f"[{time_s:7.2f} s] {text}")
 
     def _log_plan(self) -> None:
         plan = self.plan
-        follow = next((s.params for s in plan.steps if s.name == "follow_ball"), None)
-        standoff = (follow.standoff_m if follow is not None and follow.standoff_m else
-                    self.config.control.follow.standoff_m)
+        steps = []
+        for index, step in enumerate(plan.steps):
+            kind = step_kind(step.name)
+            specs = plan.pipelines(index)
+            steps.append(ch.clean({
+                "name": step.name, "index": index, "params": step.params.model_dump(),
+                "pipelines": [{"name": spec.key, "kind": spec.kind, "camera": spec.camera,
+                               "truth_body": spec.truth_body, "size_m": spec.target_size_m}
+                              for spec in specs],
+                **kind.plan_info(step.params, plan.config)}))
         self.log.write(ch.MISSION_PLAN, self.clock.now(), ch.clean({
-            "mission": plan.mission.name, "source": str(plan.source),
-            "steps": [{s.name: s.params.model_dump()} for s in plan.steps],
-            "standoff_m": standoff, "camera": self.camera_name,
-            "ball_diameter_m": self.config.perception.ball.diameter_m,
-            "config": self.config.model_dump(mode="json"),
+            "mission": plan.mission.name, "source": str(plan.source), "steps": steps,
+            # (sim.cameras is a copy of vehicle.cameras, not a setting of its own)
+            "config": self.config.model_dump(mode="json", exclude={"sim": {"cameras"}}),
             "driver": self.config.driver,
             "scenario": plan.mission.scenario.model_dump() if plan.mission.scenario else None}))
 
@@ -509,23 +536,12 @@ class Runtime:
         parts = [f"t={now:6.1f}s", f"step={self._step or '-'}", f"phase={self._phase or '-'}"]
         if s is not None:
             parts += [f"mode={s.mode.value}", f"alt={s.altitude_m:4.1f}m"]
-            est = self.filter.estimate(now)
-            if est is not None and not est.stale:
+        if self._active:
+            track = self.tracks[self._active[0]]
+            est = track.pipeline.target(now)
+            if s is not None and est is not None and not est.stale:
                 distance = float(np.linalg.norm(est.position_ned_m - s.position_ned_m))
                 parts.append(f"target={distance:4.2f}m")
-        st = self.stats
-        if st.follow_frames:
-            parts.append(f"det={100.0 * st.follow_detections / st.follow_frames:3.0f}%")
+            if track.frames:
+                parts.append(f"det={100.0 * track.detections / track.frames:3.0f}%")
         return " ".join(parts)
-
-    async def _report_progress(self) -> None:
-        interactive = sys.stderr.isatty()
-        interval = 0.25 if interactive else self.config.runtime.progress_interval_s
-        while True:
-            await asyncio.sleep(interval)  # wall time: progress is for the person watching
-            line = self.progress_line()
-            if interactive:
-                sys.stderr.write("\r" + line.ljust(100))
-                sys.stderr.flush()
-            else:
-                self._progress(line)

@@ -1,5 +1,6 @@
 """Turns a mission's ``scenario:`` section into the simulated world: the ball on its path, the
-distractors, the wind and the seed. Simulator only; a real vehicle ignores scenarios.
+distractors, the marker board and its decoys, the wind and the seed. Simulator only; a real
+vehicle ignores scenarios.
 
 The ball starts ``start_distance_m`` ahead of the vehicle's starting position and heading, at
 ``height_m``, and (after ``start_delay_s``) moves along its path at ``speed_mps``. Distractors are
@@ -17,19 +18,17 @@ from autopilot.mission import BallScenario, Scenario
 from autopilot.perception.colors import COLORS, ORANGEISH_RGBA
 from drivers.sim.config import SimConfig
 from drivers.sim.scenario import (
-    Delayed,
     Geom,
     MocapBody,
-    RandomWalk,
     ScenarioObject,
     Static,
     Trajectory,
-    circle,
-    figure8,
-    lissajous,
+    marker_objects,
+    named_path,
 )
 
 BALL = "ball"
+MARKER = "marker"
 
 
 def build_world(scenario: Scenario | None, sim: SimConfig) -> tuple[SimConfig,
@@ -40,10 +39,30 @@ def build_world(scenario: Scenario | None, sim: SimConfig) -> tuple[SimConfig,
     wind = sim.wind.model_copy(update={"gust_mps": scenario.wind.gust_mps,
                                        "steady_ned_m_s": scenario.wind.steady_ned_m_s})
     sim = sim.model_copy(update={"seed": scenario.seed, "wind": wind})
-    path = ball_trajectory(scenario.ball, sim, scenario.seed)
-    ball = MocapBody(BALL, [Geom("sphere", (scenario.ball.diameter_m / 2.0,),
-                                 COLORS[scenario.ball.color][0])], path)
-    return sim, [ball, *distractors(scenario, sim, path)]
+    objects: list[ScenarioObject] = []
+    if scenario.ball is not None:
+        path = ball_trajectory(scenario.ball, sim, scenario.seed)
+        objects.append(MocapBody(BALL, [Geom("sphere", (scenario.ball.diameter_m / 2.0,),
+                                             COLORS[scenario.ball.color][0])], path))
+        objects += distractors(scenario, sim, path)
+    if scenario.marker is not None:
+        objects += marker_board(scenario, sim)
+    return sim, objects
+
+
+def marker_board(scenario: Scenario, sim: SimConfig) -> list[ScenarioObject]:
+    """The marker board (body ``marker``) and its decoys."""
+    m = scenario.marker
+    decoys = scenario.decoys
+    ids = list(decoys) if isinstance(decoys, list) else []
+    return marker_objects(
+        marker_id=m.id, dictionary=m.dictionary, size_m=m.size_m, board_m=m.board_m,
+        path=m.path, speed_mps=m.speed_mps, height_m=m.height_m,
+        start_distance_m=m.start_distance_m, path_size_m=m.path_size_m, facing=m.facing,
+        yaw_deg=m.yaw_deg, decoys=len(ids) if ids else int(decoys), decoy_ids=ids,
+        seed=scenario.seed, start_delay_s=m.start_delay_s, accel_mps2=m.accel_mps2,
+        origin_north_east_m=sim.vehicle.initial_north_east_m,
+        heading_deg=sim.vehicle.initial_yaw_deg, name=MARKER)
 
 
 def ball_trajectory(ball: BallScenario, sim: SimConfig, seed: int) -> Trajectory:
@@ -51,20 +70,9 @@ def ball_trajectory(ball: BallScenario, sim: SimConfig, seed: int) -> Trajectory
     north, east = sim.vehicle.initial_north_east_m
     start = (north + ball.start_distance_m * math.cos(yaw),
              east + ball.start_distance_m * math.sin(yaw), -ball.height_m)
-    size, speed = ball.size_m, ball.speed_mps
-    if ball.path == "static" or speed == 0.0:
-        path: Trajectory = Static(start)
-    elif ball.path == "circle":
-        path = circle(start, speed, radius_m=size / 2.0, heading_rad=yaw)
-    elif ball.path == "figure8":
-        path = figure8(start, speed, length_m=size, width_m=size / 2.0, heading_rad=yaw)
-    elif ball.path == "lissajous":
-        path = lissajous(start, speed, size_m=(0.75 * size, size), heading_rad=yaw)
-    else:
-        path = RandomWalk(start, speed, seed=seed, radius_m=size / 2.0)
-    ramp = ball.speed_mps / ball.accel_mps2
-    return Delayed(path, ball.start_delay_s, ramp) if ball.start_delay_s > 0 or ramp > 0 \
-        else path
+    return named_path(ball.path, start, ball.speed_mps, ball.size_m, yaw, seed,
+                      ball.start_delay_s, ball.speed_mps / ball.accel_mps2,
+                      accel_m_s2=ball.accel_mps2)
 
 
 def distractors(scenario: Scenario, sim: SimConfig, path: Trajectory) -> list[ScenarioObject]:

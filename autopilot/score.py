@@ -5,7 +5,8 @@ The autopilot never sees ground truth; the simulator never sees detections. This
 two logs after the fact: the run's log holds its detections and setpoints on its own clock,
 and the time mapping its driver measured (TIMESYNC: local − vehicle boot time); the
 simulator's log holds ground truth on the vehicle's boot clock. Truth is shifted onto the
-run's clock and the run's follow metrics are computed as for an in-process run.
+run's clock and the run's metrics (each step's, as the registry picks them) are computed as
+for an in-process run.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ from pathlib import Path
 from autopilot.config import InputError
 from autopilot.flightlog import records as ch
 from autopilot.flightlog.log import read_log
-from autopilot.flightlog.metrics import follow_metrics
+from autopilot.steps.metrics import mission_metrics
 
 
 class ScoreError(InputError):
@@ -25,7 +26,8 @@ class ScoreError(InputError):
 
 
 def score(run_dir: Path, truth_path: Path) -> dict:
-    """Follow metrics of the run in ``run_dir``; also written into its ``summary.json``."""
+    """The metric groups of the run in ``run_dir`` (``follow``, ``estimation``, …, and
+    ``steps``); also written into its ``summary.json``."""
     log_path = run_dir / "flight.mcap"
     for path in (log_path, truth_path):
         if not path.is_file():
@@ -42,11 +44,11 @@ def score(run_dir: Path, truth_path: Path) -> dict:
     if not truth:
         raise ScoreError(f"{truth_path}: no ground truth (channel {ch.GROUND_TRUTH})")
     records[ch.GROUND_TRUTH] = [{**r, "time_s": r["time_s"] + offset} for r in truth]
-    metrics = ch.clean(follow_metrics(records))
+    metrics = ch.clean(mission_metrics(records))
     summary_path = run_dir / "summary.json"
     if summary_path.is_file():
         summary = json.loads(summary_path.read_text())
-        summary.setdefault("metrics", {})["follow"] = metrics
+        summary.setdefault("metrics", {}).update(metrics)
         summary["scored_against"] = str(truth_path)
         summary_path.write_text(json.dumps(summary, indent=2) + "\n")
     return metrics

@@ -14,7 +14,7 @@ import datetime as dt
 import math
 import signal
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
@@ -38,20 +38,35 @@ from drivers.video import VideoSender
 LAND_ON_EXIT_TIMEOUT_S = 60.0
 
 
-DEFAULT_VIDEO_URL = "udp://127.0.0.1:5600"
 TRUTH_LOG = "truth.mcap"
 PHOTOS = "photos"
-VIDEO_CAMERA = "front"
+#: ``serve``'s default: each camera to the address its ``vehicle.cameras.NAME.video`` listens on
+FROM_CONFIG: Mapping[str, str] = {}
+
+
+def video_destinations(config: AppConfig) -> dict[str, str]:
+    """Where each enabled camera streams by default: the address the autopilot listens on for
+    it (``vehicle.cameras.NAME.video``; a wildcard listen address means this host)."""
+    out = {}
+    for name, cam in config.vehicle.cameras.items():
+        if cam.enabled and cam.video and cam.video.startswith("udp://"):
+            host, _, port = cam.video.removeprefix("udp://").rpartition(":")
+            host = "127.0.0.1" if host in ("", "0.0.0.0", "[::]", "::") else host
+            out[name] = f"udp://{host}:{port}"
+    return out
 
 
 async def serve(config: AppConfig, scenario: Scenario | None, *, instance: int = 0,
-                video_url: str | None = DEFAULT_VIDEO_URL, out_dir: Path | None = None,
+                videos: Mapping[str, str] | None = FROM_CONFIG, out_dir: Path | None = None,
                 log: Callable[[str], None] = print,
                 stop: asyncio.Event | None = None, host: str = "127.0.0.1",
                 signing: Signing | None = None) -> None:
     """Serve the simulated vehicle until ``stop`` is set (or SIGINT / SIGTERM when None),
-    streaming the forward camera to ``video_url`` (None: no video). The MAVLink ports listen on
-    ``host``; with ``signing``, only signed MAVLink is accepted."""
+    streaming each camera in ``videos`` (camera → URL; by default every enabled camera to its
+    :func:`video_destinations`; None: no video). The MAVLink ports listen on ``host``; with
+    ``signing``, only signed MAVLink is accepted."""
+    if videos is FROM_CONFIG:
+        videos = video_destinations(config)
     sim_config, objects = build_world(scenario, with_instance_id(config.sim, instance))
     vehicle = SimDriver(sim_config, scenario=objects, lockstep=False)
     await vehicle.connect()
@@ -60,7 +75,7 @@ async def serve(config: AppConfig, scenario: Scenario | None, *, instance: int =
     loop = asyncio.get_running_loop()
     handle_signals = stop is None
     stop = stop or asyncio.Event()
-    video: asyncio.Task | None = None
+    streams: list[asyncio.Task] = []
 
     async def log_events() -> None:  # the vehicle's console, as PX4's shell prints it
         async with contextlib.aclosing(vehicle.events()) as events:
@@ -86,16 +101,20 @@ async def serve(config: AppConfig, scenario: Scenario | None, *, instance: int =
         log(f"ground truth → {out_dir / TRUTH_LOG}")
         photos = loop.create_task(save_photos(vehicle, out_dir / PHOTOS, log), name="sim-photos")
         log(f"photos → {out_dir / PHOTOS}/ (JPEG, geotagged; photos.jsonl)")
-        if VIDEO_CAMERA in vehicle.cameras:
-            calibration = out_dir / f"{VIDEO_CAMERA}_calibration.yaml"
-            write_calibration(calibration, vehicle.cameras[VIDEO_CAMERA].intrinsics)
-            log(f"{VIDEO_CAMERA} camera calibration → {calibration}")
+        for name, info in vehicle.cameras.items():  # as a factory calibration would come
+            calibration = out_dir / f"{name}_calibration.yaml"
+            write_calibration(calibration, info.intrinsics)
+            log(f"{name} camera calibration → {calibration}")
     try:
         await face.start()
-        if video_url is not None and VIDEO_CAMERA in vehicle.cameras:
-            video = loop.create_task(stream_video(vehicle, VIDEO_CAMERA, video_url, log),
-                                     name="video")
-            log(f"{VIDEO_CAMERA} camera: H.264 over RTP to {video_url} "
+        for name, url in (videos or {}).items():
+            if name not in vehicle.cameras:
+                log(f"no camera {name!r} on this vehicle (it has: "
+                    f"{', '.join(vehicle.cameras) or 'none'}): not streamed")
+                continue
+            streams.append(loop.create_task(stream_video(vehicle, name, url, log),
+                                            name=f"video-{name}"))
+            log(f"{name} camera: H.264 over RTP to {url} "
                 "(RTP timestamps are capture times on the vehicle's boot clock)")
         if handle_signals:
             for sig in (signal.SIGINT, signal.SIGTERM):
@@ -113,7 +132,7 @@ async def serve(config: AppConfig, scenario: Scenario | None, *, instance: int =
         if handle_signals:
             for sig in (signal.SIGINT, signal.SIGTERM):
                 loop.remove_signal_handler(sig)
-        await cancel_all(t for t in (video, events, truth, photos) if t is not None)
+        await cancel_all(t for t in (*streams, events, truth, photos) if t is not None)
         await face.close()
         await vehicle.close()
         if truth_log is not None:

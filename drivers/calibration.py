@@ -8,11 +8,15 @@ Reads the two formats calibration tools write:
 * ROS ``camera_calibration`` YAML (``camera_matrix: {rows, cols, data}``,
   ``distortion_coefficients: {data}``, ``image_width``, ``image_height``).
 
-Writes the OpenCV format (what ``autopilot sim --out`` leaves for its camera).
+Writes both: the OpenCV format (:func:`write_calibration`; what ``autopilot sim --out`` leaves
+for its camera, and ``autopilot calibrate``'s main file) and ROS's camera_info YAML
+(:func:`write_ros_calibration`, as ROS's ``camera_calibration`` saves it). Either loads back
+with :func:`load_calibration`.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
@@ -45,18 +49,69 @@ def load_calibration(path: str | Path) -> CameraIntrinsics:
                             float(k[0, 2]), float(k[1, 2]), tuple(d))
 
 
-def write_calibration(path: str | Path, intrinsics: CameraIntrinsics) -> None:
-    """OpenCV FileStorage YAML."""
+def write_calibration(path: str | Path, intrinsics: CameraIntrinsics,
+                      metadata: Mapping[str, int | float | str] | None = None) -> None:
+    """OpenCV FileStorage YAML (whatever the file's suffix): ``image_width``,
+    ``image_height``, ``camera_matrix``, ``distortion_coefficients``, then ``metadata``'s
+    entries (e.g. ``reprojection_rms_px``; names must be valid FileStorage keys)."""
     import cv2
 
-    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
+    if not Path(path).parent.is_dir():
+        raise CalibrationError(f"{path}: cannot write: no such folder")
+    try:
+        fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE | cv2.FILE_STORAGE_FORMAT_YAML)
+    except cv2.error:
+        fs = None
+    if fs is None or not fs.isOpened():
+        raise CalibrationError(f"{path}: cannot write (no such folder, or not permitted)")
     try:
         fs.write("image_width", intrinsics.width_px)
         fs.write("image_height", intrinsics.height_px)
         fs.write("camera_matrix", intrinsics.matrix)
-        fs.write("distortion_coefficients", np.asarray(intrinsics.distortion, dtype=float))
+        # a column (OpenCV's calibration sample writes 5x1): a 1-D array would be written as an
+        # n-d matrix, which readers expecting rows and cols do not take
+        fs.write("distortion_coefficients",
+                 np.asarray(intrinsics.distortion, dtype=float).reshape(-1, 1))
+        for key, value in (metadata or {}).items():
+            fs.write(key, value)
     finally:
         fs.release()
+
+
+def write_ros_calibration(path: str | Path, intrinsics: CameraIntrinsics,
+                          camera_name: str = "camera") -> None:
+    """ROS camera_info YAML (``camera_calibration_parsers``' format) for a monocular camera:
+    ``plumb_bob`` distortion (``rational_polynomial`` with 8 coefficients), identity
+    rectification and the projection matrix of the undistorted image as ROS's calibrator
+    makes it (``cv2.getOptimalNewCameraMatrix``, alpha 0: only valid pixels)."""
+    import cv2
+
+    k = intrinsics.matrix
+    dist = [float(v) for v in intrinsics.distortion]
+    size = (intrinsics.width_px, intrinsics.height_px)
+    if any(dist):
+        new_k, _ = cv2.getOptimalNewCameraMatrix(k, np.asarray(dist), size, 0.0, size)
+    else:
+        new_k = k
+    projection = np.hstack([np.asarray(new_k, dtype=float), np.zeros((3, 1))])
+
+    def matrix(rows: int, cols: int, values) -> str:
+        data = ", ".join(repr(float(v)) for v in np.asarray(values, dtype=float).ravel())
+        return f"\n  rows: {rows}\n  cols: {cols}\n  data: [{data}]"
+
+    model = "plumb_bob" if len(dist) <= 5 else "rational_polynomial"
+    text = (f"image_width: {size[0]}\nimage_height: {size[1]}\ncamera_name: {camera_name}\n"
+            f"camera_matrix:{matrix(3, 3, k)}\n"
+            f"distortion_model: {model}\n"
+            f"distortion_coefficients:{matrix(1, len(dist), dist)}\n"
+            f"rectification_matrix:{matrix(3, 3, np.eye(3))}\n"
+            f"projection_matrix:{matrix(3, 4, projection)}\n")
+    if not Path(path).parent.is_dir():
+        raise CalibrationError(f"{path}: cannot write: no such folder")
+    try:
+        Path(path).write_text(text)
+    except OSError as exc:
+        raise CalibrationError(f"{path}: cannot write: {exc.strerror}") from None
 
 
 def _read_opencv(path: Path):

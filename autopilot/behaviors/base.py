@@ -10,7 +10,6 @@ from typing import ClassVar
 from pydantic import BaseModel, ConfigDict
 
 from autopilot.estimation.target import TargetEstimate
-from autopilot.perception.ball import BallDetection
 from drivers.base import Setpoint, VehicleState
 
 
@@ -35,13 +34,41 @@ class VehicleRequest:
 
 
 @dataclass(frozen=True, slots=True)
+class Percept:
+    """What one perception pipeline has made of its camera's frames, for a step that uses it.
+    The detections are the pipeline's own type (a ball, a marker, …)."""
+
+    pipeline: str  # its name (and flight log channel: /perception/<name>)
+    kind: str  # what it tracks: "ball", "marker", …
+    detection: object | None = None  # result of the newest processed frame (None: not seen)
+    last_detection: object | None = None  # newest frame that had the target
+    frame_seq: int = -1  # sequence number of the newest processed frame
+    target: TargetEstimate | None = None  # its estimate, extrapolated to now
+
+
+@dataclass(frozen=True, slots=True)
 class BehaviorInputs:
+    """What a behaviour sees at a control tick: the vehicle, and what the step's perception
+    pipelines made of their frames (``percepts``, by pipeline name; ``percept`` is the step's
+    first, whose target is ``target``). A step that needs no camera gets none."""
+
     now_s: float
     state: VehicleState
-    target: TargetEstimate | None = None  # the tracked target, extrapolated to now
-    detection: BallDetection | None = None  # result of the newest processed frame
-    last_detection: BallDetection | None = None  # newest frame that had the target
-    frame_seq: int = -1  # sequence number of the newest processed frame
+    target: TargetEstimate | None = None  # the step's target, extrapolated to now
+    percept: Percept | None = None
+    percepts: tuple[Percept, ...] = ()
+
+    @property
+    def detection(self):
+        return self.percept.detection if self.percept is not None else None
+
+    @property
+    def last_detection(self):
+        return self.percept.last_detection if self.percept is not None else None
+
+    @property
+    def frame_seq(self) -> int:
+        return self.percept.frame_seq if self.percept is not None else -1
 
 
 @dataclass(frozen=True, slots=True)

@@ -12,8 +12,15 @@ keeps the vehicle's pitch — and so the target's place in a body-fixed camera �
 * ``yaw`` — turn to face the target; the standoff point lies behind it on the bearing line.
 * ``lateral`` — keep the heading the vehicle had when following began; translate so the target
   stays straight ahead.
+* ``face`` — for a target with a face (a marker): the standoff point lies in front of the face,
+  along its direction (``TargetEstimate.heading_rad``), and the vehicle turns to the target
+  (so it ends up square to the face, the target centred). Without a known face direction it
+  flies as ``yaw``.
 
-Yaw rate: proportional on the heading error plus the bearing's rate as feed-forward, limited.
+Yaw: an absolute heading setpoint — the bearing to the target, led by the bearing's rate times
+``yaw_lead_s`` (the flight stack's yaw loop lags its setpoint by about that much). A heading,
+not a yaw rate: the flight stack integrates a yaw-rate command into its own heading setpoint,
+and a rate loop closed on top of that winds it up and overshoots when the target swerves.
 An altitude floor bounds the descent. Synchronous; called by the follow behaviour.
 """
 
@@ -34,17 +41,21 @@ _MIN_BEARING_DISTANCE_M = 0.4  # closer than this (horizontally) the bearing is 
 
 @dataclass(frozen=True, slots=True)
 class FollowSettings:
-    mode: Literal["yaw", "lateral"]
+    mode: Literal["yaw", "lateral", "face"]
     standoff_m: float
     position_gain: float  # 1/s
-    yaw_gain: float  # 1/s
     max_speed_m_s: float
     max_vertical_speed_m_s: float
     max_accel_m_s2: float
-    max_yaw_rate_rad_s: float
+    max_yaw_rate_rad_s: float  # bound on the bearing rate the heading is led by
     altitude_floor_m: float
     accel_lead_s: float = 0.0  # feed-forward of the target's acceleration
     accel_filter_s: float = 0.2  # time constant of the target-acceleration estimate
+    yaw_lead_s: float = 0.3  # the heading setpoint leads the bearing by its rate × this
+    #: yaw mode: share of the target's velocity across the line of sight flown as well (1:
+    #: the vehicle translates with the target and the yaw only turns; 0: the yaw alone follows
+    #: sideways motion, as seed 001's yaw following did)
+    sideways_feedforward: float = 0.0
 
 
 def camera_depression_rad(camera: CameraInfo) -> float:
@@ -84,29 +95,40 @@ class FollowController:
         p_t, v_t = target.position_ned_m, target.velocity_ned_m_s
         rel = p_t - p_v
         horizontal = math.hypot(rel[0], rel[1])
+        facing = s.mode == "face" and target.heading_rad is not None
+        turning = s.mode in ("yaw", "face")
 
-        if s.mode == "yaw":
+        if turning:
             if horizontal > _MIN_BEARING_DISTANCE_M:
                 self._yaw_target = math.atan2(rel[1], rel[0])
             yaw_des = self._yaw_target
         else:
             yaw_des = self._heading
 
-        # the standoff point: back from the target along the camera's line of sight
+        # the standoff point: back from the target along the camera's line of sight (or out
+        # along the target's face)
         back = s.standoff_m * math.cos(self._depression)
-        desired = p_t - back * np.array([math.cos(yaw_des), math.sin(yaw_des), 0.0])
+        away = target.heading_rad + math.pi if facing else yaw_des
+        desired = p_t - back * np.array([math.cos(away), math.sin(away), 0.0])
         desired[2] = min(p_t[2] - s.standoff_m * math.sin(self._depression),
                          -s.altitude_floor_m)
         self.desired_position_ned_m = desired
 
         acc_t = self._target_acceleration(now_s, v_t)
         lead = v_t + s.accel_lead_s * acc_t
-        if s.mode == "yaw" and horizontal > _MIN_BEARING_DISTANCE_M:
+        if facing:
+            # the standoff point moves round the target as its face turns
+            h, omega = target.heading_rad, target.heading_rate_rad_s
+            lead = lead + omega * back * np.array([-math.sin(h), math.cos(h), 0.0])
+            cmd = lead + s.position_gain * (desired - p_v)
+        elif s.mode == "yaw" and horizontal > _MIN_BEARING_DISTANCE_M:
             # facing the target, only the line of sight matters: move along it to hold the
             # range, and let the yaw follow sideways motion (no orbiting)
             u = np.array([rel[0] / horizontal, rel[1] / horizontal, 0.0])
             radial = float(lead @ u) + s.position_gain * (horizontal - back)
-            cmd = radial * u
+            sideways = lead - float(lead @ u) * u
+            sideways[2] = 0.0
+            cmd = radial * u + s.sideways_feedforward * sideways
             cmd[2] = lead[2] + s.position_gain * (desired[2] - p_v[2])
         else:
             cmd = lead + s.position_gain * (desired - p_v)
@@ -118,12 +140,13 @@ class FollowController:
             cmd[2] = max(0.0, min(cmd[2], s.position_gain * (desired[2] - p_v[2])))
             self._last_cmd[2] = cmd[2]
 
-        yaw_rate = s.yaw_gain * wrap_pi(yaw_des - state.yaw_rad)
-        if s.mode == "yaw" and horizontal > _MIN_BEARING_DISTANCE_M:
+        yaw_sp = yaw_des
+        if turning and horizontal > _MIN_BEARING_DISTANCE_M:
             rel_v = v_t - np.asarray(state.velocity_ned_m_s)
-            yaw_rate += (rel[0] * rel_v[1] - rel[1] * rel_v[0]) / (horizontal * horizontal)
-        yaw_rate = max(-s.max_yaw_rate_rad_s, min(s.max_yaw_rate_rad_s, yaw_rate))
-        return Setpoint.velocity_ned(*cmd, yaw_rate_rad_s=yaw_rate, time_s=now_s)
+            bearing_rate = (rel[0] * rel_v[1] - rel[1] * rel_v[0]) / (horizontal * horizontal)
+            bearing_rate = max(-s.max_yaw_rate_rad_s, min(s.max_yaw_rate_rad_s, bearing_rate))
+            yaw_sp = wrap_pi(yaw_des + s.yaw_lead_s * bearing_rate)
+        return Setpoint.velocity_ned(*cmd, yaw_rad=yaw_sp, time_s=now_s)
 
     def _target_acceleration(self, now_s: float, v_t: np.ndarray) -> np.ndarray:
         """Low-passed derivative of the target's estimated velocity."""

@@ -19,6 +19,7 @@ measurements → this filter → :class:`TargetEstimate` for behaviours.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -62,6 +63,12 @@ class TargetEstimate:
     stale: bool
     updates: int
     confirmed: bool
+    kind: str = "point"  # what is tracked: "point" (a ball), "marker" (with a face), …
+    #: for a target with a face (a marker): the horizontal direction its face points (NED
+    #: heading, rad), its rate and 1σ; None when it has none or it is unknown
+    heading_rad: float | None = None
+    heading_rate_rad_s: float = 0.0
+    heading_std_rad: float | None = None
 
     @property
     def position_std_m(self) -> np.ndarray:
@@ -234,3 +241,42 @@ def camera_measurement(position_cam_m: np.ndarray, range_m: float, radius_px: fl
     cov_cam = lateral ** 2 * np.eye(3) + (along ** 2 - lateral ** 2) * np.outer(los, los)
     cov = r_world_cam @ cov_cam @ r_world_cam.T * noise_scale ** 2
     return PositionMeasurement(time_s, position, cov)
+
+
+@dataclass(frozen=True, slots=True)
+class NavigationUncertainty:
+    """The vehicle's own pose errors (1σ): they drift slowly, so averaging many frames of a
+    target does not reduce what they add to its world position."""
+
+    position_std_m: float = 0.0
+    attitude_std_rad: float = 0.0  # roll and pitch
+    yaw_std_rad: float = 0.0
+
+
+def navigation_covariance(relative_ned_m: np.ndarray, nav: NavigationUncertainty) -> np.ndarray:
+    """Covariance (NED, 3 × 3) that the vehicle's pose errors add to a target at
+    ``relative_ned_m`` from it: its position error, plus the target's lever arm turned by the
+    attitude errors (a yaw error moves it horizontally across the line of sight; roll and pitch
+    errors, across the line of sight in any direction)."""
+    cov = np.eye(3) * nav.position_std_m ** 2
+    rel = np.asarray(relative_ned_m, dtype=float)
+    distance = float(np.linalg.norm(rel))
+    if distance > 1e-6 and nav.attitude_std_rad > 0.0:
+        los = rel / distance
+        cov += (distance * nav.attitude_std_rad) ** 2 * (np.eye(3) - np.outer(los, los))
+    horizontal = math.hypot(rel[0], rel[1])
+    if horizontal > 1e-6 and nav.yaw_std_rad > 0.0:
+        across = np.array([-rel[1], rel[0], 0.0]) / horizontal
+        cov += (horizontal * nav.yaw_std_rad) ** 2 * np.outer(across, across)
+    return cov
+
+
+def with_navigation(estimate: TargetEstimate, vehicle_position_ned_m: np.ndarray,
+                    nav: NavigationUncertainty) -> TargetEstimate:
+    """``estimate`` with the vehicle's navigation errors added to its position covariance: the
+    uncertainty of the target's world position as the autopilot's frame knows it (the filter
+    alone only knows the scatter of its measurements)."""
+    cov = estimate.covariance.copy()
+    cov[:3, :3] += navigation_covariance(
+        estimate.position_ned_m - np.asarray(vehicle_position_ned_m, dtype=float), nav)
+    return dataclasses.replace(estimate, covariance=cov)

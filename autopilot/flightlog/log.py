@@ -113,6 +113,13 @@ class FlightLog:
                 self._wake.clear()
                 closing = self._closing  # read first: what was written before close() is taken
                 for topic, ns, data, camera in self._take_all():
+                    if camera is None and topic not in channels:  # a channel met late
+                        schema = SCHEMAS.get(topic) or {"title": topic, "type": "object"}
+                        schema_id = writer.register_schema(
+                            name=schema["title"], encoding="jsonschema",
+                            data=json.dumps(schema).encode())
+                        channels[topic] = writer.register_channel(
+                            topic=topic, message_encoding="json", schema_id=schema_id)
                     if camera is not None:
                         if topic not in channels:
                             if image_schema is None:

@@ -1,24 +1,32 @@
 """End-of-run metrics, computed from the flight log's records (scoring uses ground truth, which
 only the simulator provides; the autopilot never saw it).
 
-Follow metrics cover the intervals in which a ``follow_ball`` step ran:
+Follow metrics cover the intervals in which a follow step (``follow_ball``, ``follow_marker``,
+…) ran, and mean the same for any followed target (its pipeline, camera, truth body and size
+come from the step's plan record):
 
-* ``detection_rate`` — frames in which the ball was detected where it truly was (within
-  max(3 px, half its apparent radius)) ÷ frames in which the whole ball was inside the image;
-* ``rms_range_error_m`` — RMS of (true vehicle–ball distance − standoff) over the truth samples;
-* ``rms_image_error_px`` — RMS distance of the ball's true image position from the image centre,
-  over the frames in which it was in front of the camera, each clipped at the image's
-  half-diagonal (a ball out of view counts as at the edge);
-* ``max_lost_s`` — the longest time without a correct detection;
-* ``false_detection_rate`` — detections that were not the ball ÷ frames processed.
+* ``detection_rate`` — frames in which the target was detected where it truly was (within
+  max(3 px, half its apparent radius)) ÷ frames in which the whole target was inside the image;
+* ``rms_range_error_m`` — RMS of (true vehicle–target distance − standoff) over the truth
+  samples; ``p95_abs_range_error_m`` and ``max_abs_range_error_m`` its worst;
+* ``rms_image_error_px`` — RMS distance of the target's true image position from the image
+  centre over the frames processed; a target out of the image or behind the camera counts as
+  the worst case, the image's half-diagonal; ``p95_image_error_px`` its 95th percentile;
+* ``max_lost_s`` — the longest time without a correct detection (from the step's start);
+* ``false_detection_rate`` — detections that were not the target ÷ frames processed.
 
-Estimation metrics cover the target estimates made during those intervals, each compared with
-the ball's true position and velocity at its time:
+Estimation metrics score the target estimate *the behaviour flew on*: the step's target as the
+runtime handed it over at every control tick (``/control/target``), extrapolated to that moment,
+coasting stretches included, against the target's true position and velocity then:
 
-* ``rms_position_error_m`` — RMS of the 3-D position error; ``rms_position_error_ned_m`` per axis;
-* ``rms_velocity_error_m_s`` — RMS of the 3-D velocity error;
-* ``within_2sigma`` — the share of estimates whose error is inside ±2σ on every axis (a filter
-  whose σ is honest has about 0.87 here).
+* ``rms_position_error_m`` (and per axis, ``p95_``/``max_``), ``rms_velocity_error_m_s`` — over
+  the ticks that had a usable (not stale) estimate;
+* ``within_2sigma`` — the share of those ticks whose error is inside ±2σ on every axis (a filter
+  whose σ is honest has about 0.87 here: 0.954³);
+* ``coasting_share`` — ticks flown on a prediction more than three frame periods old, and
+  ``rms_position_error_coasting_m`` their error; ``lost_share`` — ticks with no usable estimate;
+* ``at_update`` — the same errors right after each measurement update (the filter at its best;
+  older logs without control-time records are scored this way only).
 
 Latency: for each setpoint computed from a frame, capture time → the setpoint being sent.
 """
@@ -27,24 +35,46 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
 from autopilot.estimation.pose_history import slerp
 from autopilot.flightlog import records as ch
+from drivers.base import CameraIntrinsics
+from drivers.camera_model import project_points
 from drivers.geometry import quat_to_matrix
 
-FOLLOW_STEP = "follow_ball"
-BALL = "ball"
+
+@dataclass(frozen=True, slots=True)
+class FollowedTarget:
+    """What scoring a follow step needs to know, from its plan record: the pipeline whose
+    detections and estimates to score, its camera, the target's body in the ground truth and
+    its size, and the standoff the step flew."""
+
+    pipeline: str
+    camera: str
+    truth_body: str
+    size_m: float
+    standoff_m: float
 
 
-def follow_intervals(events: Sequence[Mapping], end_s: float) -> list[tuple[float, float]]:
+def step_intervals(events: Sequence[Mapping], end_s: float, *, step_index: int | None = None,
+                   step: str | None = None) -> list[tuple[float, float]]:
+    """When a step ran: by its place in the plan (``step_index``) or by kind (``step``).
+    From a step's ``step_started`` event to its ``step_succeeded``/``step_failed`` or the
+    mission's ``aborted``. (Logs from before events had kinds: by their text.)"""
     intervals, start = [], None
     for e in events:
-        if e["text"] == f"step {FOLLOW_STEP} started":
+        kind = e.get("kind")
+        if kind is None:  # an older log
+            kind = _legacy_kind(e.get("text", ""))
+        ours = (step_index is None or e.get("step_index", step_index) == step_index) and \
+            (step is None or e.get("step") == step)
+        if kind == "step_started" and ours:
             start = e["time_s"]
-        elif start is not None and (e["text"].startswith(f"step {FOLLOW_STEP} ")
-                                    or e["text"].startswith("aborted")):
+        elif start is not None and (kind == "aborted" or
+                                    (kind in ("step_succeeded", "step_failed") and ours)):
             intervals.append((start, e["time_s"]))
             start = None
     if start is not None:
@@ -52,16 +82,76 @@ def follow_intervals(events: Sequence[Mapping], end_s: float) -> list[tuple[floa
     return intervals
 
 
+def _legacy_kind(text: str) -> str:
+    if text.startswith("step ") and text.endswith(" started"):
+        return "step_started"
+    if text.startswith("step ") and " succeeded" in text:
+        return "step_succeeded"
+    if text.startswith("step ") and " failed" in text:
+        return "step_failed"
+    return "aborted" if text.startswith("aborted") else ""
+
+
+def followed_targets(log: Mapping[str, Sequence[Mapping]]
+                     ) -> list[tuple[int, Mapping, FollowedTarget]]:
+    """The plan's follow steps (those with a target pipeline and a standoff): (index, step
+    record, target). A log from before per-step plan records: its single follow_ball step."""
+    plan = (log.get(ch.MISSION_PLAN) or [{}])[0]
+    found = []
+    for index, step in enumerate(plan.get("steps", [])):
+        pipelines = step.get("pipelines") or []
+        if pipelines and step.get("standoff_m") is not None:
+            p = pipelines[0]
+            found.append((index, step, FollowedTarget(p["name"], p["camera"], p["truth_body"],
+                                                      p["size_m"], step["standoff_m"])))
+    if not found and plan.get("camera") and plan.get("standoff_m"):
+        steps = plan.get("steps", [])
+        index = next((i for i, s in enumerate(steps) if "follow_ball" in s), 0)
+        found.append((index, {"name": "follow_ball"}, FollowedTarget(
+            "ball", plan["camera"], "ball", plan["ball_diameter_m"], plan["standoff_m"])))
+    return found
+
+
+def _first_follow(log) -> tuple[list[tuple[float, float]], FollowedTarget] | None:
+    targets = followed_targets(log)
+    if not targets:
+        return None
+    index, step, target = targets[0]
+    return _intervals_of(log, index, step.get("name")), target
+
+
+def _intervals_of(log, index: int, name: str | None) -> list[tuple[float, float]]:
+    events = log.get(ch.MISSION_EVENTS, [])
+    ends = [r["time_s"] for topic in (ch.GROUND_TRUTH, ch.VEHICLE_STATE)
+            for r in log.get(topic, [])]
+    legacy = events and "kind" not in events[0]
+    return step_intervals(events, max([*ends, 0.0]), step_index=None if legacy else index,
+                          step=name)
+
+
+def follow_step_metrics(log: Mapping[str, Sequence[Mapping]],
+                        intervals: list[tuple[float, float]], step: Mapping) -> dict:
+    """The metric groups of a follow step (its registered metrics function)."""
+    pipelines = step.get("pipelines") or []
+    if not pipelines:
+        return {}
+    p = pipelines[0]
+    target = FollowedTarget(p["name"], p["camera"], p["truth_body"], p["size_m"],
+                            step["standoff_m"])
+    return {"follow": follow_metrics(log, intervals, target),
+            "estimation": estimation_metrics(log, intervals, target)}
+
+
 class TruthTrack:
-    def __init__(self, samples: Sequence[Mapping]) -> None:
-        rows = [s for s in samples if BALL in s["bodies"]]
+    def __init__(self, samples: Sequence[Mapping], body: str = "ball") -> None:
+        rows = [s for s in samples if body in s["bodies"]]
         self.ok = bool(rows)
         if not self.ok:
             return
         self.t = np.array([s["time_s"] for s in rows])
         self.vp = np.array([s["vehicle_position_ned_m"] for s in rows])
         self.vq = np.array([s["vehicle_attitude_q"] for s in rows])
-        self.bp = np.array([s["bodies"][BALL]["position_ned_m"] for s in rows])
+        self.bp = np.array([s["bodies"][body]["position_ned_m"] for s in rows])
 
     def at(self, time_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
         t = self.t
@@ -73,40 +163,63 @@ class TruthTrack:
         return lerp(self.vp), slerp(self.vq[i], self.vq[i + 1], f), lerp(self.bp)
 
 
-def project_ball(cam: Mapping, vehicle_p, vehicle_q, ball_p, radius_m: float):
-    """Pixel, apparent radius and depth of the ball's centre in a camera (None if behind)."""
+def _intrinsics(cam: Mapping) -> CameraIntrinsics:
+    return CameraIntrinsics(int(cam["width_px"]), int(cam["height_px"]), cam["fx"], cam["fy"],
+                            cam["cx"], cam["cy"], tuple(cam.get("distortion") or (0.0,) * 5))
+
+
+def pixel_of(cam: Mapping, point_cam_m) -> tuple[float, float]:
+    """Pixel of a point in a camera's optical frame, lens distortion applied (as the camera
+    info record describes it)."""
+    u, v = project_points(_intrinsics(cam), np.asarray(point_cam_m, dtype=float))
+    return float(u), float(v)
+
+
+def project_target(cam: Mapping, vehicle_p, vehicle_q, target_p, radius_m: float):
+    """Pixel (lens distortion applied, as the camera info describes it), apparent radius and
+    position in the optical frame of a target's centre; None if it is behind the camera."""
     r_wb = quat_to_matrix(vehicle_q)
     r_bc = np.array(cam["rotation_body_cam"]).reshape(3, 3)
-    p_cam = r_bc.T @ (r_wb.T @ (ball_p - vehicle_p) - np.array(cam["position_body_m"]))
+    p_cam = r_bc.T @ (r_wb.T @ (np.asarray(target_p) - vehicle_p)
+                      - np.array(cam["position_body_m"]))
     depth = float(np.linalg.norm(p_cam))
     if p_cam[2] <= 0.0 or depth <= radius_m:
         return None
-    u = cam["fx"] * p_cam[0] / p_cam[2] + cam["cx"]
-    v = cam["fy"] * p_cam[1] / p_cam[2] + cam["cy"]
+    u, v = project_points(_intrinsics(cam), p_cam)
     r_px = cam["fx"] * radius_m / math.sqrt(depth * depth - radius_m * radius_m)
-    return u, v, r_px
+    return float(u), float(v), r_px
 
 
 def fully_in_image(cam: Mapping, u: float, v: float, r_px: float) -> bool:
-    """Whether a ball imaged at (u, v) with radius ``r_px`` lies wholly inside the image."""
+    """Whether a target imaged at (u, v) with radius ``r_px`` lies wholly inside the image."""
     return (u - r_px >= 0 and v - r_px >= 0 and u + r_px <= cam["width_px"] - 1
             and v + r_px <= cam["height_px"] - 1)
 
 
-def follow_metrics(log: Mapping[str, Sequence[Mapping]]) -> dict:
-    plan = (log.get(ch.MISSION_PLAN) or [{}])[0]
-    events = log.get(ch.MISSION_EVENTS, [])
+def in_image(cam: Mapping, u: float, v: float) -> bool:
+    return 0 <= u <= cam["width_px"] - 1 and 0 <= v <= cam["height_px"] - 1
+
+
+def follow_metrics(log: Mapping[str, Sequence[Mapping]],
+                   intervals: list[tuple[float, float]] | None = None,
+                   target: FollowedTarget | None = None) -> dict:
+    """Follow figures of a step (by default the plan's first follow step)."""
+    if target is None:
+        found = _first_follow(log)
+        if found is None:
+            return {}
+        intervals, target = found
     truth_samples = log.get(ch.GROUND_TRUTH, [])
-    frames = log.get(ch.BALL_DETECTIONS, [])
-    end = max([r["time_s"] for r in truth_samples] + [r["time_s"] for r in frames] + [0.0])
-    intervals = follow_intervals(events, end)
+    frames = log.get(ch.detection_topic(target.pipeline), [])
     cams = {c["name"]: c for c in log.get(ch.CAMERA_INFO, [])}
-    cam = cams.get(plan.get("camera"))
-    truth = TruthTrack(truth_samples)
+    cam = cams.get(target.camera)
+    body = target.truth_body
+    truth = TruthTrack(truth_samples, body)
     if not intervals or cam is None or not truth.ok:
         return {}
-    radius_m = plan["ball_diameter_m"] / 2.0
-    standoff = plan["standoff_m"]
+    radius_m = target.size_m / 2.0
+    standoff = target.standoff_m
+    half_diagonal = 0.5 * math.hypot(cam["width_px"], cam["height_px"])
 
     def following(t: float) -> bool:
         return any(a <= t <= b for a, b in intervals)
@@ -115,17 +228,18 @@ def follow_metrics(log: Mapping[str, Sequence[Mapping]]) -> dict:
     image_errors, detection_times = [], []
     for rec in frames:
         t = rec["time_s"]
-        if not following(t):
+        pose = truth.at(t) if following(t) else None
+        if pose is None:
             continue
         processed += 1
-        pose = truth.at(t)
-        proj = project_ball(cam, *pose, radius_m) if pose is not None else None
-        if proj is not None:
-            u, v, r_px = proj
-            half_diagonal = 0.5 * math.hypot(cam["width_px"], cam["height_px"])
-            image_errors.append(min(math.hypot(u - cam["cx"], v - cam["cy"]), half_diagonal))
-            visible = fully_in_image(cam, u, v, r_px)
+        proj = project_target(cam, *pose, radius_m)
+        visible = False
+        if proj is not None and in_image(cam, proj[0], proj[1]):
+            image_errors.append(math.hypot(proj[0] - cam["cx"], proj[1] - cam["cy"]))
+            visible = fully_in_image(cam, *proj)
             in_view += visible
+        else:  # out of the image or behind the camera: the worst case
+            image_errors.append(half_diagonal)
         if rec["detected"]:
             hit = proj is not None and math.hypot(rec["u_px"] - proj[0], rec["v_px"] - proj[1]) \
                 <= max(3.0, 0.5 * proj[2])
@@ -137,8 +251,8 @@ def follow_metrics(log: Mapping[str, Sequence[Mapping]]) -> dict:
 
     ranges = []
     for s in truth_samples:
-        if following(s["time_s"]) and BALL in s["bodies"]:
-            d = np.linalg.norm(np.array(s["bodies"][BALL]["position_ned_m"])
+        if following(s["time_s"]) and body in s["bodies"]:
+            d = np.linalg.norm(np.array(s["bodies"][body]["position_ned_m"])
                                - np.array(s["vehicle_position_ned_m"]))
             ranges.append(d - standoff)
 
@@ -147,48 +261,110 @@ def follow_metrics(log: Mapping[str, Sequence[Mapping]]) -> dict:
         times = [a] + [t for t in detection_times if a <= t <= b] + [b]
         lost = max(lost, max(np.diff(times)))
 
+    # how fast the target really moved while followed (truth): the scenario as flown
+    speeds = []
+    if len(truth.t) > 1:
+        dt = np.diff(truth.t)
+        ok = dt > 0
+        v = np.linalg.norm(np.diff(truth.bp, axis=0)[ok], axis=1) / dt[ok]
+        mid = (truth.t[1:][ok] + truth.t[:-1][ok]) / 2.0
+        speeds = [float(x) for x, t in zip(v, mid, strict=True) if following(t)]
+
+    abs_ranges = np.abs(ranges)
     return {
+        "target_speed_mps_rms": _rms(speeds),
+        "target_speed_mps_max": max(speeds) if speeds else None,
         "detection_rate": correct / in_view if in_view else None,
         "frames_in_view": in_view,
         "frames_processed": processed,
         "false_detection_rate": wrong / processed if processed else None,
         "rms_range_error_m": _rms(ranges),
         "mean_range_error_m": float(np.mean(ranges)) if ranges else None,
+        "p95_abs_range_error_m": float(np.percentile(abs_ranges, 95)) if ranges else None,
+        "max_abs_range_error_m": float(np.max(abs_ranges)) if ranges else None,
         "rms_image_error_px": _rms(image_errors),
+        "p95_image_error_px": float(np.percentile(image_errors, 95)) if image_errors else None,
         "max_lost_s": float(lost),
         "follow_time_s": float(sum(b - a for a, b in intervals)),
         "standoff_m": standoff,
     }
 
 
-def estimation_metrics(log: Mapping[str, Sequence[Mapping]]) -> dict:
-    events = log.get(ch.MISSION_EVENTS, [])
-    truth_samples = [s for s in log.get(ch.GROUND_TRUTH, []) if BALL in s["bodies"]]
-    estimates = log.get(ch.TARGET_ESTIMATES, [])
-    if len(truth_samples) < 2 or not estimates:
-        return {}
-    end = max(r["time_s"] for r in truth_samples)
-    intervals = follow_intervals(events, end)
-    t = np.array([s["time_s"] for s in truth_samples])
-    bp = np.array([s["bodies"][BALL]["position_ned_m"] for s in truth_samples], dtype=float)
-    bv = np.array([s["bodies"][BALL]["velocity_ned_m_s"] for s in truth_samples], dtype=float)
-    rows = [e for e in estimates if t[0] <= e["time_s"] <= t[-1]
-            and any(a <= e["time_s"] <= b for a, b in intervals)]
-    if not rows:
-        return {}
-    et = np.array([e["time_s"] for e in rows])
-    interp = lambda a: np.stack([np.interp(et, t, a[:, i]) for i in range(3)], axis=1)  # noqa: E731
+class _TruthInterp:
+    def __init__(self, samples: Sequence[Mapping], body: str) -> None:
+        rows = [s for s in samples if body in s["bodies"]]
+        self.ok = len(rows) >= 2
+        if not self.ok:
+            return
+        self.t = np.array([s["time_s"] for s in rows])
+        self.p = np.array([s["bodies"][body]["position_ned_m"] for s in rows], dtype=float)
+        self.v = np.array([s["bodies"][body]["velocity_ned_m_s"] for s in rows], dtype=float)
+
+    def covers(self, time_s: float) -> bool:
+        return bool(self.t[0] <= time_s <= self.t[-1])
+
+    def at(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        def interp(a):
+            return np.stack([np.interp(times, self.t, a[:, i]) for i in range(3)], axis=1)
+        return interp(self.p), interp(self.v)
+
+
+def _errors(rows: Sequence[Mapping], truth: _TruthInterp) -> dict:
+    """Position/velocity errors of estimate records against the truth at their times."""
     nan = lambda v: [math.nan if x is None else x for x in v]  # noqa: E731
-    pos_err = np.array([nan(e["position_ned_m"]) for e in rows], dtype=float) - interp(bp)
-    vel_err = np.array([nan(e["velocity_ned_m_s"]) for e in rows], dtype=float) - interp(bv)
-    std = np.array([nan(e["position_std_m"]) for e in rows], dtype=float)
+    times = np.array([r["time_s"] for r in rows])
+    true_p, true_v = truth.at(times)
+    pos_err = np.array([nan(r["position_ned_m"]) for r in rows], dtype=float) - true_p
+    vel_err = np.array([nan(r["velocity_ned_m_s"]) for r in rows], dtype=float) - true_v
+    std = np.array([nan(r["position_std_m"]) for r in rows], dtype=float)
+    norm = np.linalg.norm(pos_err, axis=1)
     return {
-        "rms_position_error_m": float(np.sqrt(np.mean(np.sum(pos_err ** 2, axis=1)))),
+        "rms_position_error_m": float(np.sqrt(np.mean(norm ** 2))),
         "rms_position_error_ned_m": np.sqrt(np.mean(pos_err ** 2, axis=0)).tolist(),
+        "p95_position_error_m": float(np.percentile(norm, 95)),
+        "max_position_error_m": float(np.max(norm)),
         "rms_velocity_error_m_s": float(np.sqrt(np.mean(np.sum(vel_err ** 2, axis=1)))),
         "within_2sigma": float(np.mean(np.all(np.abs(pos_err) <= 2.0 * std, axis=1))),
-        "estimates": len(rows),
     }
+
+
+def estimation_metrics(log: Mapping[str, Sequence[Mapping]],
+                       intervals: list[tuple[float, float]] | None = None,
+                       target: FollowedTarget | None = None) -> dict:
+    """Estimate figures of a step's target (by default the plan's first follow step): at
+    control time (what the behaviour flew on), and ``at_update``."""
+    if target is None:
+        found = _first_follow(log)
+        if found is None:
+            return {}
+        intervals, target = found
+    truth = _TruthInterp(log.get(ch.GROUND_TRUTH, []), target.truth_body)
+    if not truth.ok or not intervals:
+        return {}
+
+    def scored(t: float) -> bool:
+        return truth.covers(t) and any(a <= t <= b for a, b in intervals)
+
+    updates = [e for e in log.get(ch.TARGET_ESTIMATES, [])
+               if e.get("pipeline", target.pipeline) == target.pipeline and scored(e["time_s"])]
+    at_update = {**_errors(updates, truth), "estimates": len(updates)} if updates else {}
+    ticks = [r for r in log.get(ch.CONTROL_TARGET, [])
+             if r["pipeline"] == target.pipeline and scored(r["time_s"])]
+    if not ticks:  # a log from before control-time records: the updates are all there is
+        return at_update
+    cams = {c["name"]: c for c in log.get(ch.CAMERA_INFO, [])}
+    rate = (cams.get(target.camera) or {}).get("rate_hz") or 30.0
+    coast_after_s = 3.0 / rate
+    usable = [r for r in ticks if r["present"] and not r["stale"]]
+    coasting = [r for r in usable if r["age_s"] > coast_after_s]
+    result = {**(_errors(usable, truth) if usable else {}),
+              "ticks": len(ticks),
+              "lost_share": 1.0 - len(usable) / len(ticks),
+              "coasting_share": len(coasting) / len(ticks),
+              "rms_position_error_coasting_m":
+                  _errors(coasting, truth)["rms_position_error_m"] if coasting else None,
+              "at_update": at_update}
+    return result
 
 
 def latency_metrics(log: Mapping[str, Sequence[Mapping]]) -> dict:

@@ -25,13 +25,24 @@ from drivers.base import (
 CAMERA_INFO = "/camera/info"
 VEHICLE_STATE = "/vehicle/state"
 VEHICLE_STATUS = "/vehicle/status_text"
-BALL_DETECTIONS = "/perception/ball"
+BALL_DETECTIONS = "/perception/ball"  # the ball pipeline's (see detection_topic)
 TARGET_ESTIMATES = "/estimation/target"
+CONTROL_TARGET = "/control/target"
 SETPOINTS = "/control/setpoint"
 MISSION_EVENTS = "/mission/events"
 MISSION_PLAN = "/mission/plan"
 GROUND_TRUTH = "/sim/ground_truth"
 TIME_SYNC = "/vehicle/time_sync"
+
+
+def detection_topic(pipeline: str) -> str:
+    """The channel of a perception pipeline's per-frame records."""
+    return f"/perception/{pipeline}"
+
+
+def detection_topics(records) -> list[str]:
+    """The perception pipelines' channels in a log's records."""
+    return sorted(t for t in records if t.startswith("/perception/"))
 
 
 def camera_image_topic(camera: str) -> str:
@@ -76,7 +87,7 @@ SCHEMAS: dict[str, dict] = {
                           position_cam_m=_vec(3), score=_NUM, candidates=_INT,
                           cut_by_border=_BOOL, processing_ms=_NUM, received_s=_NUM,
                           detected_s=_NUM, hint_u_px=_NUM, hint_v_px=_NUM, hint_radius_px=_NUM),
-    TARGET_ESTIMATES: _obj("TargetEstimate", time_s=_NUM, measurement_time_s=_NUM,
+    TARGET_ESTIMATES: _obj("TargetEstimate", time_s=_NUM, pipeline=_STR, measurement_time_s=_NUM,
                            accepted=_BOOL, reinitialised=_BOOL, mahalanobis2=_NUM,
                            measured_position_ned_m=_vec(3), position_ned_m=_vec(3),
                            velocity_ned_m_s=_vec(3), position_std_m=_vec(3),
@@ -84,15 +95,25 @@ SCHEMAS: dict[str, dict] = {
     SETPOINTS: _obj("Setpoint", time_s=_NUM, source_frame_time_s=_NUM, latency_ms=_NUM,
                     frame=_STR, position_ned_m=_vec(3), velocity_m_s=_vec(3), yaw_rad=_NUM,
                     yaw_rate_rad_s=_NUM, expires_s=_NUM, step=_STR, phase=_STR),
-    MISSION_EVENTS: _obj("MissionEvent", time_s=_NUM, step=_STR, text=_STR),
+    MISSION_EVENTS: _obj("MissionEvent", time_s=_NUM, kind=_STR, step_index=_INT, step=_STR,
+                         text=_STR),
     MISSION_PLAN: _obj("MissionPlan", mission=_STR, source=_STR, steps={"type": "array"},
-                       standoff_m=_NUM, camera=_STR, ball_diameter_m=_NUM, driver=_STR,
-                       scenario={"type": ["object", "null"]}, config={"type": "object"}),
+                       driver=_STR, scenario={"type": ["object", "null"]},
+                       config={"type": "object"}),
+    CONTROL_TARGET: _obj("ControlTarget", time_s=_NUM, pipeline=_STR, step=_STR,
+                         step_index=_INT, present=_BOOL, position_ned_m=_vec(3),
+                         velocity_ned_m_s=_vec(3), position_std_m=_vec(3), age_s=_NUM,
+                         stale=_BOOL, confirmed=_BOOL),
     TIME_SYNC: _obj("TimeSync", time_s=_NUM, vehicle_to_local_s=_NUM, round_trip_s=_NUM),
     GROUND_TRUTH: _obj("GroundTruth", time_s=_NUM, vehicle_position_ned_m=_vec(3),
                        vehicle_velocity_ned_m_s=_vec(3), vehicle_attitude_q=_vec(4),
                        wind_ned_m_s=_vec(3), bodies={"type": "object"}),
 }
+
+
+def register_schema(topic: str, schema: dict) -> None:
+    """A channel's JSON Schema (pipelines register theirs as they are defined)."""
+    SCHEMAS[topic] = schema
 
 
 def clean(value: Any) -> Any:

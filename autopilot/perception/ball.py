@@ -28,6 +28,7 @@ import cv2
 import numpy as np
 
 from drivers.base import CameraInfo
+from drivers.camera_model import is_distorted, undistort_points
 
 HsvRange = tuple[tuple[int, int, int], tuple[int, int, int]]
 
@@ -57,6 +58,8 @@ class BallCandidate:
     fill_ratio: float
     cut_by_border: bool
     merged: bool = False  # recovered from a blob merged with something else
+    #: the outline points the fit used (image pixels), to refit in the undistorted image
+    outline: np.ndarray | None = field(default=None, compare=False, repr=False)
 
     @property
     def score(self) -> float:
@@ -175,7 +178,7 @@ class BallDetector:
         if not cut and minor >= 6.0 and len(cv2.approxPolyDP(contour, 0.02 * perimeter, True)) \
                 < s.min_polygon_vertices:
             return None
-        return BallCandidate(cu, cv_, minor, circularity, fill, cut)
+        return BallCandidate(cu, cv_, minor, circularity, fill, cut, outline=fit_pts)
 
     def _merged_balls(self, contour: np.ndarray, width: int,
                       height: int) -> list[BallCandidate]:
@@ -197,18 +200,19 @@ class BallDetector:
             circle = self._circle_around(pts, px + x - 2.0, py + y - 2.0, r_in + 0.5)
             if circle is None:
                 continue
-            cu, cv_, radius, arc, gaps = circle
+            cu, cv_, radius, arc, gaps, outline = circle
             if arc < s.min_edge_arc or gaps > s.max_edge_gaps or radius > s.max_radius_px:
                 continue
             cut = cu - radius < 0 or cv_ - radius < 0 or cu + radius > width - 1 or \
                 cv_ + radius > height - 1
             found.append(BallCandidate(float(cu), float(cv_), float(radius), arc, 1.0, cut,
-                                       merged=True))
+                                       merged=True, outline=outline))
         return found
 
     @staticmethod
     def _circle_around(pts: np.ndarray, cu: float, cv_: float,
-                       radius: float) -> tuple[float, float, float, float, int] | None:
+                       radius: float
+                       ) -> tuple[float, float, float, float, int, np.ndarray] | None:
         """Refit a circle to the outline points near a starting circle; its centre, radius,
         the fraction of it that outline points follow (in 10° sectors) and in how many places
         that is broken. Something touching a ball hides one stretch of its outline, a pole
@@ -226,7 +230,7 @@ class BallDetector:
         covered = np.zeros(36, dtype=bool)
         covered[((angles + math.pi) / (2.0 * math.pi) * 36).astype(int) % 36] = True
         # outline points are pixel centres, half a pixel inside the edge
-        return cu, cv_, radius + 0.5, float(covered.mean()), _circular_gaps(covered)
+        return cu, cv_, radius + 0.5, float(covered.mean()), _circular_gaps(covered), pts[on]
 
     def _window(self, image_bgr: np.ndarray, centre: Sequence[float],
                 radius_px: float | None) -> tuple[int, int, int, int] | None:
@@ -260,8 +264,7 @@ class BallDetector:
             best = min(found, key=lambda c: math.hypot(c.u_px - pu, c.v_px - pv))
         else:
             best = found[0]
-        position = ball_position(camera, best.u_px, best.v_px, best.radius_px,
-                                 self.settings.diameter_m)
+        position = self._position(camera, best)
         return BallDetection(
             time_s=time_s,
             camera=camera.name,
@@ -275,6 +278,26 @@ class BallDetector:
             cut_by_border=best.cut_by_border,
             others=tuple(c for c in found if c is not best),
         )
+
+
+    def _position(self, camera: CameraInfo, c: BallCandidate) -> np.ndarray:
+        """The ball's centre in the optical frame. Through a distorting lens the outline is
+        undistorted first and fitted again: the apparent size (hence the range) is that of
+        the ideal pinhole image, not the lens-squeezed one (3.5 % of range at the edges of a
+        mild barrel lens)."""
+        intr = camera.intrinsics
+        diameter = self.settings.diameter_m
+        if not is_distorted(intr) or c.outline is None or len(c.outline) < 6:
+            return ball_position(camera, c.u_px, c.v_px, c.radius_px, diameter)
+        ideal = undistort_points(intr, np.asarray(c.outline, np.float64), to_pixels=True)
+        if c.merged:
+            cu, cv_, radius = _fit_circle(ideal)
+            radius += 0.5
+        else:
+            (cu, cv_), (ax1, ax2), _ = cv2.fitEllipse(ideal.astype(np.float32))
+            radius = min(ax1, ax2) / 2.0 + 0.5
+        x, y = (cu - intr.cx) / intr.fx, (cv_ - intr.cy) / intr.fy
+        return sphere_position(x, y, radius, math.sqrt(intr.fx * intr.fy), diameter)
 
 
 def _circular_gaps(flags: np.ndarray) -> int:
@@ -309,17 +332,19 @@ def ball_position(camera: CameraInfo, u_px: float, v_px: float, radius_px: float
     sin α = b·cos θ / √(f² + b²) and the range is R / sin α.
     """
     intr = camera.intrinsics
-    if any(intr.distortion):
-        pts = cv2.undistortPoints(np.array([[[u_px, v_px]]], np.float64), intr.matrix,
-                                  np.array(intr.distortion))
-        x, y = pts[0, 0]
-    else:
-        x, y = (u_px - intr.cx) / intr.fx, (v_px - intr.cy) / intr.fy
+    x, y = undistort_points(intr, (u_px, v_px))
+    return sphere_position(float(x), float(y), radius_px, math.sqrt(intr.fx * intr.fy),
+                           diameter_m)
+
+
+def sphere_position(x: float, y: float, radius_px: float, f_px: float,
+                    diameter_m: float) -> np.ndarray:
+    """A sphere's centre from its ideal (pinhole) image: the centre's normalised coordinates
+    (x, y) and the ellipse's minor semi-axis ``radius_px``, with focal length ``f_px``."""
     direction = np.array([x, y, 1.0])
     direction /= np.linalg.norm(direction)
     cos_theta = direction[2]
-    f = math.sqrt(intr.fx * intr.fy)
-    sin_alpha = radius_px * cos_theta / math.sqrt(f * f + radius_px * radius_px)
+    sin_alpha = radius_px * cos_theta / math.sqrt(f_px * f_px + radius_px * radius_px)
     return direction * (diameter_m / 2.0) / sin_alpha
 
 

@@ -13,10 +13,30 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from autopilot.flightlog import records as ch
-from autopilot.flightlog.metrics import TruthTrack, fully_in_image, project_ball
+from autopilot.flightlog.metrics import (
+    FollowedTarget,
+    TruthTrack,
+    followed_targets,
+    fully_in_image,
+    project_target,
+)
 
-BALL = "ball"
 Records = Mapping[str, Sequence[Mapping]]
+
+
+def targets(records: Records) -> list[FollowedTarget]:
+    """The followed targets of the plan's steps (one per pipeline, in step order)."""
+    seen: dict[str, FollowedTarget] = {}
+    for _, _, target in followed_targets(records):
+        seen.setdefault(target.pipeline, target)
+    return list(seen.values())
+
+
+def _estimates(records: Records, target: FollowedTarget | None) -> list[Mapping]:
+    if target is None:
+        return []
+    return [e for e in records.get(ch.TARGET_ESTIMATES, [])
+            if e.get("pipeline", target.pipeline) == target.pipeline]
 
 
 def _arr(rows: Sequence[Mapping], key: str, width: int | None = None) -> np.ndarray:
@@ -29,18 +49,20 @@ def _arr(rows: Sequence[Mapping], key: str, width: int | None = None) -> np.ndar
 
 
 def phases(records: Records) -> list[tuple[float, float, str]]:
-    """(start, end, step) for each mission step, from the mission events."""
+    """(start, end, step) for each mission step and the fallback, from the mission events."""
     events = records.get(ch.MISSION_EVENTS, [])
     end_of_log = max((r.get("time_s", 0.0) for rows in records.values() for r in rows
                       if isinstance(r.get("time_s"), (int, float))), default=0.0)
     out, current = [], None
     for e in events:
-        text = e.get("text", "")
-        if text.startswith("step ") and text.endswith(" started"):
+        kind = e.get("kind") or _legacy_kind(e.get("text", ""))
+        if kind in ("step_started", "fallback_started"):
             if current is not None:
                 out.append((current[0], e["time_s"], current[1]))
-            current = (e["time_s"], text[len("step "):-len(" started")])
-        elif current is not None and text.startswith(f"step {current[1]} "):
+            name = e.get("step") if e.get("kind") else \
+                e.get("text", "").split(" ")[1] if " " in e.get("text", "") else ""
+            current = (e["time_s"], name if kind == "step_started" else f"{name} (fallback)")
+        elif current is not None and kind in ("step_succeeded", "step_failed", "fallback_ended"):
             out.append((current[0], e["time_s"], current[1]))
             current = None
     if current is not None:
@@ -48,33 +70,44 @@ def phases(records: Records) -> list[tuple[float, float, str]]:
     return out
 
 
-def trajectories(records: Records) -> dict[str, np.ndarray]:
+def _legacy_kind(text: str) -> str:
+    if text.startswith("step ") and text.endswith(" started"):
+        return "step_started"
+    if text.startswith("step ") and (" succeeded" in text or " failed" in text):
+        return "step_succeeded"
+    return ""
+
+
+def trajectories(records: Records, target: FollowedTarget | None = None
+                 ) -> dict[str, np.ndarray]:
     """Vehicle (telemetry and truth) and target (estimate and truth) positions, NED."""
     state = records.get(ch.VEHICLE_STATE, [])
     truth = [r for r in records.get(ch.GROUND_TRUTH, [])]
-    est = records.get(ch.TARGET_ESTIMATES, [])
-    ball = [r for r in truth if BALL in (r.get("bodies") or {})]
+    est = _estimates(records, target)
+    body = target.truth_body if target is not None else None
+    ball = [r for r in truth if body in (r.get("bodies") or {})]
     return {
         "vehicle_t": _arr(state, "time_s"), "vehicle": _arr(state, "position_ned_m", 3),
         "vehicle_truth_t": _arr(truth, "time_s"),
         "vehicle_truth": _arr(truth, "vehicle_position_ned_m", 3),
         "target_estimate_t": _arr(est, "time_s"), "target_estimate": _arr(est, "position_ned_m", 3),
         "target_truth_t": _arr(ball, "time_s"),
-        "target_truth": np.array([r["bodies"][BALL]["position_ned_m"] for r in ball],
+        "target_truth": np.array([r["bodies"][body]["position_ned_m"] for r in ball],
                                  dtype=float).reshape(len(ball), 3),
     }
 
 
-def standoff_error(records: Records) -> dict[str, np.ndarray]:
+def standoff_error(records: Records, target: FollowedTarget | None
+                   ) -> dict[str, np.ndarray]:
     """True vehicle–target distance minus the standoff (truth), and the autopilot's own view
     (estimate minus telemetry)."""
-    plan = (records.get(ch.MISSION_PLAN) or [{}])[0]
-    standoff = float(plan.get("standoff_m") or 0.0)
-    tr = trajectories(records)
+    standoff = target.standoff_m if target is not None else 0.0
+    tr = trajectories(records, target)
     out = {"t": tr["target_truth_t"], "error_m": np.empty(0), "estimated_t": np.empty(0),
            "estimated_error_m": np.empty(0)}
     if len(tr["target_truth_t"]) and len(tr["vehicle_truth_t"]):
-        truth = [r for r in records.get(ch.GROUND_TRUTH, []) if BALL in (r.get("bodies") or {})]
+        truth = [r for r in records.get(ch.GROUND_TRUTH, [])
+                 if target.truth_body in (r.get("bodies") or {})]
         vehicle = _arr(truth, "vehicle_position_ned_m", 3)
         out["error_m"] = np.linalg.norm(tr["target_truth"] - vehicle, axis=1) - standoff
     if len(tr["target_estimate_t"]) and len(tr["vehicle_t"]):
@@ -87,39 +120,46 @@ def standoff_error(records: Records) -> dict[str, np.ndarray]:
     return out
 
 
-def detection_timeline(records: Records) -> dict[str, np.ndarray]:
-    """Per processed frame: its time, whether the ball was detected, and (from ground truth,
-    when the log has it) whether the whole ball was truly in the image; ``in_view`` is all
+def detection_timeline(records: Records, target: FollowedTarget | None
+                       ) -> dict[str, np.ndarray]:
+    """Per processed frame: its time, whether the target was detected, and (from ground truth,
+    when the log has it) whether the whole target was truly in the image; ``in_view`` is all
     False without truth, and ``has_truth`` says which."""
-    rows = records.get(ch.BALL_DETECTIONS, [])
-    plan = (records.get(ch.MISSION_PLAN) or [{}])[0]
+    rows = records.get(ch.detection_topic(target.pipeline), []) if target is not None else []
     cams = {c.get("name"): c for c in records.get(ch.CAMERA_INFO, [])}
-    truth = TruthTrack(records.get(ch.GROUND_TRUTH, []))
+    truth = TruthTrack(records.get(ch.GROUND_TRUTH, []),
+                       target.truth_body if target is not None else "")
     in_view = np.zeros(len(rows), dtype=bool)
-    has_truth = truth.ok and plan.get("ball_diameter_m") is not None
+    has_truth = truth.ok
     if has_truth:
-        radius_m = plan["ball_diameter_m"] / 2.0
+        radius_m = target.size_m / 2.0
         for i, r in enumerate(rows):
-            cam = cams.get(r.get("camera", plan.get("camera")))
+            cam = cams.get(r.get("camera", target.camera))
             pose = truth.at(r["time_s"]) if cam is not None else None
-            proj = project_ball(cam, *pose, radius_m) if pose is not None else None
+            proj = project_target(cam, *pose, radius_m) if pose is not None else None
             in_view[i] = proj is not None and fully_in_image(cam, *proj)
     return {"t": _arr(rows, "time_s"),
             "detected": np.array([bool(r.get("detected")) for r in rows], dtype=bool),
             "in_view": in_view, "has_truth": np.array(has_truth)}
 
 
-def estimate_vs_truth(records: Records) -> dict[str, np.ndarray]:
-    """Target estimate with its standard deviation, and the truth at the estimate's times."""
-    est = records.get(ch.TARGET_ESTIMATES, [])
-    tr = trajectories(records)
-    t = tr["target_estimate_t"]
+def estimate_vs_truth(records: Records, target: FollowedTarget | None
+                      ) -> dict[str, np.ndarray]:
+    """The target estimate the behaviour flew on (at each control tick, coasting included;
+    the filter's updates for logs without those) with its standard deviation, and the truth at
+    the same times."""
+    rows = [r for r in records.get(ch.CONTROL_TARGET, [])
+            if target is not None and r.get("pipeline") == target.pipeline and r.get("present")]
+    if not rows:
+        rows = _estimates(records, target)
+    tr = trajectories(records, target)
+    t = _arr(rows, "time_s")
     truth = np.full((len(t), 3), math.nan)
     if len(tr["target_truth_t"]) >= 2 and len(t):
         truth = np.stack([np.interp(t, tr["target_truth_t"], tr["target_truth"][:, i],
                                     left=math.nan, right=math.nan) for i in range(3)], axis=1)
-    return {"t": t, "estimate": tr["target_estimate"], "std": _arr(est, "position_std_m", 3),
-            "truth": truth}
+    return {"t": t, "estimate": _arr(rows, "position_ned_m", 3),
+            "std": _arr(rows, "position_std_m", 3), "truth": truth}
 
 
 def velocity_tracking(records: Records) -> dict[str, np.ndarray]:

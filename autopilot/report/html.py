@@ -43,10 +43,12 @@ def render(records, complete: bool, summary: dict | None, title: str = "flight",
 
     matplotlib.use("Agg")
     phases = data.phases(records)
+    targets = data.targets(records)
     sections = []
-    for name, draw in PLOTS:
+    for name, draw, target in _panels(records, targets):
         try:
-            image = _figure(lambda fig, draw=draw: draw(fig, records, phases))
+            image = _figure(lambda fig, draw=draw, target=target:
+                            draw(fig, records, phases, target))
         except _NoData as exc:
             sections.append(f"<h2>{html.escape(name)}</h2><p class='none'>{exc}</p>")
             continue
@@ -101,8 +103,8 @@ def _shade(ax, phases) -> None:
                 color="#555")
 
 
-def _trajectories(fig, records, phases) -> None:
-    tr = data.trajectories(records)
+def _trajectories(fig, records, phases, target) -> None:
+    tr = data.trajectories(records, target)
     if not len(tr["vehicle"]) and not len(tr["vehicle_truth"]):
         raise _NoData("no vehicle positions in this log")
     top, side = fig.subplots(1, 2)
@@ -120,8 +122,8 @@ def _trajectories(fig, records, phases) -> None:
     top.legend(fontsize=8)
 
 
-def _standoff(fig, records, phases) -> None:
-    s = data.standoff_error(records)
+def _standoff(fig, records, phases, target) -> None:
+    s = data.standoff_error(records, target)
     if not len(s["error_m"]) and not len(s["estimated_error_m"]):
         raise _NoData("no target in this log")
     ax = fig.subplots()
@@ -136,8 +138,8 @@ def _standoff(fig, records, phases) -> None:
     ax.legend(fontsize=8)
 
 
-def _detections(fig, records, phases) -> None:
-    d = data.detection_timeline(records)
+def _detections(fig, records, phases, target) -> None:
+    d = data.detection_timeline(records, target)
     if not len(d["t"]):
         raise _NoData("no frames were processed")
     ax = fig.subplots()
@@ -157,8 +159,8 @@ def _detections(fig, records, phases) -> None:
     _shade(ax, phases)
 
 
-def _estimate(fig, records, phases) -> None:
-    e = data.estimate_vs_truth(records)
+def _estimate(fig, records, phases, target) -> None:
+    e = data.estimate_vs_truth(records, target)
     if not len(e["t"]):
         raise _NoData("no target estimates in this log")
     axes = fig.subplots(1, 3)
@@ -173,7 +175,7 @@ def _estimate(fig, records, phases) -> None:
     axes[0].legend(fontsize=8)
 
 
-def _velocity(fig, records, phases) -> None:
+def _velocity(fig, records, phases, target) -> None:
     v = data.velocity_tracking(records)
     if not len(v["actual_t"]):
         raise _NoData("no telemetry in this log")
@@ -187,7 +189,7 @@ def _velocity(fig, records, phases) -> None:
     axes[0].legend(fontsize=8)
 
 
-def _latency(fig, records, phases) -> None:
+def _latency(fig, records, phases, target) -> None:
     lat = data.latencies_ms(records)
     if not len(lat):
         raise _NoData("no setpoint was computed from a frame")
@@ -204,9 +206,44 @@ def _latency(fig, records, phases) -> None:
     ax.legend(fontsize=8)
 
 
-PLOTS = [("Trajectories", _trajectories), ("Standoff error", _standoff),
-         ("Detections", _detections), ("Target estimate against truth", _estimate),
-         ("Commanded and actual velocity", _velocity), ("Latency", _latency)]
+#: panel name (as step kinds list them in their ``report``) → title, drawing, per target?
+PLOTS = {
+    "trajectory": ("Trajectories", _trajectories, False),
+    "standoff": ("Standoff error", _standoff, True),
+    "detections": ("Detections", _detections, True),
+    "estimate": ("Target estimate the controller flew on, against truth", _estimate, True),
+    "velocity": ("Commanded and actual velocity", _velocity, False),
+    "latency": ("Latency", _latency, False),
+}
+ALWAYS = ("trajectory", "velocity")
+
+
+def _panels(records, targets: list) -> list[tuple[str, Callable, object]]:
+    """The panels the flown steps' kinds ask for (every panel for a log from before per-step
+    plan records), in the registry's order; target panels once per followed target."""
+    from autopilot.steps import STEP_KINDS
+    from autopilot.steps.metrics import plan_steps
+
+    steps = plan_steps(records)
+    wanted = set(ALWAYS)
+    if steps:
+        for step in steps:
+            kind = STEP_KINDS.get(step["name"])
+            wanted.update(kind.report if kind is not None else ())
+    else:
+        wanted.update(PLOTS)
+    first = targets[0] if targets else None
+    out = []
+    for key, (title, draw, per_target) in PLOTS.items():
+        if key not in wanted:
+            continue
+        if not per_target:
+            out.append((title, draw, first))
+            continue
+        for target in targets or [None]:
+            suffix = f" ({target.pipeline})" if target is not None and len(targets) > 1 else ""
+            out.append((title + suffix, draw, target))
+    return out
 
 
 def _metrics_table(summary: dict | None) -> str:
@@ -215,9 +252,16 @@ def _metrics_table(summary: dict | None) -> str:
     rows = [("status", summary.get("status")), ("mission", summary.get("mission")),
             ("driver", summary.get("driver")), ("sim time (s)", summary.get("sim_time_s")),
             ("wall time (s)", summary.get("wall_time_s"))]
+    def flatten(prefix: str, values: dict) -> None:
+        for key, value in values.items():
+            if isinstance(value, dict):
+                flatten(f"{prefix}{key}.", value)
+            else:
+                rows.append((f"{prefix}{key}", value))
+
     for group, values in (summary.get("metrics") or {}).items():
-        for key, value in (values or {}).items():
-            rows.append((f"{group}.{key}", value))
+        if group != "steps" and isinstance(values, dict):
+            flatten(f"{group}.", values)
     cells = "".join(f"<tr><th>{html.escape(str(k))}</th><td>{html.escape(_fmt(v))}</td></tr>"
                     for k, v in rows)
     return f"<h2>Summary</h2><table>{cells}</table>"

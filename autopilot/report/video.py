@@ -29,6 +29,7 @@ from autopilot.config import InputError
 from autopilot.estimation.pose_history import slerp
 from autopilot.flightlog import records as ch
 from autopilot.flightlog.log import read_images, read_log_checked
+from autopilot.flightlog.metrics import pixel_of
 from drivers.geometry import quat_to_matrix
 
 Records = Mapping[str, Sequence[Mapping]]
@@ -56,6 +57,8 @@ class Overlay:
     step: str = ""
     phase: str = ""
     detection_px: tuple[float, float, float] | None = None  # u, v, radius
+    #: the detection's outline when it has corners (a marker's, in its corner order)
+    outline_px: tuple[tuple[float, float], ...] | None = None
     hint_px: tuple[float, float, float] | None = None
     estimate_px: tuple[float, float] | None = None
     estimate_ellipse: Ellipse | None = None
@@ -81,7 +84,7 @@ def project_with_covariance(camera: Mapping, vehicle_p: np.ndarray, vehicle_q: n
     if z <= 0.05:
         return None
     fx, fy = camera["fx"], camera["fy"]
-    u, v = fx * x / z + camera["cx"], fy * y / z + camera["cy"]
+    u, v = pixel_of(camera, p)  # where the lens puts it (the image is not undistorted)
     jac = np.array([[fx / z, 0.0, -fx * x / z ** 2], [0.0, fy / z, -fy * y / z ** 2]]) @ a
     cov_px = jac @ cov_ned @ jac.T
     values, vectors = np.linalg.eigh(0.5 * (cov_px + cov_px.T))
@@ -119,10 +122,15 @@ class OverlaySource:
     def __init__(self, records: Records, camera: str) -> None:
         cams = {c["name"]: c for c in records.get(ch.CAMERA_INFO, [])}
         self.camera = cams.get(camera)
-        self.detections = {ch.time_key(r["time_s"]): r
-                           for r in records.get(ch.BALL_DETECTIONS, []) if r["camera"] == camera}
+        # the first pipeline that read this camera: its detections and estimates are drawn
+        pipeline = next((topic for topic in ch.detection_topics(records)
+                         if any(r.get("camera") == camera for r in records[topic])), None)
+        rows = records.get(pipeline, []) if pipeline is not None else []
+        name = pipeline.rsplit("/", 1)[-1] if pipeline is not None else None
+        self.detections = {ch.time_key(r["time_s"]): r for r in rows if r["camera"] == camera}
         self.states = _Series(records.get(ch.VEHICLE_STATE, []))
-        self.estimates = _Series(records.get(ch.TARGET_ESTIMATES, []))
+        self.estimates = _Series([e for e in records.get(ch.TARGET_ESTIMATES, [])
+                                  if e.get("pipeline", name) == name])
         self.setpoints = _Series(records.get(ch.SETPOINTS, []))
         self.events = _Series(records.get(ch.MISSION_EVENTS, []))
 
@@ -139,12 +147,18 @@ class OverlaySource:
 
     def overlay_at(self, time_s: float) -> Overlay:
         det = self.detections.get(ch.time_key(time_s))
-        detection = hint = None
+        detection = hint = outline = None
         panel: list[tuple[str, str]] = []
         if det is not None:
             if det["detected"]:
                 detection = (det["u_px"], det["v_px"], det["radius_px"])
-                panel += [("det", f"score {det['score']:.2f}, r {det['radius_px']:.1f} px"),
+                corners = det.get("corners_px")
+                if corners:
+                    outline = tuple((float(corners[i]), float(corners[i + 1]))
+                                    for i in range(0, len(corners) - 1, 2))
+                what = f"id {det['marker_id']}" if det.get("marker_id") is not None else \
+                    f"score {det['score']:.2f}" if det.get("score") is not None else "found"
+                panel += [("det", f"{what}, r {det['radius_px']:.1f} px"),
                           ("range", f"{det['range_m']:.2f} m (detection)")]
             else:
                 panel.append(("det", "none"))
@@ -187,8 +201,8 @@ class OverlaySource:
             yaw_rate = math.degrees(rate) if math.isfinite(rate) else None
             if setpoint.get("latency_ms") is not None:
                 panel.append(("latency", f"{setpoint['latency_ms']:.0f} ms"))
-        return Overlay(time_s, step, phase, detection, hint, estimate_px, ellipse, command,
-                       yaw_rate, tuple(panel))
+        return Overlay(time_s, step, phase, detection, outline, hint, estimate_px, ellipse,
+                       command, yaw_rate, tuple(panel))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -236,9 +250,14 @@ def draw_overlay(image_bgr: np.ndarray, overlay: Overlay) -> np.ndarray:
     if overlay.estimate_px is not None:
         x, y = _pt(*overlay.estimate_px)
         cv2.drawMarker(out, (x, y), YELLOW, cv2.MARKER_TILTED_CROSS, 12, 2, cv2.LINE_AA)
+    if overlay.outline_px:
+        points = np.round(np.asarray(overlay.outline_px)).astype(np.int32)
+        cv2.polylines(out, [points], True, GREEN, 2, cv2.LINE_AA)
+        cv2.circle(out, tuple(int(x) for x in points[0]), 4, RED, -1)  # the first corner
     if overlay.detection_px is not None:
         u, v, r = overlay.detection_px
-        cv2.circle(out, _pt(u, v), max(1, round(r)), GREEN, 2, cv2.LINE_AA)
+        if not overlay.outline_px:
+            cv2.circle(out, _pt(u, v), max(1, round(r)), GREEN, 2, cv2.LINE_AA)
         cv2.drawMarker(out, _pt(u, v), GREEN, cv2.MARKER_CROSS, 10, 1, cv2.LINE_AA)
     # commanded velocity: an arrow from the bottom centre, forward = up the image
     if overlay.command_frd_m_s is not None:
@@ -277,7 +296,9 @@ def write_video(run_dir: Path, camera: str | None = None, out: Path | None = Non
         raise VideoError(f"{path}: no such file")
     records, _ = read_log_checked(path)
     plan = (records.get(ch.MISSION_PLAN) or [{}])[0]
-    camera = camera or plan.get("camera") or "front"
+    used = [p["camera"] for step in plan.get("steps", []) if isinstance(step, Mapping)
+            for p in step.get("pipelines") or []]
+    camera = camera or (used[0] if used else plan.get("camera")) or "front"
     source = OverlaySource(records, camera)
     times = [im.time_s for im in read_images(path, camera)]
     if not times:

@@ -11,6 +11,7 @@ from typing import Annotated
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
+from drivers.camera_model import distortion_problem, pinhole
 from drivers.sim.flight.params import validate_overrides
 
 Positive = Annotated[float, Field(gt=0)]
@@ -18,6 +19,7 @@ NonNegative = Annotated[float, Field(ge=0)]
 Fraction = Annotated[float, Field(ge=0, le=1)]
 Vec3 = tuple[float, float, float]
 Gains3 = tuple[NonNegative, NonNegative, NonNegative]
+Coefficient = Annotated[float, Field(ge=-2, le=2)]
 
 
 class _Model(BaseModel):
@@ -38,6 +40,32 @@ class CameraConfig(_Model):
     pitch_deg: Annotated[float, Field(ge=-90, le=90)]
     yaw_deg: Annotated[float, Field(ge=-180, le=180)]
     latency_s: Annotated[float, Field(ge=0, le=1)]
+    #: A real camera's imperfections (the keys below); false: an ideal pinhole image, as
+    #: MuJoCo renders it, with no distortion reported (the keys below are then ignored).
+    realistic: bool
+    #: Lens distortion, OpenCV's k1 k2 p1 p2 k3 (normalised coordinates); reported with each
+    #: frame's intrinsics. Must keep the image one-to-one out to its corners.
+    distortion: tuple[Coefficient, Coefficient, Coefficient, Coefficient, Coefficient]
+    #: Gaussian read noise, standard deviation in 8-bit digital numbers (per pixel, per channel).
+    noise_std_dn: Annotated[float, Field(ge=0, le=50)]
+    #: Exposure time: motion blur from the vehicle's motion during it (0: none).
+    exposure_s: Annotated[float, Field(ge=0, le=0.1)]
+    #: Rolling shutter: time from the first row's exposure to the last's (0: global shutter).
+    rolling_shutter_s: Annotated[float, Field(ge=0, le=0.1)]
+
+    @model_validator(mode="after")
+    def _physical(self) -> CameraConfig:
+        period = 1.0 / self.rate_hz
+        for key in ("exposure_s", "rolling_shutter_s"):
+            if getattr(self, key) >= period:
+                raise ValueError(f"{key} ({getattr(self, key)}) must be shorter than the frame "
+                                 f"period (1 / rate_hz = {period:.4g} s)")
+        if self.realistic and any(self.distortion):
+            problem = distortion_problem(pinhole(self.width_px, self.height_px, self.hfov_deg,
+                                                 self.distortion))
+            if problem:
+                raise ValueError(f"distortion {list(self.distortion)}: {problem}")
+        return self
 
 
 class VehicleConfig(_Model):
@@ -209,7 +237,8 @@ class SimConfig(_Model):
     telemetry: TelemetryConfig
     rangefinder: RangefinderConfig
     flight_stack: FlightStackConfig
-    cameras: dict[str, CameraConfig]
+    #: the vehicle's cameras (the application fills them in from ``vehicle.cameras``)
+    cameras: dict[str, CameraConfig] = Field(default_factory=dict)
 
     @field_validator("params")
     @classmethod

@@ -14,6 +14,7 @@ import mujoco
 import numpy as np
 
 from drivers.base import CameraInfo, CameraIntrinsics
+from drivers.camera_model import pinhole
 from drivers.geometry import matrix_to_quat, quat_from_euler
 from drivers.resources import sim_model_path
 from drivers.sim.config import CameraConfig, SimConfig
@@ -53,11 +54,12 @@ def camera_info(name: str, cfg: CameraConfig) -> CameraInfo:
 
 
 def camera_intrinsics(cfg: CameraConfig) -> CameraIntrinsics:
-    """Ideal pinhole matching MuJoCo's rendering (square pixels, principal point centred;
-    OpenCV puts pixel centres at integer coordinates, hence the half-pixel)."""
-    f = (cfg.width_px / 2.0) / math.tan(math.radians(cfg.hfov_deg) / 2.0)
-    return CameraIntrinsics(cfg.width_px, cfg.height_px, f, f,
-                            (cfg.width_px - 1) / 2.0, (cfg.height_px - 1) / 2.0)
+    """The camera's intrinsics as delivered with its frames: MuJoCo's pinhole (square pixels,
+    principal point centred; OpenCV puts pixel centres at integer coordinates, hence the
+    half-pixel) with the configured lens distortion when the camera is ``realistic`` (the
+    rendered image is then distorted to match; see drivers/sim/camera.py), none otherwise."""
+    distortion = cfg.distortion if cfg.realistic else (0.0, 0.0, 0.0, 0.0, 0.0)
+    return pinhole(cfg.width_px, cfg.height_px, cfg.hfov_deg, distortion)
 
 
 def build_model(cfg: SimConfig, scenario: Sequence[ScenarioObject] = ()) -> BuiltModel:

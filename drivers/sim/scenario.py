@@ -9,6 +9,9 @@ The simulator calls, in order: :meth:`ScenarioObject.build` once (before compili
 step that runs the flight controller or captures a sample (so every frame and ground-truth
 sample shows the object exactly where its script puts it), and :meth:`ScenarioObject.truth`
 whenever ground truth is sampled.
+
+Marker boards (:class:`MarkerBoard`, built by :func:`marker_objects`) carry a square fiducial
+(ArUco or AprilTag) whose texture is generated at run time from OpenCV's dictionaries.
 """
 
 from __future__ import annotations
@@ -18,13 +21,15 @@ import bisect
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import Literal, Protocol
 
+import cv2
 import mujoco
 import numpy as np
 
-from drivers.geometry import quat_from_euler
-from drivers.sim.frames import ENU_FROM_NED, enu_to_ned, ned_to_enu
+from drivers.base import CameraInfo
+from drivers.geometry import quat_from_euler, quat_to_matrix
+from drivers.sim.frames import ENU_FROM_NED, enu_to_ned, ned_to_enu, quat_enu_flu_to_ned_frd
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -137,31 +142,84 @@ def lissajous(start_ned_m, speed_m_s: float, size_m: tuple[float, float] = (6.0,
 
 
 class RandomWalk:
-    """Smooth random horizontal motion: the velocity is a seeded Ornstein–Uhlenbeck process with
-    the given RMS speed, pulled back towards the start when it strays beyond ``radius_m``.
+    """Smooth random horizontal motion, as a walking person or a carried target moves: the
+    velocity wanders (a seeded second-order Gauss–Markov process: its acceleration is itself
+    smooth, correlated over ``accel_time_constant_s``, and its direction and speed over
+    ``time_constant_s``) with about the given RMS speed, and the target follows it with at most
+    ``max_accel_m_s2`` of acceleration, pulled back towards the start when it strays beyond
+    ``radius_m``. A first-order (Ornstein–Uhlenbeck) velocity would have unbounded, white
+    acceleration — steps no body makes (its 99th percentile above 10 m/s² at 2.5 m/s).
     Precomputed on a fine grid, so position is a pure function of time."""
 
     def __init__(self, start_ned_m, speed_m_s: float, seed: int, radius_m: float = 5.0,
                  time_constant_s: float = 2.0, duration_s: float = 900.0,
-                 dt_s: float = 0.01) -> None:
+                 dt_s: float = 0.01, max_accel_m_s2: float = 2.0,
+                 accel_time_constant_s: float = 0.5) -> None:
+        if max_accel_m_s2 <= 0.0:
+            raise ValueError("max_accel_m_s2 must be positive")
         rng = np.random.default_rng(seed)
         n = int(duration_s / dt_s) + 1
-        a = math.exp(-dt_s / time_constant_s)
-        sigma = speed_m_s / math.sqrt(2.0)  # per axis, so the RMS speed is speed_m_s
-        noise = rng.standard_normal((n, 2)) * sigma * math.sqrt(1.0 - a * a)
-        pos = np.zeros((n, 2))
-        vel = np.zeros((n, 2))
-        v = rng.standard_normal(2) * sigma
-        p = np.zeros(2)
+        # the wanted velocity: a' = -a/τa - v/(τa·τv) + white noise (plain floats: fast)
+        ta, tv = accel_time_constant_s, time_constant_s
+        noise = (rng.standard_normal((n, 2)) * math.sqrt(dt_s)).tolist()
+        wanted = np.zeros((n, 2))
+        vx = vy = ax = ay = 0.0
         for k in range(n):
-            pos[k], vel[k] = p, v
-            p = p + v * dt_s
-            pull = -p * max(0.0, np.linalg.norm(p) - radius_m) / radius_m  # soft boundary
-            v = a * v + noise[k] + pull * dt_s
+            wanted[k] = vx, vy
+            nx, ny = noise[k]
+            ax += dt_s * (-ax / ta - vx / (ta * tv)) + nx
+            ay += dt_s * (-ay / ta - vy / (ta * tv)) + ny
+            vx += ax * dt_s
+            vy += ay * dt_s
+        rms = math.sqrt(float(np.mean(np.sum(wanted ** 2, axis=1))))
+        wanted *= speed_m_s / rms if rms > 0.0 else 0.0
+        # the target follows the wanted velocity within its acceleration, kept near the start;
+        # the wanted velocity is rescaled until the target's own RMS speed is speed_m_s
+        # (at most 3 times the RMS speed: faster, it could not turn within the radius)
+        limit = 3.0 * speed_m_s
+        for _ in range(6):
+            speeds = np.linalg.norm(wanted, axis=1, keepdims=True)
+            capped = wanted * np.minimum(1.0, limit / np.maximum(speeds, 1e-9))
+            pos, vel = self._follow(capped.tolist(), dt_s, max_accel_m_s2, radius_m)
+            rms = math.sqrt(float(np.mean(np.sum(vel ** 2, axis=1))))
+            if rms <= 0.0 or abs(rms / speed_m_s - 1.0) < 0.02:
+                break
+            wanted *= speed_m_s / rms
         self._t = np.arange(n) * dt_s
         self._pos, self._vel = pos, vel
         self._start = np.asarray(start_ned_m, dtype=float)
         self._dt = dt_s
+
+    @staticmethod
+    def _follow(wanted: list[list[float]], dt_s: float, max_accel_m_s2: float,
+                radius_m: float) -> tuple[np.ndarray, np.ndarray]:
+        n = len(wanted)
+        pos = np.zeros((n, 2))
+        vel = np.zeros((n, 2))
+        px = py = 0.0
+        vx, vy = wanted[0]
+        for k in range(n):
+            pos[k] = px, py
+            vel[k] = vx, vy
+            wx, wy = wanted[min(k + 1, n - 1)]
+            # where it would stop: beyond the radius, it heads no further out, and back
+            reach = math.hypot(vx, vy) / (2.0 * max_accel_m_s2)
+            sx, sy = px + vx * reach, py + vy * reach
+            r = math.hypot(sx, sy)
+            if r > radius_m:
+                out = max(0.0, (wx * sx + wy * sy) / r) + min(2.0, r - radius_m)
+                wx -= out * sx / r
+                wy -= out * sy / r
+            dvx, dvy = wx - vx, wy - vy
+            norm = math.hypot(dvx, dvy)
+            if norm > max_accel_m_s2 * dt_s:
+                dvx *= max_accel_m_s2 * dt_s / norm
+                dvy *= max_accel_m_s2 * dt_s / norm
+            vx += dvx
+            vy += dvy
+            px += vx * dt_s
+            py += vy * dt_s
+        return pos, vel
 
     def __call__(self, time_s: float) -> tuple[np.ndarray, np.ndarray, float]:
         k = min(max(time_s / self._dt, 0.0), len(self._t) - 1.000001)
@@ -312,3 +370,447 @@ def _yaw_quat_enu(yaw_ned_rad: float) -> np.ndarray:
 
 def _pad3(size: Sequence[float]) -> list[float]:
     return [*size, *([0.0] * (3 - len(size)))]
+
+
+# --------------------------------------------------------------------------------------------
+# Paths by name (shared by the ball and the marker boards)
+# --------------------------------------------------------------------------------------------
+
+PathName = Literal["static", "circle", "figure8", "lissajous", "random_walk"]
+
+
+def named_path(path: PathName, start_ned_m, speed_m_s: float, size_m: float = 6.0,
+               heading_rad: float = 0.0, seed: int = 0, start_delay_s: float = 0.0,
+               ramp_s: float = 0.0, accel_m_s2: float = 2.0) -> Trajectory:
+    """A trajectory by name, starting at ``start_ned_m``: the ball's paths (``size_m`` is the
+    circle's diameter, the figure eight's and the Lissajous curve's length, the random walk's
+    diameter), oriented by ``heading_rad``; held for ``start_delay_s`` and brought up to speed
+    over ``ramp_s``. ``accel_m_s2`` bounds the random walk's acceleration."""
+    start = tuple(float(x) for x in start_ned_m)
+    if path == "static" or speed_m_s == 0.0:
+        trajectory: Trajectory = Static(start)
+    elif path == "circle":
+        trajectory = circle(start, speed_m_s, radius_m=size_m / 2.0, heading_rad=heading_rad)
+    elif path == "figure8":
+        trajectory = figure8(start, speed_m_s, length_m=size_m, width_m=size_m / 2.0,
+                             heading_rad=heading_rad)
+    elif path == "lissajous":
+        trajectory = lissajous(start, speed_m_s, size_m=(0.75 * size_m, size_m),
+                               heading_rad=heading_rad)
+    elif path == "random_walk":
+        trajectory = RandomWalk(start, speed_m_s, seed=seed, radius_m=size_m / 2.0,
+                                max_accel_m_s2=accel_m_s2)
+    else:
+        raise ValueError(f"unknown path {path!r}")
+    if start_delay_s > 0.0 or ramp_s > 0.0:
+        return Delayed(trajectory, start_delay_s, ramp_s)
+    return trajectory
+
+
+# --------------------------------------------------------------------------------------------
+# Marker boards
+# --------------------------------------------------------------------------------------------
+
+Facing = Literal["drone", "travel", "trail", "fixed"]
+
+#: AprilTag families by their OpenCV dictionary names (the same codes and ids).
+_APRILTAG_DICTIONARIES = {"tag16h5": "DICT_APRILTAG_16h5", "tag25h9": "DICT_APRILTAG_25h9",
+                          "tag36h11": "DICT_APRILTAG_36h11"}
+
+#: The printed marker's frame in a board's body frame (columns: the marker's axes in FRD). The
+#: marker frame is OpenCV's: x right and y up as the marker is read, z out of its face; the
+#: board's body x is the face's normal, so the marker's x is the body's left (−y) and its y the
+#: body's up (−z).
+BOARD_FROM_MARKER = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
+
+_VEHICLE_BODY = "vehicle/base"  # drivers/sim/model.py's VEHICLE_BODY (it imports this module)
+_PLATE_M = 0.001  # the printed face's thickness, in front of the board
+
+
+def _aruco_dictionary(name: str):
+    name = _APRILTAG_DICTIONARIES.get(name, name)
+    if not name.startswith("DICT_") or not hasattr(cv2.aruco, name):
+        raise ValueError(f"unknown marker dictionary {name!r}")
+    return cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, name))
+
+
+def marker_texture(dictionary: str, marker_id: int, size_m: float, board_m: float,
+                   px_per_cell: int = 16) -> tuple[np.ndarray, float]:
+    """The board's face as a grey-scale image: the marker (black square of side ``size_m``,
+    code cells of ``px_per_cell`` texels) centred in a white quiet zone. Returns the image and
+    the board side it spans (within a texel of ``board_m``, so that the marker is exactly
+    ``size_m``)."""
+    d = _aruco_dictionary(dictionary)
+    if not 0 <= marker_id < d.bytesList.shape[0]:
+        raise ValueError(f"{dictionary} has no marker {marker_id}")
+    if board_m < size_m:
+        raise ValueError("the board must be at least as large as the marker")
+    side = (d.markerSize + 2) * px_per_cell
+    marker = cv2.aruco.generateImageMarker(d, marker_id, side, borderBits=1)
+    n = round(board_m / size_m * side)
+    n += (n - side) % 2  # an even margin, so the marker sits in the middle
+    image = np.full((n, n), 255, np.uint8)
+    margin = (n - side) // 2
+    image[margin:margin + side, margin:margin + side] = marker
+    return image, n * size_m / side
+
+
+@dataclass
+class MarkerBoard(ScenarioObject):
+    """A square board carrying a fiducial marker, moved along a trajectory.
+
+    The body's origin is the marker's centre on the printed face; its x axis is the face's
+    normal (out of the face), y right and z down as seen from behind the board (FRD), so its
+    truth ``attitude_q`` is a heading: the direction the face looks in. The board stays
+    upright and turns its face to the vehicle (``drone``), along its direction of travel
+    (``travel``), against it (``trail``: towards a follower behind it), or to the fixed
+    heading ``yaw_deg`` (``fixed``). The marker frame (OpenCV's) is
+    ``R_ned_body @ BOARD_FROM_MARKER``; see :func:`marker_rotation_ned`.
+
+    The face is a thin textured plate (MuJoCo maps a 2D texture onto each face of a box; on the
+    −x face it shows mirrored, so the plate's back is buried in the board), the board a plain
+    box behind it: no geometry beyond two boxes, no shadows, a texture of a few hundred texels.
+    """
+
+    name: str
+    marker_id: int
+    trajectory: Trajectory | Callable[[float], tuple[np.ndarray, np.ndarray, float]]
+    dictionary: str = "DICT_ARUCO_ORIGINAL"
+    size_m: float = 0.16
+    board_m: float = 0.3
+    thickness_m: float = 0.01
+    facing: Facing = "drone"
+    yaw_deg: float = 0.0  # the face's heading with ``fixed`` (NED, 0 = north)
+    board_rgba: tuple[float, float, float, float] = (0.85, 0.85, 0.85, 1.0)
+    px_per_cell: int = 16
+    _mocap_id: int = field(default=-1, init=False)
+    _vehicle_qpos: int = field(default=-1, init=False)
+    _origin: tuple[float, float, float] = field(default=(0.0, 0.0, 0.0), init=False)
+    _vehicle_start_ned: np.ndarray = field(default_factory=lambda: np.zeros(3), init=False)
+
+    def __post_init__(self) -> None:
+        if self.facing not in ("drone", "travel", "trail", "fixed"):
+            raise ValueError(f"facing must be drone, travel, trail or fixed, not {self.facing!r}")
+        self.texture, self.board_side_m = marker_texture(self.dictionary, self.marker_id,
+                                                         self.size_m, self.board_m,
+                                                         self.px_per_cell)
+
+    @property
+    def moves(self) -> bool:  # type: ignore[override]
+        still = isinstance(self.trajectory, Static) or (
+            isinstance(self.trajectory, ClosedPath) and self.trajectory.speed_m_s == 0.0)
+        return self.facing == "drone" or not still
+
+    def heading(self, position_ned_m: np.ndarray, path_yaw_rad: float,
+                vehicle_ned_m: np.ndarray | None) -> float:
+        """The face's heading (NED, rad) for the board at a position."""
+        if self.facing == "travel":
+            return path_yaw_rad
+        if self.facing == "trail":
+            return path_yaw_rad + math.pi
+        if self.facing == "drone" and vehicle_ned_m is not None:
+            dn, de = vehicle_ned_m[0] - position_ned_m[0], vehicle_ned_m[1] - position_ned_m[1]
+            if dn * dn + de * de > 1e-8:
+                return math.atan2(de, dn)
+        return math.radians(self.yaw_deg)
+
+    def build(self, spec: mujoco.MjSpec, frame: WorldFrame) -> None:
+        pos, _, yaw = self.trajectory(0.0)
+        self._vehicle_start_ned = frame.to_ned(frame.origin_enu_m)
+        vehicle = spec.body(_VEHICLE_BODY)
+        if vehicle is not None:
+            self._vehicle_start_ned = frame.to_ned(np.array(vehicle.pos, dtype=float))
+        heading = self.heading(pos, yaw, self._vehicle_start_ned)
+        n = self.texture.shape[0]
+        texture = spec.add_texture(name=f"{self.name}/texture", type=mujoco.mjtTexture.mjTEXTURE_2D,
+                                   width=n, height=n, nchannel=3)
+        texture.data = np.repeat(self.texture[:, :, None], 3, axis=2).tobytes()
+        material = spec.add_material(name=f"{self.name}/face", specular=0.0, shininess=0.0,
+                                     reflectance=0.0, rgba=[1.0, 1.0, 1.0, 1.0])
+        material.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = f"{self.name}/texture"
+        body = spec.worldbody.add_body(name=self.name, mocap=True, pos=frame.to_enu(pos),
+                                       quat=_yaw_quat_enu(heading))
+        half = self.board_side_m / 2.0
+        # body FLU: the face's normal is +x
+        body.add_geom(name=f"{self.name}/face", type=mujoco.mjtGeom.mjGEOM_BOX,
+                      size=[_PLATE_M / 2.0, half, half], pos=[-_PLATE_M / 2.0, 0.0, 0.0],
+                      material=f"{self.name}/face", contype=0, conaffinity=0)
+        body.add_geom(name=f"{self.name}/board", type=mujoco.mjtGeom.mjGEOM_BOX,
+                      size=[self.thickness_m / 2.0, half, half],
+                      pos=[-_PLATE_M - self.thickness_m / 2.0, 0.0, 0.0],
+                      rgba=list(self.board_rgba), contype=0, conaffinity=0)
+
+    def bind(self, model: mujoco.MjModel, data: mujoco.MjData, frame: WorldFrame) -> None:
+        self._mocap_id = int(model.body_mocapid[model.body(self.name).id])
+        self._origin = tuple(frame.origin_enu_m.tolist())
+        vehicle = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, _VEHICLE_BODY)
+        if vehicle >= 0 and model.body_jntadr[vehicle] >= 0:
+            self._vehicle_qpos = int(model.jnt_qposadr[model.body_jntadr[vehicle]])
+        self.update(0.0, data)
+
+    def _vehicle_ned(self, data: mujoco.MjData) -> np.ndarray | None:
+        if self._vehicle_qpos < 0:
+            return self._vehicle_start_ned
+        e, n, u = data.qpos[self._vehicle_qpos:self._vehicle_qpos + 3]
+        ox, oy, oz = self._origin
+        return np.array((n - oy, e - ox, oz - u))
+
+    def update(self, time_s: float, data: mujoco.MjData) -> None:
+        pos, _, yaw = self.trajectory(time_s)
+        heading = self.heading(pos, yaw, self._vehicle_ned(data) if self.facing == "drone"
+                               else None)
+        n, e, d = pos
+        ox, oy, oz = self._origin
+        data.mocap_pos[self._mocap_id] = (e + ox, n + oy, oz - d)
+        data.mocap_quat[self._mocap_id] = _yaw_quat_enu(heading)
+
+    def truth(self, time_s: float, data: mujoco.MjData) -> BodyTruth:
+        """The marker's centre, the board's motion, and its attitude as rendered."""
+        pos, vel, _ = self.trajectory(time_s)
+        q = quat_enu_flu_to_ned_frd(np.array(data.mocap_quat[self._mocap_id], dtype=float))
+        return BodyTruth(pos, vel, q)
+
+
+def marker_rotation_ned(board_attitude_q: np.ndarray) -> np.ndarray:
+    """The marker frame's axes (OpenCV's: x right, y up, z out of the face) in NED, from a
+    board's truth attitude."""
+    return quat_to_matrix(board_attitude_q) @ BOARD_FROM_MARKER
+
+
+def marker_in_camera(board: BodyTruth, vehicle: BodyTruth,
+                     camera: CameraInfo) -> tuple[np.ndarray, np.ndarray]:
+    """A board's marker seen from a camera, from ground truth: the marker centre in the optical
+    frame and ``rotation_cam_marker`` (as :class:`~autopilot.perception.marker.MarkerDetection`
+    reports them)."""
+    r_ned_body = quat_to_matrix(vehicle.attitude_q)
+    r_ned_cam = r_ned_body @ camera.rotation_body_cam
+    position = r_ned_cam.T @ (np.asarray(board.position_ned_m) - vehicle.position_ned_m
+                              - r_ned_body @ camera.position_body_m)
+    return position, r_ned_cam.T @ marker_rotation_ned(board.attitude_q)
+
+
+def marker_objects(*, marker_id: int = 36, dictionary: str = "DICT_ARUCO_ORIGINAL",
+                   size_m: float = 0.16, board_m: float = 0.3, path: PathName = "static",
+                   speed_mps: float = 0.0, height_m: float = 1.5, start_distance_m: float = 2.0,
+                   path_size_m: float = 6.0, facing: Facing = "drone",
+                   yaw_deg: float | None = None, decoys: int = 0,
+                   decoy_ids: Sequence[int] = (), seed: int = 0, start_delay_s: float = 0.0,
+                   accel_mps2: float = 0.0, origin_north_east_m: Sequence[float] = (0.0, 0.0),
+                   heading_deg: float = 0.0, name: str = "marker") -> list[ScenarioObject]:
+    """The followed marker board and its decoys, for a mission's scenario.
+
+    The board starts ``start_distance_m`` ahead of ``origin_north_east_m`` along
+    ``heading_deg`` (the vehicle's start and heading), its marker's centre ``height_m`` above
+    the ground, and moves along ``path`` (as the ball's paths; ``path_size_m`` sets their
+    size) at ``speed_mps`` after ``start_delay_s``, reaching that speed at ``accel_mps2`` (0:
+    at once). ``facing``: drone | travel | trail | fixed; ``yaw_deg`` is the face's heading when
+    fixed (default: back towards the start). ``decoys`` boards with other ids of the same
+    dictionary (``decoy_ids``, or drawn with ``seed``) stand still beside the path, facing the
+    vehicle. The first object is the followed board, named ``name``; decoys are
+    ``{name}_decoy{i}``."""
+    heading = math.radians(heading_deg)
+    north, east = origin_north_east_m
+    start = (north + start_distance_m * math.cos(heading),
+             east + start_distance_m * math.sin(heading), -height_m)
+    ramp = speed_mps / accel_mps2 if accel_mps2 > 0.0 else 0.0
+    trajectory = named_path(path, start, speed_mps, path_size_m, heading, seed,
+                            start_delay_s, ramp, accel_m_s2=accel_mps2 or 2.0)
+    fixed_yaw = heading_deg + 180.0 if yaw_deg is None else yaw_deg
+    board = MarkerBoard(name, marker_id, trajectory, dictionary=dictionary, size_m=size_m,
+                        board_m=board_m, facing=facing, yaw_deg=fixed_yaw)
+    objects: list[ScenarioObject] = [board]
+    if decoys <= 0:
+        return objects
+    rng = np.random.default_rng(seed + 104729)
+    count = _aruco_dictionary(dictionary).bytesList.shape[0]
+    ids = [i for i in decoy_ids if i != marker_id]
+    pool = [i for i in range(count) if i != marker_id and i not in ids]
+    ids += [int(i) for i in rng.choice(pool, size=max(0, decoys - len(ids)), replace=False)]
+    origin = np.array([north, east, 0.0])
+    for i, decoy_id in enumerate(ids[:decoys]):
+        for _ in range(100):  # beside the path, clear of the start and of the board's start
+            along = trajectory(float(rng.uniform(0.0, 60.0)))[0]
+            angle = rng.uniform(0.0, 2.0 * math.pi)
+            pos = along + rng.uniform(0.6, 2.5) * np.array([math.cos(angle), math.sin(angle),
+                                                            0.0])
+            pos[2] = -float(rng.uniform(0.5, 2.5))
+            if (np.linalg.norm(pos[:2] - origin[:2]) > 1.5
+                    and np.linalg.norm(pos - np.asarray(start)) > 0.6):
+                break
+        objects.append(MarkerBoard(f"{name}_decoy{i}", decoy_id, Static(tuple(pos)),
+                                   dictionary=dictionary, size_m=size_m, board_m=board_m,
+                                   facing="drone"))
+    return objects
+
+
+# --------------------------------------------------------------------------------------------
+# Calibration boards
+# --------------------------------------------------------------------------------------------
+
+CalibrationPattern = Literal["chessboard", "charuco"]
+
+#: The printed pattern's frame in a calibration board's body frame (columns: the pattern's axes
+#: in the body's FRD). The pattern frame is OpenCV's object frame as a camera in front of the
+#: board reads it: x right, y down, z into the face; the body's x is the face's normal, so the
+#: pattern's x is the body's left (−y), its y the body's down (+z), its z the body's back (−x).
+BOARD_FROM_PATTERN = np.array([[0.0, 0.0, -1.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+
+
+def calibration_texture(pattern: CalibrationPattern, squares: tuple[int, int], *,
+                        marker_ratio: float = 0.75, dictionary: str = "DICT_5X5_100",
+                        px_per_square: int = 64, margin_squares: int = 1,
+                        blur_squares: float = 0.0) -> np.ndarray:
+    """A calibration board's face as a grey-scale image: ``squares`` (columns, rows) squares of
+    ``px_per_square`` texels, chessboard or ChArUco (OpenCV's layout, markers of
+    ``marker_ratio`` of a square from ``dictionary``), in a white margin of ``margin_squares``
+    squares; the top-left square is black. ``blur_squares``: the standard deviation of a
+    Gaussian blur of the print, in squares (see :class:`CalibrationBoard`).
+
+    Square edges fall on texel boundaries at every mipmap level up to
+    log2(``px_per_square``) when ``px_per_square`` is a power of two, so that OpenGL's texture
+    filtering blurs them symmetrically and leaves the corners where they are."""
+    cols, rows = squares
+    if cols < 2 or rows < 2:
+        raise ValueError(f"a calibration board needs at least 2x2 squares, got {cols}x{rows}")
+    if px_per_square < 8:
+        raise ValueError("px_per_square must be at least 8")
+    margin = margin_squares * px_per_square
+    if pattern == "chessboard":
+        cells = (np.indices((rows, cols)).sum(axis=0) % 2).astype(np.uint8) * 255
+        face = np.kron(cells, np.ones((px_per_square, px_per_square), np.uint8))
+        image = cv2.copyMakeBorder(face, margin, margin, margin, margin, cv2.BORDER_CONSTANT,
+                                   value=255)
+    elif pattern == "charuco":
+        if not 0.0 < marker_ratio < 1.0:
+            raise ValueError(f"marker_ratio must be in (0, 1), got {marker_ratio}")
+        board = charuco_board(squares, 1.0, marker_ratio, dictionary)
+        size = (cols * px_per_square + 2 * margin, rows * px_per_square + 2 * margin)
+        image = board.generateImage(size, marginSize=margin, borderBits=1)
+    else:
+        raise ValueError(f"unknown calibration pattern {pattern!r} (chessboard, charuco)")
+    if blur_squares > 0.0:
+        image = cv2.GaussianBlur(image, (0, 0), blur_squares * px_per_square,
+                                 borderType=cv2.BORDER_REPLICATE)
+    return image
+
+
+def charuco_board(squares: tuple[int, int], square_m: float, marker_m_or_ratio: float,
+                  dictionary: str):
+    """OpenCV's ChArUco board (``cv2.aruco.CharucoBoard``: columns × rows of squares)."""
+    d = _aruco_dictionary(dictionary)
+    needed = squares[0] * squares[1] // 2
+    if d.bytesList.shape[0] < needed:
+        raise ValueError(f"{dictionary} has {d.bytesList.shape[0]} markers; a "
+                         f"{squares[0]}x{squares[1]} ChArUco board needs {needed}")
+    return cv2.aruco.CharucoBoard(tuple(squares), square_m, marker_m_or_ratio, d)
+
+
+@dataclass
+class CalibrationBoard(ScenarioObject):
+    """A flat camera-calibration board (chessboard or ChArUco) standing still at a pose.
+
+    The body's origin is the centre of the pattern on the printed face; its x axis is the face's
+    normal (out of the face), y right and z down as seen from behind the board (FRD), as for a
+    :class:`MarkerBoard`, but ``attitude_q`` (body → NED) may tilt it any way. The pattern frame
+    (OpenCV's object frame) is ``R_ned_body @ BOARD_FROM_PATTERN``; :meth:`corners_ned` gives
+    where the pattern's inner corners are, in the order OpenCV's detectors report them.
+
+    The texture has ``px_per_square`` texels a square (a power of two: see
+    :func:`calibration_texture`); choose it larger than a square will appear in the image, so
+    that the texture is minified (mipmapped), not magnified.
+
+    ``blur_squares`` softens the print: a Gaussian blur of that standard deviation, in squares
+    (e.g. 0.02 for ink that bleeds a little), so it scales with the board's distance, unlike
+    the camera's own blur (lens, motion: see the camera's configuration). The blur is
+    symmetric, so the corners stay where they are. 0 (the default): a sharp print.
+    """
+
+    name: str
+    position_ned_m: tuple[float, float, float]
+    attitude_q: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
+    pattern: CalibrationPattern = "chessboard"
+    squares: tuple[int, int] = (10, 7)  # columns × rows of squares
+    square_m: float = 0.05
+    marker_m: float | None = None  # ChArUco: the markers' side (default 0.75 of a square)
+    dictionary: str = "DICT_5X5_100"
+    px_per_square: int = 64
+    margin_squares: int = 1  # the white margin around the pattern, in squares
+    #: The print's blur (Gaussian standard deviation, in squares); see the class notes.
+    blur_squares: float = 0.0
+    thickness_m: float = 0.01
+    board_rgba: tuple[float, float, float, float] = (0.85, 0.85, 0.85, 1.0)
+    #: The face's brightness: the printed white under the scene's light (below 1 keeps the
+    #: lit face from saturating).
+    face_gain: float = 0.8
+    moves = False
+    _mocap_id: int = field(default=-1, init=False)
+    _origin: tuple[float, float, float] = field(default=(0.0, 0.0, 0.0), init=False)
+
+    def __post_init__(self) -> None:
+        marker = 0.75 * self.square_m if self.marker_m is None else self.marker_m
+        if not 0.0 < marker < self.square_m:
+            raise ValueError(f"marker_m must be between 0 and square_m, got {marker}")
+        self.marker_m = marker
+        self.texture = calibration_texture(self.pattern, self.squares,
+                                           marker_ratio=marker / self.square_m,
+                                           dictionary=self.dictionary,
+                                           px_per_square=self.px_per_square,
+                                           margin_squares=self.margin_squares,
+                                           blur_squares=self.blur_squares)
+        cols, rows = self.squares
+        self.face_size_m = ((cols + 2 * self.margin_squares) * self.square_m,
+                            (rows + 2 * self.margin_squares) * self.square_m)
+
+    def pattern_points_m(self) -> np.ndarray:
+        """The inner corners in the pattern frame, origin at the pattern's centre, ``(N, 3)``:
+        row by row from the top left for a chessboard, by id for ChArUco (OpenCV's order)."""
+        cols, rows = self.squares
+        ij = np.stack(np.meshgrid(np.arange(1, cols), np.arange(1, rows)), axis=-1)
+        xy = ij.reshape(-1, 2) * self.square_m - np.array([cols, rows]) * self.square_m / 2
+        return np.column_stack([xy, np.zeros(len(xy))])
+
+    def rotation_ned_pattern(self) -> np.ndarray:
+        """The pattern frame's axes in NED (columns)."""
+        return quat_to_matrix(np.asarray(self.attitude_q, dtype=float)) @ BOARD_FROM_PATTERN
+
+    def corners_ned(self) -> np.ndarray:
+        """Where the inner corners are, local NED, ``(N, 3)`` (order of
+        :meth:`pattern_points_m`)."""
+        return (np.asarray(self.position_ned_m, dtype=float)
+                + self.pattern_points_m() @ self.rotation_ned_pattern().T)
+
+    def build(self, spec: mujoco.MjSpec, frame: WorldFrame) -> None:
+        height, width = self.texture.shape
+        texture = spec.add_texture(name=f"{self.name}/texture",
+                                   type=mujoco.mjtTexture.mjTEXTURE_2D,
+                                   width=width, height=height, nchannel=3)
+        texture.data = np.repeat(self.texture[:, :, None], 3, axis=2).tobytes()
+        gain = self.face_gain
+        material = spec.add_material(name=f"{self.name}/face", specular=0.0, shininess=0.0,
+                                     reflectance=0.0, rgba=[gain, gain, gain, 1.0])
+        material.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = f"{self.name}/texture"
+        body = spec.worldbody.add_body(name=self.name, mocap=True,
+                                       pos=frame.to_enu(np.asarray(self.position_ned_m)),
+                                       quat=self._quat_enu())
+        half_w, half_h = self.face_size_m[0] / 2.0, self.face_size_m[1] / 2.0
+        # body FLU: the face's normal is +x, the face spans y (width) and z (height)
+        body.add_geom(name=f"{self.name}/face", type=mujoco.mjtGeom.mjGEOM_BOX,
+                      size=[_PLATE_M / 2.0, half_w, half_h], pos=[-_PLATE_M / 2.0, 0.0, 0.0],
+                      material=f"{self.name}/face", contype=0, conaffinity=0)
+        body.add_geom(name=f"{self.name}/board", type=mujoco.mjtGeom.mjGEOM_BOX,
+                      size=[self.thickness_m / 2.0, half_w, half_h],
+                      pos=[-_PLATE_M - self.thickness_m / 2.0, 0.0, 0.0],
+                      rgba=list(self.board_rgba), contype=0, conaffinity=0)
+
+    def _quat_enu(self) -> np.ndarray:
+        from drivers.sim.frames import quat_ned_frd_to_enu_flu
+
+        return quat_ned_frd_to_enu_flu(np.asarray(self.attitude_q, dtype=float))
+
+    def bind(self, model: mujoco.MjModel, data: mujoco.MjData, frame: WorldFrame) -> None:
+        self._mocap_id = int(model.body_mocapid[model.body(self.name).id])
+        self._origin = tuple(frame.origin_enu_m.tolist())
+
+    def truth(self, time_s: float, data: mujoco.MjData) -> BodyTruth:
+        return BodyTruth(np.asarray(self.position_ned_m, dtype=float), np.zeros(3),
+                         np.asarray(self.attitude_q, dtype=float))

@@ -33,7 +33,7 @@ import numpy as np
 
 from drivers.base import CameraInfo, ConnectionLost, Frame, Health, Setpoint, VehicleState
 from drivers.geo import GlobalOrigin
-from drivers.sim.camera import CameraRig, SimCamera
+from drivers.sim.camera import CameraEffects, CameraRig, SimCamera, VehicleMotion
 from drivers.sim.config import SimConfig
 from drivers.sim.flight.flight_stack import FlightStack
 from drivers.sim.flight.navigator import NavEvent
@@ -156,9 +156,10 @@ class Simulator:
         self.rotor_thrust_n = np.zeros(n)
         self._weight_n = self.airframe.mass_kg * 9.80665
 
-        self.cameras = {name: SimCamera(cam_id, info, config.cameras[name].latency_s)
+        self.cameras = {name: SimCamera(cam_id, info, config.cameras[name].latency_s,
+                                        CameraEffects.from_config(config.cameras[name]))
                         for name, (cam_id, info) in built.cameras.items()}
-        self._rig = CameraRig(self.model)
+        self._rig = CameraRig(self.model, self.seed)
         self._moving = [obj for obj in self.scenario if obj.moves]
 
         self._step = 0
@@ -271,13 +272,16 @@ class Simulator:
         if k >= self._truth.next_step:
             self._queue(t, "truth", self.ground_truth())
             self._truth.advance(k)
+        motion = None
         for name, cam in self.cameras.items():
             sched = self._cam_schedules[name]
             if k >= sched.next_step:
                 if cam.active:
                     due = t + cam.latency_s
+                    if motion is None:
+                        motion = self._vehicle_motion()
                     pending = self._rig.submit(self.data, cam, t,
-                                               due - self.cfg.realtime_render_lead_s)
+                                               due - self.cfg.realtime_render_lead_s, motion)
                     self._queue(due, "frame", pending)
                 sched.advance(k)
         self._update_next_capture()
@@ -337,8 +341,12 @@ class Simulator:
         if cam is None:
             self._queue(event.time_s, "photo", meta)
             return
-        pending = self._rig.submit(self.data, cam, event.time_s)
+        pending = self._rig.submit(self.data, cam, event.time_s, motion=self._vehicle_motion())
         self._queue(event.time_s + cam.latency_s, "photo", (meta, pending))
+
+    def _vehicle_motion(self) -> VehicleMotion:
+        """The vehicle's true motion now (motion blur and rolling shutter of its cameras)."""
+        return VehicleMotion(*self._truth_state())
 
     def _truth_attitude(self) -> tuple[tuple[float, ...], list[float]]:
         qw, qx, qy, qz = self.data.qpos[self._qpos0 + 3:self._qpos0 + 7].tolist()
@@ -464,7 +472,8 @@ class Simulator:
     def capture(self, camera: str) -> Frame:
         """Render a camera now, synchronously (whether or not it is active)."""
         cam = self.cameras[camera]
-        return self._rig.finish(self._rig.submit(self.data, cam, self.time_s))
+        return self._rig.finish(self._rig.submit(self.data, cam, self.time_s,
+                                                 motion=self._vehicle_motion()))
 
     def set_realtime_rendering(self, gate: Callable[[float], None] | None) -> None:
         """Render as the real-time driver needs (see camera.py): at a lower CPU priority, and

@@ -8,6 +8,7 @@ import cv2
 import numpy as np
 import pytest
 
+from drivers import camera_model
 from drivers.base import CameraUnavailable
 from drivers.geometry import quat_from_euler, quat_to_matrix
 from drivers.sim import camera
@@ -15,6 +16,7 @@ from drivers.sim.driver import SimDriver
 from drivers.sim.scenario import Geom, MocapBody, Static
 from drivers.sim.simulator import Simulator
 
+from ..conftest import sim_with
 from .simtools import run, simulator
 
 RED = (1.0, 0.0, 0.0, 1.0)
@@ -33,13 +35,15 @@ def _blob_centres(image):
 
 
 def _expected_pixel(info, truth, point):
+    """Where the frame's camera model (pinhole and lens distortion) puts a world point."""
     r_world_body = quat_to_matrix(truth.vehicle.attitude_q)
     p_body = r_world_body.T @ (np.asarray(point) - truth.vehicle.position_ned_m)
     p_cam = info.rotation_body_cam.T @ (p_body - info.position_body_m)
     assert p_cam[2] > 0, "marker behind the camera"
-    return info.intrinsics.project(p_cam)
+    return camera_model.project_points(info.intrinsics, p_cam)
 
 
+@pytest.mark.parametrize("realistic", [True, False], ids=["realistic", "ideal"])
 @pytest.mark.parametrize(
     ("camera", "vehicle", "euler_deg", "points"),
     [
@@ -53,7 +57,12 @@ def _expected_pixel(info, truth, point):
          [(2.0, 1.0, -0.5), (2.6, 0.4, -0.3), (1.5, 1.8, -0.6)]),
     ],
 )
-def test_marker_appears_at_projected_pixel(sim_config, camera, vehicle, euler_deg, points):
+def test_marker_appears_at_projected_pixel(sim_config, camera, vehicle, euler_deg, points,
+                                           realistic):
+    """To the pixel, with the lens distortion the frame reports (realistic camera, default)
+    and without (an ideal pinhole: ``intrinsics.project``)."""
+    if not realistic:
+        sim_config = sim_with(sim_config, **{f"cameras.{camera}.realistic": False})
     sim = Simulator(sim_config, scenario=_markers(points))
     try:
         sim.set_vehicle_pose(vehicle, quat_from_euler(*np.radians(euler_deg)))
@@ -61,12 +70,31 @@ def test_marker_appears_at_projected_pixel(sim_config, camera, vehicle, euler_de
         truth = sim.ground_truth()
     finally:
         sim.close()
+    assert camera_model.is_distorted(frame.camera.intrinsics) == realistic
     found = _blob_centres(frame.image)
     assert len(found) == len(points)
     for point in points:
         expected = _expected_pixel(frame.camera, truth, point)
         nearest = min(found, key=lambda c: np.linalg.norm(c - expected))
         assert np.linalg.norm(nearest - expected) < 1.0, (point, expected, nearest)
+
+
+def test_two_cameras_rendering_in_turn_each_draw_their_own_view(sim_config):
+    """Each camera has its own framebuffer on the one OpenGL context: drawing into the one
+    bound last would hand each camera the other's picture."""
+    ahead, below = (3.0, 0.0, -1.9), (0.3, 0.2, -0.5)
+    sim = Simulator(sim_config, scenario=_markers([ahead, below]))
+    try:
+        sim.set_vehicle_pose((0.0, 0.0, -2.5), quat_from_euler(0.0, 0.0, 0.0))
+        frames = [sim.capture(name) for name in ("front", "down", "front", "down")]
+        truth = sim.ground_truth()
+    finally:
+        sim.close()
+    for frame in frames:
+        point = ahead if frame.camera.name == "front" else below
+        (found,) = _blob_centres(frame.image)  # the other marker is out of this camera's view
+        expected = _expected_pixel(frame.camera, truth, point)
+        assert np.linalg.norm(found - expected) < 1.0, (frame.camera.name, found, expected)
 
 
 def test_intrinsics_match_configuration(sim_config):
@@ -82,6 +110,8 @@ def test_intrinsics_match_configuration(sim_config):
     assert not frame.image.flags.writeable
     assert math.degrees(info.intrinsics.hfov_rad) == pytest.approx(cam.hfov_deg)
     assert info.intrinsics.cx == pytest.approx((cam.width_px - 1) / 2)
+    assert cam.realistic
+    assert info.intrinsics.distortion == tuple(cam.distortion)  # the autopilot undistorts
 
 
 def test_frames_are_stamped_with_capture_time(sim_config):

@@ -23,8 +23,8 @@ def test_doctor_passes_a_healthy_vehicle_and_camera():
     async def main_():
         stop = asyncio.Event()
         server = asyncio.ensure_future(serve(
-            load_config(overrides=["sim.cameras.down.enabled=false"]), None, instance=INSTANCE,
-            video_url=VIDEO, log=lambda line: None, stop=stop))
+            load_config(overrides=["vehicle.cameras.down.enabled=false"]), None,
+            instance=INSTANCE, videos={"front": VIDEO}, log=lambda line: None, stop=stop))
         try:
             await asyncio.sleep(3.0)  # the simulator boots
             return await run_doctor(plan, connect=CONNECT, video=VIDEO, duration_s=3.0)
@@ -38,7 +38,8 @@ def test_doctor_passes_a_healthy_vehicle_and_camera():
         assert checks[item].status == "PASS", checks[item]
     assert "system 9" in checks["link"].detail  # PX4 SITL: instance 8 is system 9
     assert "vehicle-clock" in checks["capture times"].detail
-    assert checks["calibration"].status == "WARN"  # no --calibration given
+    assert checks["calibration front"].status == "WARN"  # no --calibration given
+    assert "front=FILE" in checks["calibration front"].detail
     assert "FAIL" not in {c.status for c in checks.values()}
 
 

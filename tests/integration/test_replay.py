@@ -20,7 +20,8 @@ def test_replay_without_overrides_reproduces_the_flight(logged_flight):
     assert again["frames_in_view"] == flown["frames_in_view"]
     assert again["false_detection_rate"] == flown["false_detection_rate"]
     est_flown, est_again = summary["metrics"]["estimation"], result["metrics"]["estimation"]
-    assert est_again["estimates"] == est_flown["estimates"] > 100
+    assert est_again["at_update"]["estimates"] == est_flown["at_update"]["estimates"] > 100
+    assert est_again["ticks"] == est_flown["ticks"]  # the same control ticks, replayed
     for key in ("rms_position_error_m", "rms_velocity_error_m_s"):
         assert est_again[key] == pytest.approx(est_flown[key], rel=0.01), key
     # and the flight's own figures, as the replay quotes them, are summary.json's
@@ -32,7 +33,9 @@ def test_overrides_change_what_the_pipeline_does(logged_flight):
     run_dir, summary = logged_flight
     blind = replay(run_dir, ["perception.ball.color=blue"])  # the ball is orange
     assert blind["metrics"]["follow"]["detection_rate"] == 0.0
-    assert blind["metrics"]["estimation"] == {}
+    # never an estimate to fly on: every control tick lost, no error to average
+    assert blind["metrics"]["estimation"]["lost_share"] == 1.0
+    assert "rms_position_error_m" not in blind["metrics"]["estimation"]
     sluggish = replay(run_dir, ["estimation.target.accel_noise_m_s2=0.05"])
     flown = summary["metrics"]["estimation"]["rms_velocity_error_m_s"]
     # a filter that believes the ball hardly accelerates lags it on its curve

@@ -50,7 +50,7 @@ def test_every_plot_is_visible_in_headless_chromium(logged_flight, tmp_path):
     found = re.search(r'data-plots="([^"]*)"', dom)
     assert found, "the page did not finish loading"
     plots = json.loads(html.unescape(found.group(1)))
-    assert [p["alt"] for p in plots] == [name for name, _ in PLOTS]
+    assert [p["alt"] for p in plots] == [title for title, _, _ in PLOTS.values()]
     for plot in plots:
         assert plot["complete"], plot
         assert plot["width"] > 300, plot

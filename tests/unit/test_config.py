@@ -24,7 +24,15 @@ def _line_of(text, needle):
 def test_shipped_config_is_valid():
     cfg = load_config()
     assert cfg.driver == "sim"
-    assert cfg.sim.cameras["front"].width_px == 640
+    assert cfg.vehicle.cameras["front"].width_px == 640
+    # one camera section: the simulator renders the vehicle's cameras
+    assert cfg.sim.cameras["front"] == cfg.vehicle.cameras["front"]
+    assert cfg.vehicle.cameras["down"].video == "udp://127.0.0.1:5601"
+
+
+def test_cameras_moved_out_of_the_simulator_section():
+    with pytest.raises(ConfigError, match=r"sim\.cameras: moved to vehicle\.cameras"):
+        load_config(overrides=["sim.cameras.front.width_px=320"])
 
 
 def test_unknown_key_names_file_line_and_path(tmp_path):
@@ -41,8 +49,9 @@ def test_wrong_type(tmp_path):
     with pytest.raises(ConfigError) as err:
         load_config(_write(tmp_path, text))
     line = _line_of(text, "width_px: wide")
-    assert re.fullmatch(rf"config.yaml:{line}: sim.cameras.front.width_px: .*integer.*'wide'.*",
-                        str(err.value))
+    assert re.fullmatch(
+        rf"config.yaml:{line}: vehicle.cameras.front.width_px: .*integer.*'wide'.*",
+        str(err.value))
 
 
 def test_out_of_range(tmp_path):
@@ -82,7 +91,8 @@ def test_invalid_yaml_reports_line(tmp_path):
 
 
 def test_overrides_apply_and_are_validated():
-    cfg = load_config(overrides=["sim.wind.gust_mps=2.5", "sim.cameras.down.enabled=false"])
+    cfg = load_config(overrides=["sim.wind.gust_mps=2.5",
+                                 "vehicle.cameras.down.enabled=false"])
     assert cfg.sim.wind.gust_mps == 2.5
     assert cfg.sim.cameras["down"].enabled is False
     with pytest.raises(ConfigError, match=r"--set: sim\.wind\.gust: unknown key"):

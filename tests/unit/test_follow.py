@@ -1,5 +1,5 @@
-"""The follow controller (yaw and lateral modes, limits) and the follow behaviour's handling of
-a lost target (hold, search, fail), with synthetic states and estimates."""
+"""The follow controller (yaw, lateral and face modes, limits) and the follow behaviour's
+handling of a lost target (hold, search, fail), with synthetic states and estimates."""
 
 import math
 
@@ -16,7 +16,7 @@ from ..factories import front_camera, vehicle_state
 
 
 def _settings(mode="yaw", **kw):
-    base = dict(mode=mode, standoff_m=2.0, position_gain=1.2, yaw_gain=2.5, max_speed_m_s=5.0,
+    base = dict(mode=mode, standoff_m=2.0, position_gain=1.2, max_speed_m_s=5.0,
                 max_vertical_speed_m_s=1.5, max_accel_m_s2=4.0,
                 max_yaw_rate_rad_s=math.radians(120), altitude_floor_m=1.0)
     base.update(kw)
@@ -29,9 +29,9 @@ CAMERA = front_camera(pitch_down_deg=5.0)
 _state = vehicle_state
 
 
-def _target(t, pos, vel=(0.0, 0.0, 0.0), age=0.0, stale=False):
+def _target(t, pos, vel=(0.0, 0.0, 0.0), age=0.0, stale=False, **face):
     return TargetEstimate(t, np.array(pos, float), np.array(vel, float), np.eye(6) * 0.01,
-                          age, stale, 10, True)
+                          age, stale, 10, True, **face)
 
 
 def test_depression_of_a_camera_pitched_down():
@@ -49,8 +49,8 @@ def test_yaw_mode_faces_the_target_and_closes_range_along_the_line_of_sight():
     bearing = np.array([0.8, 0.6])
     assert v[:2] @ bearing == pytest.approx(np.linalg.norm(v[:2]))  # purely radial
     assert np.linalg.norm(v) == pytest.approx(0.4, abs=1e-6)
-    assert sp.yaw_rate_rad_s > 0  # turn right, towards the target
-    assert math.isnan(sp.yaw_rad)
+    assert sp.yaw_rad == pytest.approx(math.atan2(3.0, 4.0))  # a heading: the bearing
+    assert math.isnan(sp.yaw_rate_rad_s)
 
 
 def test_yaw_mode_does_not_orbit_a_target_moving_sideways():
@@ -62,7 +62,39 @@ def test_yaw_mode_does_not_orbit_a_target_moving_sideways():
     target = _target(0.0, (2.0 * math.cos(d), 0.0, -2.0 + 2.0 * math.sin(d)), (0.0, 2.0, 0.0))
     sp = ctl.update(0.05, state, target)
     assert abs(sp.velocity_m_s[1]) < 1e-6  # no sideways flight ...
-    assert sp.yaw_rate_rad_s == pytest.approx(2.0 / (2.0 * math.cos(d)), rel=1e-3)  # ... a turn
+    # ... a turn: the heading leads the bearing by its rate × yaw_lead_s
+    rate = 2.0 / (2.0 * math.cos(d))
+    assert sp.yaw_rad == pytest.approx(_settings().yaw_lead_s * rate, rel=1e-3)
+
+
+def test_yaw_mode_with_sideways_feedforward_flies_along():
+    ctl = FollowController(_settings("yaw", max_accel_m_s2=100.0, sideways_feedforward=1.0),
+                           CAMERA)
+    state = _state()
+    ctl.reset(state)
+    d = camera_depression_rad(CAMERA)
+    target = _target(0.0, (2.0 * math.cos(d), 0.0, -2.0 + 2.0 * math.sin(d)), (0.0, 2.0, 0.0))
+    assert ctl.update(0.05, state, target).velocity_m_s[1] == pytest.approx(2.0)
+
+
+def test_face_mode_stands_in_front_of_the_face_and_turns_to_the_target():
+    ctl = FollowController(_settings("face", standoff_m=1.0, max_accel_m_s2=100.0,
+                                     position_gain=1.0), CAMERA)
+    state = _state(pos=(0.0, 0.0, -2.0))
+    ctl.reset(state)
+    d = camera_depression_rad(CAMERA)
+    # a marker 2 m north whose face looks west (heading −90°): its standoff point is 1 m west
+    # of it; the vehicle flies there and keeps turned to the marker
+    target = _target(0.0, (2.0, 0.0, -2.0), heading_rad=-math.pi / 2)
+    sp = ctl.update(0.05, state, target)
+    desired = np.array([2.0, -math.cos(d), -2.0 - math.sin(d)])
+    assert np.allclose(ctl.desired_position_ned_m, desired)
+    assert np.allclose(sp.velocity_m_s, desired - state.position_ned_m)
+    assert sp.yaw_rad == pytest.approx(0.0)
+    # without a known face it follows along the line of sight, like yaw mode
+    ctl.reset(state)
+    ctl.update(0.05, state, _target(0.0, (2.0, 0.0, -2.0)))
+    assert ctl.desired_position_ned_m[1] == pytest.approx(0.0)
 
 
 def test_lateral_mode_keeps_heading_and_translates():
@@ -72,7 +104,7 @@ def test_lateral_mode_keeps_heading_and_translates():
     target = _target(0.0, (2.0, 1.5, -1.83))  # ahead and to the right
     sp = ctl.update(0.05, state, target)
     assert sp.velocity_m_s[1] > 0.5  # translate east
-    assert abs(sp.yaw_rate_rad_s) < 1e-9  # heading held
+    assert sp.yaw_rad == pytest.approx(0.0)  # heading held
 
 
 def test_limits_speed_acceleration_yaw_rate_and_floor():
@@ -89,7 +121,7 @@ def test_limits_speed_acceleration_yaw_rate_and_floor():
         assert math.hypot(v[0], v[1]) <= s.max_speed_m_s + 1e-9
         assert abs(v[2]) <= s.max_vertical_speed_m_s + 1e-9
         assert np.linalg.norm(v - previous) <= s.max_accel_m_s2 * 0.05 + 1e-9
-        assert abs(sp.yaw_rate_rad_s) <= s.max_yaw_rate_rad_s + 1e-9
+        assert math.isfinite(sp.yaw_rad)
         previous = v
     assert ctl.desired_position_ned_m[2] <= -s.altitude_floor_m  # never below the floor
     low = _state(pos=(0.0, 0.0, -1.0))  # at the floor, target below: no descent

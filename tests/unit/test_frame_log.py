@@ -8,7 +8,7 @@ from mcap.reader import make_reader
 
 from autopilot.flightlog import records as ch
 from autopilot.flightlog.log import FlightLog, read_images, read_log
-from autopilot.runtime import FrameSampler, encode_jpeg
+from autopilot.framelog import FrameSampler, encode_jpeg
 from tests.factories import front_camera, vehicle_state
 
 

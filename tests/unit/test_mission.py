@@ -77,7 +77,7 @@ def test_unknown_behaviour(tmp_path):
     text = GOOD.replace("  - land: {}", "  - loop_the_loop: {}")
     msg = _error(tmp_path, text)
     assert msg.startswith(f"mission.yaml:{_line(text, 'loop_the_loop')}: steps[2].loop_the_loop: "
-                          "unknown behaviour")
+                          "unknown step kind")
 
 
 def test_step_with_two_behaviours(tmp_path):
@@ -205,9 +205,12 @@ def test_executor_runs_steps_in_order():
     steps = [_Scripted(Status.SUCCEEDED), _Scripted(Status.SUCCEEDED, after=2)]
     ex = MissionExecutor(steps)
     out = ex.start(_inputs())
-    assert out.events == ("step scripted started",)
+    assert [(e.kind, e.step_index, e.step, e.text) for e in out.events] == [
+        ("step_started", 0, "scripted", "step scripted started")]
     out = ex.update(_inputs())
-    assert "step scripted succeeded" in out.events
+    assert [(e.kind, e.step_index) for e in out.events] == [("step_succeeded", 0),
+                                                           ("step_started", 1)]
+    assert out.step_index == 1
     assert not out.finished
     ex.update(_inputs())
     out = ex.update(_inputs())
@@ -219,8 +222,9 @@ def test_failed_step_runs_the_fallback_and_the_mission_fails():
     ex = MissionExecutor([_Scripted(Status.FAILED), _Scripted(Status.SUCCEEDED)])
     ex.start(_inputs())
     out = ex.update(_inputs())
-    assert "step scripted failed: scripted" in out.events
-    assert "fallback safe_stop started" in out.events
+    assert [(e.kind, e.step_index, e.text) for e in out.events] == [
+        ("step_failed", 0, "step scripted failed: scripted"),
+        ("fallback_started", -1, "fallback safe_stop started")]
     assert [r.kind for r in out.requests] == [RequestKind.HOLD]
     out = ex.update(_inputs(t=1.5))
     assert [r.kind for r in out.requests] == [RequestKind.LAND]
@@ -233,7 +237,8 @@ def test_abort_stops_safely():
     ex = MissionExecutor([_Scripted(Status.SUCCEEDED, after=100)])
     ex.start(_inputs())
     out = ex.abort("SIGINT received", _inputs())
-    assert "aborted: SIGINT received" in out.events
+    assert ("aborted", 0, "aborted: SIGINT received") in [(e.kind, e.step_index, e.text)
+                                                           for e in out.events]
     assert ex.status == "aborted"
     ex.update(_inputs(t=2.0))
     out = ex.update(_inputs(t=4.0, armed=False, in_air=False))
@@ -248,6 +253,7 @@ def test_refused_request_fails_the_step():
     assert out.requests[0].kind is RequestKind.ARM
     out = ex.request_failed(out.requests[0], "arm denied: preflight checks failed",
                             _inputs(in_air=False))
-    assert "arm refused: arm denied: preflight checks failed" in out.events
+    assert ("request_refused", "arm refused: arm denied: preflight checks failed") in [
+        (e.kind, e.text) for e in out.events]
     assert ex.status == "failed"
     assert np.all([r.kind is RequestKind.LAND for r in out.requests])

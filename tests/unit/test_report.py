@@ -15,12 +15,20 @@ from tests.factories import front_camera
 
 def _log(n: int = 50) -> dict:
     """A tiny synthetic flight: the vehicle 2.5 m south of a ball at rest, flying north 1 m/s."""
-    recs = {ch.MISSION_PLAN: [{"standoff_m": 2.0, "camera": "front", "ball_diameter_m": 0.2}],
+    ball = {"name": "ball", "kind": "ball", "camera": "front", "truth_body": "ball",
+            "size_m": 0.2}
+    recs = {ch.MISSION_PLAN: [{"steps": [
+                {"name": "takeoff", "index": 0, "params": {}, "pipelines": []},
+                {"name": "follow_ball", "index": 1, "params": {"duration_s": 10},
+                 "pipelines": [ball], "standoff_m": 2.0}]}],
             ch.CAMERA_INFO: [ch.clean(ch.camera_info_record(front_camera()))],
             ch.MISSION_EVENTS: [
-                {"time_s": 0.0, "step": "takeoff", "text": "step takeoff started"},
-                {"time_s": 1.0, "step": "takeoff", "text": "step takeoff succeeded"},
-                {"time_s": 1.0, "step": "follow_ball", "text": "step follow_ball started"}],
+                {"time_s": 0.0, "kind": "step_started", "step_index": 0, "step": "takeoff",
+                 "text": "step takeoff started"},
+                {"time_s": 1.0, "kind": "step_succeeded", "step_index": 0, "step": "takeoff",
+                 "text": "step takeoff succeeded"},
+                {"time_s": 1.0, "kind": "step_started", "step_index": 1, "step": "follow_ball",
+                 "text": "step follow_ball started"}],
             ch.VEHICLE_STATE: [], ch.GROUND_TRUTH: [], ch.TARGET_ESTIMATES: [],
             ch.BALL_DETECTIONS: [], ch.SETPOINTS: []}
     for k in range(n):
@@ -30,7 +38,8 @@ def _log(n: int = 50) -> dict:
         recs[ch.GROUND_TRUTH].append({"time_s": t, "vehicle_position_ned_m": [t - 2.5, 0, -2],
                                       "vehicle_attitude_q": [1.0, 0, 0, 0],  # facing north
                                       "bodies": {"ball": {"position_ned_m": [0, 0, -2]}}})
-        recs[ch.TARGET_ESTIMATES].append({"time_s": t, "position_ned_m": [0.1, 0, -2],
+        recs[ch.TARGET_ESTIMATES].append({"time_s": t, "pipeline": "ball",
+                                          "position_ned_m": [0.1, 0, -2],
                                           "position_std_m": [0.05, 0.05, 0.02]})
         recs[ch.BALL_DETECTIONS].append({"time_s": t, "camera": "front",
                                          "detected": k % 5 != 0})
@@ -44,24 +53,41 @@ def test_phases_come_from_the_mission_events():
                                                             "follow_ball")]
 
 
+def _target(log):
+    (target,) = data.targets(log)
+    return target
+
+
+def test_the_followed_target_comes_from_the_step_records():
+    target = _target(_log())
+    assert (target.pipeline, target.camera, target.truth_body, target.size_m,
+            target.standoff_m) == ("ball", "front", "ball", 0.2, 2.0)
+    # a log from before per-step plan records names its single ball the old way
+    old = {**_log(), ch.MISSION_PLAN: [{"standoff_m": 2.0, "camera": "front",
+                                        "ball_diameter_m": 0.2,
+                                        "steps": [{"takeoff": {}}, {"follow_ball": {}}]}]}
+    assert _target(old) == target
+
+
 def test_standoff_error_is_true_distance_minus_standoff():
-    s = data.standoff_error(_log())
+    s = data.standoff_error(_log(), _target(_log()))
     assert s["error_m"][0] == pytest.approx(0.5)  # 2.5 m away, standoff 2 m
     assert s["error_m"][-1] == pytest.approx(abs(4.9 - 2.5) - 2.0)
     assert s["estimated_error_m"][0] == pytest.approx(0.6)  # the estimate is 0.1 m further
 
 
 def test_detection_timeline_and_estimate_against_truth():
-    d = data.detection_timeline(_log())
+    target = _target(_log())
+    d = data.detection_timeline(_log(), target)
     assert d["detected"].sum() == 40
     # flying north past the ball: in view until it is (nearly) alongside, then behind
     assert d["has_truth"]
     assert d["in_view"][:20].all()
     assert not d["in_view"][26:].any()
-    no_truth = data.detection_timeline({**_log(), ch.GROUND_TRUTH: []})
+    no_truth = data.detection_timeline({**_log(), ch.GROUND_TRUTH: []}, target)
     assert not no_truth["has_truth"]
     assert not no_truth["in_view"].any()
-    e = data.estimate_vs_truth(_log())
+    e = data.estimate_vs_truth(_log(), target)
     assert np.allclose(e["estimate"][:, 0] - e["truth"][:, 0], 0.1)
     assert np.allclose(e["std"][:, 2], 0.02)
 

@@ -35,10 +35,10 @@ def test_truth_is_shifted_onto_the_run_clock_by_the_measured_offset(tmp_path, mo
 
     def fake_metrics(records):
         seen.update(records)
-        return {"detection_rate": 1.0}
+        return {"follow": {"detection_rate": 1.0}}
 
-    monkeypatch.setattr(scoring, "follow_metrics", fake_metrics)
-    assert scoring.score(run, tmp_path / "truth.mcap") == {"detection_rate": 1.0}
+    monkeypatch.setattr(scoring, "mission_metrics", fake_metrics)
+    assert scoring.score(run, tmp_path / "truth.mcap") == {"follow": {"detection_rate": 1.0}}
     assert [r["time_s"] for r in seen[ch.GROUND_TRUTH]] == [100.0, 100.5]
     summary = json.loads((run / "summary.json").read_text())
     assert summary["metrics"]["follow"] == {"detection_rate": 1.0}

@@ -1,0 +1,138 @@
+"""Following a tracked target with a camera, for any kind of target (ball, marker, …).
+
+:class:`FollowTarget` flies :class:`~autopilot.control.follow.FollowController` on the step's
+target estimate (``inputs.target``). When the track is lost it stops (holds position) for
+``lost_hold_s``, then searches — turning towards where the target was last seen or is predicted
+to be, then sweeping on in that direction — and fails after ``lost_timeout_s`` so that the
+mission's fallback takes over. A step kind may instead fly a *rule* (a seed report's
+controller, kept as a baseline for the benchmarks): an object whose ``command(inputs)`` returns
+the setpoint, acting on raw detections as the original did.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+from autopilot.behaviors.base import (
+    Behavior,
+    BehaviorInputs,
+    BehaviorOutput,
+    RequestKind,
+    Status,
+    VehicleRequest,
+)
+from autopilot.control.follow import FollowController, FollowSettings
+from drivers.base import CameraInfo, Setpoint
+from drivers.geometry import wrap_pi
+
+
+@dataclass(frozen=True, slots=True)
+class LostTargetSettings:
+    lost_after_s: float  # no accepted measurement for this long: the track is lost
+    hold_s: float  # then hold this long
+    search_yaw_rate_rad_s: float  # then search, turning at this rate
+    timeout_s: float  # lost this long in all: the step fails
+
+
+class Rule(Protocol):
+    def command(self, inputs: BehaviorInputs) -> Setpoint: ...
+
+
+class FollowTarget(Behavior):
+    """Follow ``inputs.target`` for ``params.duration_s`` (``params`` has at least that)."""
+
+    name = "follow"
+
+    def __init__(self, params, follow: FollowSettings, lost: LostTargetSettings,
+                 camera: CameraInfo, rule: Rule | None = None) -> None:
+        self.params = params
+        self.follow = follow
+        self.lost = lost
+        self.camera = camera
+        self.controller = FollowController(follow, camera)
+        self._rule = rule
+        self._start = 0.0
+        self._tracking = False
+        self._lost_since: float | None = None
+        self._hold_point = np.zeros(3)
+        self._hold_yaw = 0.0
+        self._search_dir = 1.0
+        self._search_aimed = False
+
+    def activate(self, inputs: BehaviorInputs) -> BehaviorOutput:
+        self._start = inputs.now_s
+        self._hold_here(inputs)
+        return BehaviorOutput(Status.RUNNING, setpoint=self._hold_setpoint(inputs.now_s),
+                              requests=(VehicleRequest(RequestKind.START_OFFBOARD),),
+                              phase="starting")
+
+    def update(self, inputs: BehaviorInputs) -> BehaviorOutput:
+        if inputs.now_s - self._start >= self.params.duration_s:
+            self._hold_here(inputs)
+            return BehaviorOutput(Status.SUCCEEDED, setpoint=self._hold_setpoint(inputs.now_s),
+                                  phase="done")
+        if self._rule is not None:
+            return BehaviorOutput(Status.RUNNING, setpoint=self._rule.command(inputs),
+                                  phase="tracking")
+        target = inputs.target
+        if (target is not None and target.confirmed and not target.stale
+                and target.age_s <= self.lost.lost_after_s):
+            if not self._tracking:
+                self.controller.reset(inputs.state)
+                self._tracking = True
+            self._lost_since = None
+            setpoint = self.controller.update(inputs.now_s, inputs.state, target)
+            return BehaviorOutput(Status.RUNNING, setpoint=setpoint, phase="tracking")
+        return self._lost(inputs)
+
+    # -- target lost ------------------------------------------------------------------------
+
+    def _lost(self, inputs: BehaviorInputs) -> BehaviorOutput:
+        now = inputs.now_s
+        if self._lost_since is None:
+            self._lost_since = now
+            self._tracking = False
+            self._search_aimed = False
+            self._hold_here(inputs)
+        lost_for = now - self._lost_since
+        if lost_for > self.lost.timeout_s:
+            return BehaviorOutput(Status.FAILED, setpoint=self._hold_setpoint(now),
+                                  phase="searching", reason=f"target lost for {lost_for:.1f} s")
+        if lost_for < self.lost.hold_s:
+            return BehaviorOutput(Status.RUNNING, setpoint=self._hold_setpoint(now),
+                                  phase="holding")
+        # search: first face where the target should be, then keep turning that way
+        yaw = inputs.state.yaw_rad
+        if not self._search_aimed:
+            bearing = self._predicted_bearing(inputs)
+            if bearing is not None and abs(wrap_pi(bearing - yaw)) > math.radians(10):
+                self._search_dir = 1.0 if wrap_pi(bearing - yaw) > 0 else -1.0
+                pos = self._hold_point
+                return BehaviorOutput(Status.RUNNING, phase="searching", setpoint=Setpoint.position(
+                    *pos, yaw_rad=bearing, time_s=now))
+            self._search_aimed = True
+        pos = self._hold_point
+        setpoint = Setpoint(position_ned_m=pos, velocity_m_s=np.zeros(3),
+                            yaw_rate_rad_s=self._search_dir * self.lost.search_yaw_rate_rad_s,
+                            time_s=now)
+        return BehaviorOutput(Status.RUNNING, setpoint=setpoint, phase="searching")
+
+    def _predicted_bearing(self, inputs: BehaviorInputs) -> float | None:
+        target = inputs.target
+        if target is None:
+            return None
+        rel = target.position_ned_m - np.asarray(inputs.state.position_ned_m)
+        if math.hypot(rel[0], rel[1]) < 0.3:
+            return None
+        return math.atan2(rel[1], rel[0])
+
+    def _hold_here(self, inputs: BehaviorInputs) -> None:
+        self._hold_point = np.array(inputs.state.position_ned_m)
+        self._hold_yaw = inputs.state.yaw_rad
+
+    def _hold_setpoint(self, now_s: float) -> Setpoint:
+        return Setpoint.position(*self._hold_point, yaw_rad=self._hold_yaw, time_s=now_s)

@@ -1,0 +1,124 @@
+"""``autopilot bench follow_ball`` / ``follow_marker``: our follower against the seed reports'
+rules.
+
+Scenarios of the step's mission — as shipped, a hard one (a figure eight in gusts), and the
+stress case (a random walk at 2.5 m/s in 3 m/s gusts, at the vehicle's limits) — each flown in
+lockstep with our controller (``estimator``) and with the seed rules as baselines, everything
+else identical (same seed, world, camera, detector). Reports the follow metrics side by side
+and, per scenario, each baseline's RMS range error as a multiple of ours.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+from autopilot.mission import load_mission
+from autopilot.run import fly
+
+
+@dataclass(frozen=True)
+class FollowBench:
+    step: str  # the step kind whose ``controller`` is switched
+    mission: str
+    controllers: tuple[str, ...]  # ours first
+    scenarios: dict[str, tuple[str, ...]]  # name → mission overrides
+
+
+BENCHES = {
+    "follow_ball": FollowBench(
+        "follow_ball", "follow_ball", ("estimator", "seed001", "seed003"), {
+            "default": (),
+            "figure8_2mps_gusts": ("scenario.ball.path=figure8", "scenario.ball.speed_mps=2",
+                                   "scenario.wind.gust_mps=2"),
+            "stress_random_walk_2.5mps_gusts3": (
+                "scenario.ball.path=random_walk", "scenario.ball.speed_mps=2.5",
+                "scenario.wind.gust_mps=3"),
+        }),
+    "follow_marker": FollowBench(
+        "follow_marker", "follow_marker", ("estimator", "seed002"), {
+            "default": (),
+            "figure8_1mps_gusts": ("scenario.marker.path=figure8",
+                                   "scenario.marker.speed_mps=1", "scenario.wind.gust_mps=1"),
+            "stress_random_walk_2.5mps_gusts3": (
+                "scenario.marker.path=random_walk", "scenario.marker.speed_mps=2.5",
+                "scenario.wind.gust_mps=3"),
+        }),
+}
+METRICS = ("detection_rate", "rms_range_error_m", "rms_image_error_px", "max_lost_s",
+           "target_speed_mps_rms")
+
+
+def _step_index(plan, step: str) -> int:
+    try:
+        return next(i for i, s in enumerate(plan.steps) if s.name == step)
+    except StopIteration:
+        raise ValueError(f"mission {plan.mission.name!r} has no {step} step") from None
+
+
+def run_bench(bench: str = "follow_ball", mission: str | None = None,
+              overrides: Sequence[str] = (), log: Callable[[str], None] = lambda message: None,
+              scenarios: Sequence[str] | None = None) -> dict:
+    spec = BENCHES[bench]
+    mission = mission or spec.mission
+    results: dict[str, dict] = {}
+    for scenario, scenario_overrides in spec.scenarios.items():
+        if scenarios is not None and scenario not in scenarios:
+            continue
+        runs = {}
+        for controller in spec.controllers:
+            base = load_mission(mission, [*scenario_overrides, *overrides])
+            step = _step_index(base, spec.step)
+            plan = load_mission(mission, [*scenario_overrides, *overrides,
+                                          f"steps.{step}.{spec.step}.controller={controller}"])
+            log(f"{scenario}: {controller} …")
+            summary = asyncio.run(fly(plan, None))
+            runs[controller] = {
+                "status": summary["status"],
+                **{k: (summary["metrics"].get("follow") or {}).get(k) for k in METRICS},
+                "real_time_factor": summary["metrics"]["sim"]["real_time_factor"],
+            }
+        ours = runs[spec.controllers[0]]["rms_range_error_m"]
+        baselines = spec.controllers[1:]
+        ratios = {c: _ratio(runs[c]["rms_range_error_m"], ours) for c in baselines}
+        better = min(baselines, key=lambda c: runs[c]["rms_range_error_m"] or math.inf)
+        results[scenario] = {
+            "overrides": list(scenario_overrides),
+            "runs": runs,
+            "baseline_rms_over_ours": ratios,
+            "better_seed_rule": better,
+            "better_seed_rule_over_ours": ratios[better],
+        }
+    return {"bench": bench, "mission": mission, "overrides": list(overrides),
+            "scenarios": results}
+
+
+def _ratio(baseline: float | None, ours: float | None) -> float | None:
+    if baseline is None or not ours:
+        return None
+    return baseline / ours
+
+
+def format_table(result: dict) -> str:
+    lines = []
+    for scenario, data in result["scenarios"].items():
+        extra = ", ".join(data["overrides"]) or "as shipped"
+        lines.append(f"{scenario} ({extra})")
+        head = f"  {'controller':<11} {'status':<10}" + "".join(f"{m:>20}" for m in METRICS) + \
+            f"{'rms ÷ ours':>12}"
+        lines.append(head)
+        for controller, run in data["runs"].items():
+            ratio = data["baseline_rms_over_ours"].get(controller)
+            cells = "".join(f"{_fmt(run[m]):>20}" for m in METRICS)
+            lines.append(f"  {controller:<11} {run['status']:<10}{cells}"
+                         f"{(f'{ratio:.1f}×' if ratio else '—'):>12}")
+        lines.append(f"  better seed rule: {data['better_seed_rule']}, whose RMS range error is "
+                     f"{_fmt(data['better_seed_rule_over_ours'])}× ours (target ≥ 3)")
+        lines.append("")
+    return "\n".join(lines).rstrip()
+
+
+def _fmt(value) -> str:
+    return "n/a" if value is None else f"{value:.3f}"

@@ -1,0 +1,13 @@
+"""Step kinds that only fly: ``takeoff``, ``hold``, ``land`` (no camera, no perception)."""
+
+from __future__ import annotations
+
+from autopilot.behaviors.flight import Hold, HoldParams, Land, LandParams, Takeoff, TakeoffParams
+from autopilot.steps.registry import StepKind, register
+
+register(StepKind("takeoff", TakeoffParams, lambda params, ctx: Takeoff(params),
+                  description="arm, take off to altitude_m and hold"))
+register(StepKind("hold", HoldParams, lambda params, ctx: Hold(params),
+                  description="hold position for duration_s"))
+register(StepKind("land", LandParams, lambda params, ctx: Land(params),
+                  description="land and wait for the disarm"))

@@ -1,0 +1,72 @@
+"""The registry of mission step kinds.
+
+A step kind is everything the project knows about one kind of mission step, in one place:
+its parameter model (what a mission file may say), how to build its behaviour, the perception
+pipelines it needs (each on a named camera), the metrics it is scored by, the report panels
+that show it, and what the flight log's plan record keeps about it. The runtime, the mission
+loader, the summary, the report and replay ask this registry; adding a mission is adding one
+module that registers its step kind (see :mod:`autopilot.steps`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+
+from autopilot.behaviors.base import Behavior, Params
+from autopilot.config import AppConfig
+from autopilot.pipeline import PipelineSpec
+from drivers.base import CameraInfo
+
+#: (start, end) times of the intervals a step ran in
+Intervals = list[tuple[float, float]]
+
+
+@dataclass(frozen=True, slots=True)
+class StepContext:
+    """What building a behaviour may use: the configuration and the vehicle's cameras."""
+
+    config: AppConfig
+    cameras: Mapping[str, CameraInfo]
+
+
+def _no_pipelines(params: Params, config: AppConfig) -> tuple[PipelineSpec, ...]:
+    return ()
+
+
+def _no_info(params: Params, config: AppConfig) -> dict:
+    return {}
+
+
+@dataclass(frozen=True)
+class StepKind:
+    name: str
+    params: type[Params]
+    behavior: Callable[[Params, StepContext], Behavior]
+    #: the perception pipelines the step needs while it runs (the first is its target's)
+    pipelines: Callable[[Params, AppConfig], tuple[PipelineSpec, ...]] = _no_pipelines
+    #: its metrics: (log records, the intervals it ran in, its plan record) → metric groups
+    metrics: Callable[[Mapping[str, Sequence[Mapping]], Intervals, Mapping], dict] | None = None
+    #: the report's panels that show it (names in autopilot.report)
+    report: tuple[str, ...] = ()
+    #: what the plan record keeps about it beyond its parameters (e.g. the standoff flown)
+    plan_info: Callable[[Params, AppConfig], dict] = _no_info
+    description: str = ""
+
+
+STEP_KINDS: dict[str, StepKind] = {}
+
+
+def register(kind: StepKind) -> StepKind:
+    if kind.name in STEP_KINDS:
+        raise ValueError(f"step kind {kind.name!r} is registered twice")
+    STEP_KINDS[kind.name] = kind
+    return kind
+
+
+def step_kind(name: str) -> StepKind:
+    try:
+        return STEP_KINDS[name]
+    except KeyError:
+        raise KeyError(f"no step kind {name!r} (known: {', '.join(sorted(STEP_KINDS))})") \
+            from None

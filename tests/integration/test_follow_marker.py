@@ -1,0 +1,90 @@
+"""follow_marker (seed 002) through the runtime, on the simulator's lockstep clock: the mission
+flies, its figures hold, and replay, report and onboard video work for it as for follow_ball."""
+
+import asyncio
+
+import cv2
+import pytest
+
+from autopilot.flightlog import records as ch
+from autopilot.flightlog.log import read_log
+from autopilot.mission import load_mission
+from autopilot.replay import replay
+from autopilot.report.html import write_report
+from autopilot.report.video import write_video
+from autopilot.run import fly
+
+SHORT = ["steps.1.follow_marker.duration_s=20"]
+
+
+def _fly(overrides, out=None, **kwargs):
+    plan = load_mission("follow_marker", [*SHORT, *overrides])
+    return asyncio.run(fly(plan, out, **kwargs))
+
+
+@pytest.fixture(scope="module")
+def marker_flight(tmp_path_factory):
+    out = tmp_path_factory.mktemp("marker_flight")
+    summary = _fly([], out, record_video="")
+    return out, summary
+
+
+def test_follow_marker_closed_loop(marker_flight):
+    run_dir, summary = marker_flight
+    assert summary["status"] == "completed"
+    follow = summary["metrics"]["follow"]
+    # the README's figures (detection 1.000, RMS range error 0.045 m over 60 s), with about
+    # twice their room, so a regression fails
+    assert follow["detection_rate"] >= 0.98
+    assert follow["rms_range_error_m"] <= 0.09
+    assert follow["max_lost_s"] <= 0.5
+    assert follow["false_detection_rate"] == 0.0  # three decoy boards with other ids
+    assert follow["standoff_m"] == 1.0
+    est = summary["metrics"]["estimation"]
+    assert est["lost_share"] == 0.0
+    assert est["rms_position_error_m"] <= 0.06
+    # the marker pipeline ran on the front camera, logged on its own topic
+    log = read_log(run_dir / "flight.mcap")
+    frames = log[ch.detection_topic("marker")]
+    assert len(frames) == summary["stats"]["frames"]
+    found = [f for f in frames if f["detected"]]
+    assert {f["marker_id"] for f in found} == {36}
+    assert all(len(f["corners_px"]) == 8 for f in found)
+    assert ch.BALL_DETECTIONS not in log or not log[ch.BALL_DETECTIONS]
+
+
+def test_replay_reproduces_the_marker_flight(marker_flight):
+    run_dir, summary = marker_flight
+    result = replay(run_dir)
+    flown, again = summary["metrics"]["follow"], result["metrics"]["follow"]
+    assert again["detection_rate"] == flown["detection_rate"]
+    assert again["frames_in_view"] == flown["frames_in_view"]
+    est_flown, est_again = summary["metrics"]["estimation"], result["metrics"]["estimation"]
+    assert est_again["ticks"] == est_flown["ticks"]
+    assert est_again["rms_position_error_m"] == pytest.approx(
+        est_flown["rms_position_error_m"], rel=0.01)
+    # another marker id: the pipeline ignores the followed one
+    blind = replay(run_dir, ["perception.marker.id=7"])
+    assert blind["metrics"]["follow"]["detection_rate"] == 0.0
+
+
+def test_report_and_video_of_the_marker_flight(marker_flight, tmp_path):
+    run_dir, summary = marker_flight
+    page = write_report(run_dir).read_text()
+    assert "follow_marker" in page
+    assert page.count("<img") >= 4
+    path, count = write_video(run_dir, out=tmp_path / "onboard.mp4")
+    assert path.stat().st_size > 0
+    assert count == summary["stats"]["frames_logged"]
+    capture = cv2.VideoCapture(str(path))
+    ok, image = capture.read()
+    capture.release()
+    assert ok
+    assert image.shape[:2] == (480, 640)
+
+
+def test_a_marker_that_is_never_seen_is_searched_for_then_the_fallback_lands():
+    # the board carries id 36; the autopilot looks for id 7: it never sees it
+    summary = _fly(["perception.marker.id=7", "control.follow.lost_timeout_s=3"])
+    assert summary["status"] == "failed"
+    assert "target lost" in summary["reason"]
