@@ -150,6 +150,8 @@ class FollowControlConfig(_Model):
     accel_lead_s: NonNegative
     accel_filter_s: Positive
     sideways_feedforward: Annotated[float, Field(ge=0, le=1)]
+    yaw_tracked_bearing_rate_deg_s: Annotated[float, Field(gt=0, le=720)]
+    intercept_horizon_s: Annotated[float, Field(ge=0, le=10)]
     lost_after_s: Positive
     lost_hold_s: NonNegative
     search_yaw_rate_deg_s: Positive

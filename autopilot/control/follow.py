@@ -56,6 +56,12 @@ class FollowSettings:
     #: the vehicle translates with the target and the yaw only turns; 0: the yaw alone follows
     #: sideways motion, as seed 001's yaw following did)
     sideways_feedforward: float = 0.0
+    #: yaw mode: the bearing rate the yaw alone follows; the part of the target's sideways
+    #: velocity beyond it (a target passing close and fast) is flown too, or it gets away
+    yaw_tracked_bearing_rate_rad_s: float = math.radians(60.0)
+    #: yaw mode, fallen behind: head for where the target will be when the gap is closed, at
+    #: most this far ahead (0: always straight at it)
+    intercept_horizon_s: float = 1.0
 
 
 def camera_depression_rad(camera: CameraInfo) -> float:
@@ -123,12 +129,26 @@ class FollowController:
             cmd = lead + s.position_gain * (desired - p_v)
         elif s.mode == "yaw" and horizontal > _MIN_BEARING_DISTANCE_M:
             # facing the target, only the line of sight matters: move along it to hold the
-            # range, and let the yaw follow sideways motion (no orbiting)
+            # range, and let the yaw follow sideways motion (no orbiting). Fallen behind (a
+            # target faster or turning harder than the vehicle can), head for where it will be
+            # by the time the gap is closed rather than where it is: a chasing vehicle then
+            # cuts inside its turns instead of trailing it round them
             u = np.array([rel[0] / horizontal, rel[1] / horizontal, 0.0])
+            gap = horizontal - back
+            speed_t = math.hypot(v_t[0], v_t[1])
+            if gap > 0.0 and speed_t > 0.1 and s.intercept_horizon_s > 0.0:
+                ahead = rel + v_t * min(gap / max(speed_t, 1.0), s.intercept_horizon_s)
+                reach = math.hypot(ahead[0], ahead[1])
+                if reach > _MIN_BEARING_DISTANCE_M:
+                    u = np.array([ahead[0] / reach, ahead[1] / reach, 0.0])
             radial = float(lead @ u) + s.position_gain * (horizontal - back)
             sideways = lead - float(lead @ u) * u
             sideways[2] = 0.0
-            cmd = radial * u + s.sideways_feedforward * sideways
+            side_speed = float(np.linalg.norm(sideways))
+            followed = s.yaw_tracked_bearing_rate_rad_s * horizontal
+            beyond = max(0.0, side_speed - followed) / side_speed if side_speed > 1e-6 else 0.0
+            share = s.sideways_feedforward + (1.0 - s.sideways_feedforward) * beyond
+            cmd = radial * u + share * sideways
             cmd[2] = lead[2] + s.position_gain * (desired[2] - p_v[2])
         else:
             cmd = lead + s.position_gain * (desired - p_v)

@@ -32,6 +32,8 @@ def follow_settings(config: AppConfig, mode: str | None, standoff_m: float | Non
         accel_lead_s=f.accel_lead_s,
         accel_filter_s=f.accel_filter_s,
         sideways_feedforward=f.sideways_feedforward,
+        yaw_tracked_bearing_rate_rad_s=math.radians(f.yaw_tracked_bearing_rate_deg_s),
+        intercept_horizon_s=f.intercept_horizon_s,
         yaw_lead_s=f.yaw_lead_s,
     )
 

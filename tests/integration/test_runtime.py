@@ -34,7 +34,7 @@ def test_follow_ball_closed_loop(tmp_path):
     assert orphans == []
     assert summary["status"] == "completed"
     follow = summary["metrics"]["follow"]
-    # the README's figures (detection 1.000, RMS range error 0.034 m, over 60 s) with about
+    # the README's figures (detection 1.000, RMS range error 0.031 m, over 60 s) with about
     # twice their room, so a regression fails
     assert follow["detection_rate"] >= 0.98
     assert follow["rms_range_error_m"] <= 0.07

@@ -77,6 +77,38 @@ def test_yaw_mode_with_sideways_feedforward_flies_along():
     assert ctl.update(0.05, state, target).velocity_m_s[1] == pytest.approx(2.0)
 
 
+def test_yaw_mode_flies_the_sideways_motion_the_yaw_cannot_follow():
+    s = _settings("yaw", max_accel_m_s2=100.0)
+    ctl = FollowController(s, CAMERA)
+    state = _state()
+    ctl.reset(state)
+    # passing at the standoff at 4 m/s: a bearing rate of 2 rad/s, beyond the 60°/s the yaw
+    # alone follows; the rest of the sideways speed is flown
+    d = camera_depression_rad(CAMERA)
+    horizontal = 2.0 * math.cos(d)
+    target = _target(0.0, (horizontal, 0.0, -2.0 + 2.0 * math.sin(d)), (0.0, 4.0, 0.0))
+    flown = ctl.update(0.05, state, target).velocity_m_s[1]
+    assert flown == pytest.approx(4.0 - s.yaw_tracked_bearing_rate_rad_s * horizontal)
+
+
+def test_yaw_mode_fallen_behind_heads_for_where_the_target_will_be():
+    s = _settings("yaw", max_accel_m_s2=100.0, max_speed_m_s=20.0)
+    ctl = FollowController(s, CAMERA)
+    state = _state()
+    ctl.reset(state)
+    # 6 m ahead (4 m too far), running east at 3 m/s: aim 1 s ahead of it (the horizon)
+    target = _target(0.0, (6.0, 0.0, -2.0), (0.0, 3.0, 0.0))
+    sp = ctl.update(0.05, state, target)
+    v = np.array(sp.velocity_m_s)
+    assert math.atan2(v[1], v[0]) == pytest.approx(math.atan2(3.0, 6.0), abs=1e-6)
+    assert sp.yaw_rad == pytest.approx(s.yaw_lead_s * 3.0 / 6.0, rel=1e-3)  # facing it
+    # without the horizon: straight at it, the yaw alone following its sideways motion
+    ctl = FollowController(_settings("yaw", max_accel_m_s2=100.0, max_speed_m_s=20.0,
+                                     intercept_horizon_s=0.0), CAMERA)
+    ctl.reset(state)
+    assert ctl.update(0.05, state, target).velocity_m_s[1] == pytest.approx(0.0, abs=1e-9)
+
+
 def test_face_mode_stands_in_front_of_the_face_and_turns_to_the_target():
     ctl = FollowController(_settings("face", standoff_m=1.0, max_accel_m_s2=100.0,
                                      position_gain=1.0), CAMERA)
