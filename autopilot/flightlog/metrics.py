@@ -143,7 +143,7 @@ def follow_step_metrics(log: Mapping[str, Sequence[Mapping]],
 
 
 class TruthTrack:
-    def __init__(self, samples: Sequence[Mapping], body: str = "ball") -> None:
+    def __init__(self, samples: Sequence[Mapping], body: str) -> None:
         rows = [s for s in samples if body in s["bodies"]]
         self.ok = bool(rows)
         if not self.ok:

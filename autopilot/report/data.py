@@ -85,15 +85,15 @@ def trajectories(records: Records, target: FollowedTarget | None = None
     truth = [r for r in records.get(ch.GROUND_TRUTH, [])]
     est = _estimates(records, target)
     body = target.truth_body if target is not None else None
-    ball = [r for r in truth if body in (r.get("bodies") or {})]
+    rows = [r for r in truth if body in (r.get("bodies") or {})]
     return {
         "vehicle_t": _arr(state, "time_s"), "vehicle": _arr(state, "position_ned_m", 3),
         "vehicle_truth_t": _arr(truth, "time_s"),
         "vehicle_truth": _arr(truth, "vehicle_position_ned_m", 3),
         "target_estimate_t": _arr(est, "time_s"), "target_estimate": _arr(est, "position_ned_m", 3),
-        "target_truth_t": _arr(ball, "time_s"),
-        "target_truth": np.array([r["bodies"][body]["position_ned_m"] for r in ball],
-                                 dtype=float).reshape(len(ball), 3),
+        "target_truth_t": _arr(rows, "time_s"),
+        "target_truth": np.array([r["bodies"][body]["position_ned_m"] for r in rows],
+                                 dtype=float).reshape(len(rows), 3),
     }
 
 

@@ -43,6 +43,32 @@ def test_doctor_passes_a_healthy_vehicle_and_camera():
     assert "FAIL" not in {c.status for c in checks.values()}
 
 
+def test_each_camera_is_its_own_stream_the_down_camera_too():
+    # follow_marker with its marker looked for by the down camera: the simulator streams both
+    # cameras, each to its own port (vehicle.cameras.NAME.video), and the doctor checks the
+    # camera the mission uses, on its own stream
+    ports = {"front": "udp://127.0.0.1:5618", "down": "udp://127.0.0.1:5619"}
+    plan = load_mission("follow_marker", ["driver=pymavlink", "perception.marker.camera=down",
+                                          f"vehicle.cameras.down.video={ports['down']}"])
+
+    async def main_():
+        stop = asyncio.Event()
+        server = asyncio.ensure_future(serve(
+            load_config(), None, instance=INSTANCE, videos=ports, log=lambda line: None,
+            stop=stop))
+        try:
+            await asyncio.sleep(3.0)
+            return await run_doctor(plan, connect=CONNECT, duration_s=3.0)
+        finally:
+            stop.set()
+            await server
+
+    checks = {c.item: c for c in asyncio.run(main_())}
+    assert checks["camera down"].status == "PASS", checks["camera down"]
+    assert "camera front" not in checks  # not used by this mission
+    assert "FAIL" not in {c.status for c in checks.values()}
+
+
 def test_doctor_fails_clearly_without_a_vehicle(capsys):
     code = main(["doctor", "--connect", CONNECT, "--duration-s", "1", "--json",
                  "--set", "link.connect_timeout_s=1"])
