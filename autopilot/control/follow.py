@@ -142,6 +142,14 @@ class FollowController:
                 if reach > _MIN_BEARING_DISTANCE_M:
                     u = np.array([ahead[0] / reach, ahead[1] / reach, 0.0])
             radial = float(lead @ u) + s.position_gain * (horizontal - back)
+            if gap > 0.0:
+                # chasing a target that turns: the line of sight turns with it, and at the
+                # acceleration limit the vehicle turns at that rate only this slowly; faster,
+                # it would be carried round outside the turn and never close the gap
+                rel_v = v_t - np.asarray(state.velocity_ned_m_s)
+                turn = abs(rel[0] * rel_v[1] - rel[1] * rel_v[0]) / (horizontal * horizontal)
+                if turn > 1e-3:
+                    radial = min(radial, 0.8 * s.max_accel_m_s2 / turn)
             sideways = lead - float(lead @ u) * u
             sideways[2] = 0.0
             side_speed = float(np.linalg.norm(sideways))

@@ -109,6 +109,23 @@ def test_yaw_mode_fallen_behind_heads_for_where_the_target_will_be():
     assert ctl.update(0.05, state, target).velocity_m_s[1] == pytest.approx(0.0, abs=1e-9)
 
 
+def test_chasing_a_turning_target_slows_to_turn_inside_it():
+    # 6 m behind a target that crosses at 3 m/s: the line of sight turns at 0.5 rad/s; with
+    # 1 m/s² to turn with, the vehicle closes at no more than 0.8 × 1 / 0.5 = 1.6 m/s (faster
+    # it would be carried round outside the target's turn)
+    s = _settings("yaw", max_accel_m_s2=1.0, max_speed_m_s=20.0)
+    ctl = FollowController(s, CAMERA)
+    state = _state()
+    ctl.reset(state)
+    target = _target(0.0, (6.0, 0.0, -2.0), (0.0, 3.0, 0.0))
+    v = np.array(ctl.update(100.0, state, target).velocity_m_s)  # long after: no rate limit
+    assert np.linalg.norm(v[:2]) == pytest.approx(1.6, rel=1e-6)
+    # with acceleration to spare it closes as fast as its gain asks
+    ctl = FollowController(_settings("yaw", max_accel_m_s2=10.0, max_speed_m_s=20.0), CAMERA)
+    ctl.reset(state)
+    assert np.linalg.norm(ctl.update(100.0, state, target).velocity_m_s[:2]) > 5.0
+
+
 def test_face_mode_stands_in_front_of_the_face_and_turns_to_the_target():
     ctl = FollowController(_settings("face", standoff_m=1.0, max_accel_m_s2=100.0,
                                      position_gain=1.0), CAMERA)
