@@ -414,7 +414,7 @@ def test_marker_objects_delay_and_fixed_default():
     assert np.allclose(main.trajectory(1.0)[0], main.trajectory(0.0)[0])
 
 
-@pytest.mark.parametrize("seed", [0, 1, 2])
+@pytest.mark.parametrize("seed", [0, 1])
 def test_random_walk_moves_as_a_body_can(seed):
     # a walk asked for 2.5 m/s RMS within about 4 m of its start, accelerating at most 2 m/s²:
     # turning back at the edge at 2 m/s² costs speed (about 2.1 m/s RMS); with room, it
