@@ -94,9 +94,30 @@ class MarkerPerceptionConfig(_Model):
         return name
 
 
+class ImagePerceptionConfig(_Model):
+    """How a known flat image (hover_image, seed 000) is found; which image, and its size, are
+    the mission step's."""
+
+    camera: str
+    features: Literal["orb", "akaze"]
+    reference_features: Annotated[int, Field(ge=100, le=20000)]
+    frame_features: Annotated[int, Field(ge=100, le=20000)]
+    reference_px: Annotated[int, Field(ge=100, le=4000)]
+    ratio: Annotated[float, Field(gt=0, lt=1)]
+    ransac_px: Positive
+    min_inliers: Annotated[int, Field(ge=6)]
+
+
 class PerceptionConfig(_Model):
     ball: BallPerceptionConfig
     marker: MarkerPerceptionConfig
+    image: ImagePerceptionConfig
+
+
+class ImageEstimationConfig(_Model):
+    position_noise_px: Positive  # the image centre's bearing noise
+    size_noise_px: Positive  # noise of its apparent width (range noise)
+    heading_noise_deg: Positive  # of the direction of its top, one detection
 
 
 class TargetEstimationConfig(_Model):
@@ -134,6 +155,7 @@ class MarkerEstimationConfig(_Model):
 class EstimationConfig(_Model):
     target: TargetEstimationConfig
     marker: MarkerEstimationConfig
+    image: ImageEstimationConfig
     navigation: NavigationUncertaintyConfig
 
 

@@ -66,6 +66,8 @@ class PipelineSpec:
     truth_body: str = ""
     target_size_m: float = 0.0
     name: str = ""  # default: the kind
+    #: what to look for, when the step says (an image pipeline: the reference image's file)
+    target: str = ""
 
     @property
     def key(self) -> str:

@@ -126,7 +126,7 @@ def _flown_pipelines(records, cfg: AppConfig) -> dict[str, PipelineSpec]:
     for step in plan_steps(records):
         for p in step.get("pipelines") or []:
             spec = PipelineSpec(p["kind"], p["camera"], p.get("truth_body", ""),
-                                p.get("size_m") or 0.0, p["name"])
+                                p.get("size_m") or 0.0, p["name"], p.get("target") or "")
             specs.setdefault(spec.key, spec)
         kind = STEP_KINDS.get(step["name"])
         if kind is None:

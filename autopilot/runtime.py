@@ -520,7 +520,8 @@ class Runtime:
             steps.append(ch.clean({
                 "name": step.name, "index": index, "params": step.params.model_dump(),
                 "pipelines": [{"name": spec.key, "kind": spec.kind, "camera": spec.camera,
-                               "truth_body": spec.truth_body, "size_m": spec.target_size_m}
+                               "truth_body": spec.truth_body, "size_m": spec.target_size_m,
+                               "target": spec.target}
                               for spec in specs],
                 **kind.plan_info(step.params, plan.config)}))
         self.log.write(ch.MISSION_PLAN, self.clock.now(), ch.clean({

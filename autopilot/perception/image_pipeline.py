@@ -1,0 +1,184 @@
+"""The image pipeline: a known flat image (:mod:`autopilot.perception.image_target`) tracked in
+the world — its centre by the constant-velocity Kalman filter of
+:mod:`autopilot.estimation.target`, the direction of its top by
+:class:`~autopilot.estimation.heading.HeadingFilter` — as a
+:class:`~autopilot.pipeline.Pipeline` of kind ``image``.
+
+Which image, and its printed width, are the step's (``PipelineSpec.target`` — the generated
+default or a file — and ``target_size_m``); how it is found is ``perception.image``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from autopilot.config import AppConfig
+from autopilot.estimation.heading import HeadingFilter, HeadingSettings
+from autopilot.estimation.pose_history import PoseHistory
+from autopilot.estimation.target import (
+    TargetEstimate,
+    TargetFilter,
+    camera_measurement,
+    with_navigation,
+)
+from autopilot.flightlog import records as ch
+from autopilot.perception.ball_pipeline import filter_settings, navigation_settings
+from autopilot.perception.image_target import (
+    DEFAULT_TARGET,
+    ImageTargetDetection,
+    ImageTargetDetector,
+    ImageTargetSettings,
+    load_target_image,
+)
+from autopilot.pipeline import PipelineSpec, register
+from drivers.base import CameraInfo, VehicleState
+from drivers.geometry import matrix_to_quat, quat_to_matrix
+
+KIND = "image"
+
+
+def detector_settings(cfg: AppConfig, size_m: float) -> ImageTargetSettings:
+    i = cfg.perception.image
+    return ImageTargetSettings(size_m=size_m, features=i.features,
+                               reference_features=i.reference_features,
+                               frame_features=i.frame_features, reference_px=i.reference_px,
+                               ratio=i.ratio, ransac_px=i.ransac_px, min_inliers=i.min_inliers)
+
+
+def image_spec(cfg: AppConfig, image: str = DEFAULT_TARGET, size_m: float = 1.0,
+               truth_body: str = "image") -> PipelineSpec:
+    return PipelineSpec(KIND, cfg.perception.image.camera, truth_body=truth_body,
+                        target_size_m=size_m, target=image)
+
+
+def image_heading(rotation_world_image: np.ndarray) -> float:
+    """The heading (NED) of the image's top: its −y axis, in the horizontal plane."""
+    top = -rotation_world_image[:, 1]
+    return math.atan2(top[1], top[0])
+
+
+class ImagePipeline:
+    kind = KIND
+
+    def __init__(self, cfg: AppConfig, spec: PipelineSpec | None = None) -> None:
+        spec = spec or image_spec(cfg)
+        self.name = spec.key
+        self.camera = spec.camera
+        self.size_m = spec.target_size_m
+        self.detector = ImageTargetDetector(load_target_image(spec.target or DEFAULT_TARGET),
+                                            detector_settings(cfg, self.size_m))
+        e = cfg.estimation.image
+        self.filter_settings = dataclasses.replace(
+            filter_settings(cfg), pixel_noise_px=e.position_noise_px,
+            radius_noise_px=e.size_noise_px)
+        self.filter = TargetFilter(self.filter_settings)
+        self.heading = HeadingFilter(HeadingSettings(
+            accel_noise_rad_s2=math.radians(30.0), initial_rate_std_rad_s=math.radians(30.0),
+            gate_chi2=10.8, stale_after_s=cfg.estimation.target.stale_after_s))
+        self.heading_std_rad = math.radians(e.heading_noise_deg)
+        self.history = PoseHistory()
+        self.navigation = navigation_settings(cfg)
+
+    def add_state(self, state: VehicleState) -> None:
+        self.history.add(state)
+
+    def hint(self, time_s: float, camera: CameraInfo) -> None:
+        return None  # the whole frame is searched (frame-to-frame tracking: to come)
+
+    def detect(self, image_bgr: np.ndarray, camera: CameraInfo, time_s: float,
+               hint: object | None) -> ImageTargetDetection | None:
+        return self.detector.detect(image_bgr, camera, time_s)
+
+    def estimate(self, time_s: float, camera: CameraInfo,
+                 detection: ImageTargetDetection) -> dict | None:
+        pose = self.history.pose_at(time_s)
+        if pose is None:
+            return None
+        width_px = camera.intrinsics.fx * self.size_m / max(detection.range_m, 1e-6)
+        meas = camera_measurement(detection.position_cam_m, detection.range_m, width_px / 2.0,
+                                  camera, pose, self.filter_settings, time_s)
+        result = self.filter.update(meas)
+        if result.accepted:
+            r_world_cam = quat_to_matrix(pose.attitude_q) @ camera.rotation_body_cam
+            heading = image_heading(r_world_cam @ detection.rotation_cam_image)
+            if self.heading.innovation2(time_s, heading, self.heading_std_rad) <= \
+                    self.heading.settings.gate_chi2:
+                self.heading.update(time_s, heading, self.heading_std_rad)
+        est = self.target(time_s, pose.position_ned_m)
+        std = np.sqrt(np.diag(est.covariance))
+        return {"time_s": time_s, "pipeline": self.name, "measurement_time_s": time_s,
+                "accepted": result.accepted, "reinitialised": result.reinitialised,
+                "mahalanobis2": result.mahalanobis2,
+                "measured_position_ned_m": meas.position_ned_m,
+                "position_ned_m": est.position_ned_m, "velocity_ned_m_s": est.velocity_ned_m_s,
+                "position_std_m": std[:3], "velocity_std_m_s": std[3:],
+                "position_cov_m2": est.covariance[:3, :3].reshape(-1),
+                "updates": est.updates, "heading_rad": est.heading_rad,
+                "heading_std_rad": est.heading_std_rad}
+
+    def target(self, time_s: float, vehicle_position_ned_m=None) -> TargetEstimate | None:
+        """The image at ``time_s``: its centre (σ including the vehicle's navigation errors)
+        and the heading of its top."""
+        est = self.filter.estimate(time_s)
+        if est is None:
+            return None
+        if vehicle_position_ned_m is None:
+            latest = self.history.latest
+            vehicle_position_ned_m = latest.position_ned_m if latest is not None \
+                else est.position_ned_m
+        est = with_navigation(est, vehicle_position_ned_m, self.navigation)
+        heading = self.heading.estimate(time_s, self.filter_settings.max_extrapolation_s)
+        fresh = heading is not None and heading.age_s <= self.filter_settings.stale_after_s
+        return dataclasses.replace(
+            est, kind=KIND, heading_rad=heading.heading_rad if fresh else None,
+            heading_rate_rad_s=heading.rate_rad_s if fresh else 0.0,
+            heading_std_rad=heading.std_rad if fresh else None)
+
+    def detection_record(self, seq: int, time_s: float, camera: str,
+                         det: ImageTargetDetection | None, hint: object | None) -> dict:
+        return detection_record(seq, time_s, camera, det)
+
+    def hint_from_record(self, record: dict) -> None:
+        return None
+
+
+def detection_record(seq: int, time_s: float, camera: str,
+                     det: ImageTargetDetection | None) -> dict:
+    """The flight log's record of one processed frame. ``u_px``/``v_px`` (the image's centre)
+    and ``radius_px`` (half its apparent width) mean what they mean for any target."""
+    record = {"time_s": time_s, "seq": seq, "camera": camera, "detected": det is not None,
+              "hint_u_px": None, "hint_v_px": None, "hint_radius_px": None}
+    if det is None:
+        return {**record, "u_px": None, "v_px": None, "radius_px": None, "range_m": None,
+                "position_cam_m": [None] * 3, "corners_px": None,
+                "quaternion_cam_image": None, "matches": None, "inliers": None,
+                "reprojection_error_px": None, "score": None}
+    u, v = det.center_px
+    width = float(np.linalg.norm(det.corners_px[1] - det.corners_px[0]))
+    return {**record, "u_px": u, "v_px": v, "radius_px": width / 2.0, "range_m": det.range_m,
+            "position_cam_m": det.position_cam_m, "corners_px": det.corners_px.reshape(-1),
+            "quaternion_cam_image": matrix_to_quat(det.rotation_cam_image),
+            "matches": det.matches, "inliers": det.inliers,
+            "reprojection_error_px": det.reprojection_error_px, "score": None}
+
+
+_NUM, _BOOL, _INT, _STR = ({"type": ["number", "null"]}, {"type": ["boolean", "null"]},
+                           {"type": ["integer", "null"]}, {"type": ["string", "null"]})
+
+
+def _arr(n: int) -> dict:
+    return {"type": ["array", "null"], "items": _NUM, "minItems": n, "maxItems": n}
+
+
+register(KIND, ImagePipeline)
+ch.register_schema(ch.detection_topic(KIND), {
+    "title": "ImageTargetDetection", "type": "object", "properties": {
+        "time_s": _NUM, "seq": _INT, "camera": _STR, "detected": _BOOL, "u_px": _NUM,
+        "v_px": _NUM, "radius_px": _NUM, "range_m": _NUM, "position_cam_m": _arr(3),
+        "corners_px": _arr(8), "quaternion_cam_image": _arr(4), "matches": _INT,
+        "inliers": _INT, "reprojection_error_px": _NUM, "score": _NUM, "hint_u_px": _NUM,
+        "hint_v_px": _NUM, "hint_radius_px": _NUM, "processing_ms": _NUM, "received_s": _NUM,
+        "detected_s": _NUM}})
