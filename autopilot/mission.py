@@ -105,11 +105,21 @@ class WindScenario(_Model):
     steady_ned_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
 
+class ImageScenario(_Model):
+    """A printed image lying on the ground (hover_image), on gravel and grass."""
+
+    file: str = "default"  # "default": the generated target; else an image file
+    size_m: Annotated[float, Field(gt=0.05, le=50)] = 1.0  # printed width
+    north_east_m: tuple[float, float] = (0.0, 0.0)  # its centre, from the vehicle's start
+    yaw_deg: Annotated[float, Field(ge=-360, le=360)] = 0.0  # heading of its top
+
+
 class Scenario(_Model):
     seed: Annotated[int, Field(ge=0)] = 0
     ball: BallScenario | None = BallScenario()  # null: no ball
     distractors: Annotated[int, Field(ge=0, le=30)] = 0  # orange-ish objects near the ball
     marker: MarkerScenario | None = None
+    image: ImageScenario | None = None
     #: decoy markers beside the marker's path: how many (ids drawn from its dictionary), or
     #: their ids
     decoys: Annotated[int, Field(ge=0, le=30)] | list[Annotated[int, Field(ge=0)]] = 0

@@ -18,7 +18,9 @@ from autopilot.mission import BallScenario, Scenario
 from autopilot.perception.colors import COLORS, ORANGEISH_RGBA
 from drivers.sim.config import SimConfig
 from drivers.sim.scenario import (
+    FeatureGround,
     Geom,
+    GroundImage,
     MocapBody,
     ScenarioObject,
     Static,
@@ -29,6 +31,7 @@ from drivers.sim.scenario import (
 
 BALL = "ball"
 MARKER = "marker"
+IMAGE = "image"
 
 
 def build_world(scenario: Scenario | None, sim: SimConfig) -> tuple[SimConfig,
@@ -47,7 +50,20 @@ def build_world(scenario: Scenario | None, sim: SimConfig) -> tuple[SimConfig,
         objects += distractors(scenario, sim, path)
     if scenario.marker is not None:
         objects += marker_board(scenario, sim)
+    if scenario.image is not None:
+        objects += ground_image(scenario, sim)
     return sim, objects
+
+
+def ground_image(scenario: Scenario, sim: SimConfig) -> list[ScenarioObject]:
+    """The image on the ground (body ``image``), on a ground with features of its own."""
+    from autopilot.perception.image_target import load_target_image
+
+    i = scenario.image
+    north, east = sim.vehicle.initial_north_east_m
+    return [FeatureGround(seed=scenario.seed + 7),
+            GroundImage(IMAGE, load_target_image(i.file), i.size_m,
+                        (north + i.north_east_m[0], east + i.north_east_m[1]), i.yaw_deg)]
 
 
 def marker_board(scenario: Scenario, sim: SimConfig) -> list[ScenarioObject]:

@@ -160,8 +160,9 @@ def ground_truth_record(gt) -> dict:
         "vehicle_attitude_q": gt.vehicle.attitude_q,
         "wind_ned_m_s": gt.wind_ned_m_s,
         "bodies": {name: {"position_ned_m": b.position_ned_m,
-                          "velocity_ned_m_s": b.velocity_ned_m_s}
-                   for name, b in gt.bodies.items()},
+                          "velocity_ned_m_s": b.velocity_ned_m_s,
+                          "attitude_q": b.attitude_q}
+                   for name, b in gt.bodies.items() if name != "ground"},
     }
 
 

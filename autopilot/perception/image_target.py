@@ -109,8 +109,8 @@ class ImageTargetSettings:
     size_m: float  # printed width
     features: FeatureKind = "orb"
     #: features kept in the reference (its working copy is ``reference_px`` wide) and per frame
-    reference_features: int = 3000
-    frame_features: int = 1500
+    reference_features: int = 1200
+    frame_features: int = 800
     reference_px: int = 800
     ratio: float = 0.75  # Lowe's ratio test
     #: inlier threshold of the homography, in pixels of the frame

@@ -5,7 +5,12 @@ parameter model, behaviour, pipelines, metrics and report panels, call
 :func:`~autopilot.steps.registry.register`, and import it below.
 """
 
-from autopilot.steps import flight, follow_ball, follow_marker  # noqa: F401 (registers them)
+from autopilot.steps import (  # noqa: F401 (registers them)
+    flight,
+    follow_ball,
+    follow_marker,
+    hover_image,
+)
 from autopilot.steps.registry import STEP_KINDS, StepContext, StepKind, register, step_kind
 
 __all__ = ["STEP_KINDS", "StepContext", "StepKind", "register", "step_kind"]

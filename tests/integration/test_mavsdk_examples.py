@@ -156,6 +156,11 @@ def test_offboard_velocity_ned(no_camera_config):
             track = _Track(vehicle)
             code, out = await _run_example("offboard_velocity_ned.py", 90.0)
             _check(code, out, "-- Starting offboard", "-- Go up 2 m/s", "-- Stopping offboard")
+            # the example exits as soon as its stop is acknowledged; the telemetry saying HOLD
+            # may come a moment later (well within COM_OF_LOSS_T: not the offboard-loss
+            # failsafe's HOLD, which would take a second)
+            await wait_for_state(vehicle, lambda s: s.mode is FlightMode.HOLD, 0.5,
+                                 "HOLD after the example's stop")
             await track.aclose()
             assert "failed" not in out
             assert track.modes()[-2:] == [FlightMode.OFFBOARD, FlightMode.HOLD]

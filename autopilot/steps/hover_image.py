@@ -1,0 +1,131 @@
+"""The ``hover_image`` step kind: hover over a known image on the ground (seed 000).
+
+Its behaviour is :class:`~autopilot.behaviors.hover_image.HoverImage`, its pipeline the image
+pipeline on ``perception.image.camera`` (the down camera), looking for the step's ``image``
+(``size_m`` wide). Its metrics (``metrics.hover``) score the vehicle's true pose against the
+hover point over the image's true pose (simulator ground truth), from the moment the image was
+first found plus a settling time, and the detector's rate and cost.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+from autopilot.behaviors.hover_image import (
+    HoverImage,
+    HoverImageParams,
+    HoverSettings,
+    hover_point,
+)
+from autopilot.flightlog import records as ch
+from autopilot.flightlog.metrics import FollowedTarget, estimation_metrics, in_image, project_target
+from autopilot.perception.image_pipeline import image_spec
+from autopilot.steps.follow_ball import camera_of
+from autopilot.steps.registry import StepContext, StepKind, register
+from drivers.geometry import quat_to_matrix
+
+#: scored from this long after the image was first found (the approach to the hover point)
+SETTLE_S = 3.0
+
+
+def _behavior(params: HoverImageParams, ctx: StepContext) -> HoverImage:
+    config = ctx.config
+    camera_of(ctx, config.perception.image.camera, "perception.image.camera")
+    f = config.control.follow
+    return HoverImage(params, HoverSettings(f.lost_after_s, f.lost_timeout_s))
+
+
+def _yaw(q) -> float:
+    r = quat_to_matrix(np.asarray(q, dtype=float))
+    return math.atan2(r[1, 0], r[0, 0])
+
+
+def hover_metrics(log: Mapping[str, Sequence[Mapping]], intervals: list[tuple[float, float]],
+                  step: Mapping) -> dict:
+    """``hover``: horizontal, vertical and yaw error of the true vehicle from the hover point
+    over the true image; detection rate (frames with the image found ÷ frames with it wholly
+    in view); time per frame. ``estimation``: the image estimate flown on, against truth."""
+    pipelines = step.get("pipelines") or []
+    if not pipelines or not intervals:
+        return {}
+    p = pipelines[0]
+    params = HoverImageParams(**step["params"])
+    body = p["truth_body"]
+    truth = [s for s in log.get(ch.GROUND_TRUTH, []) if body in s["bodies"]]
+    if not truth:
+        return {}
+    frames = log.get(ch.detection_topic(p["name"]), [])
+
+    def running(t: float) -> bool:
+        return any(a <= t <= b for a, b in intervals)
+
+    found = [f["time_s"] for f in frames if f["detected"] and running(f["time_s"])]
+    start = (found[0] + SETTLE_S) if found else None
+    horizontal, vertical, yaw_errors = [], [], []
+    for s in truth:
+        t = s["time_s"]
+        if start is None or t < start or not running(t):
+            continue
+        image = s["bodies"][body]
+        heading = _yaw(image["attitude_q"])
+        goal = hover_point(np.asarray(image["position_ned_m"]), heading, params)
+        vehicle = np.asarray(s["vehicle_position_ned_m"])
+        horizontal.append(float(np.hypot(*(vehicle[:2] - goal[:2]))))
+        vertical.append(float(vehicle[2] - goal[2]))
+        want = heading + math.radians(params.yaw_deg)
+        yaw_errors.append(math.degrees(math.remainder(_yaw(s["vehicle_attitude_q"]) - want,
+                                                      2.0 * math.pi)))
+    cams = {c["name"]: c for c in log.get(ch.CAMERA_INFO, [])}
+    cam = cams.get(p["camera"])
+    in_view = detected = 0
+    times_ms = []
+    if cam is not None:
+        t_truth = np.array([s["time_s"] for s in truth])
+        for f in frames:
+            t = f["time_s"]
+            if not running(t):
+                continue
+            if f.get("processing_ms") is not None:
+                times_ms.append(f["processing_ms"])
+            i = min(int(np.searchsorted(t_truth, t)), len(truth) - 1)
+            s = truth[i]
+            proj = project_target(cam, np.asarray(s["vehicle_position_ned_m"]),
+                                  np.asarray(s["vehicle_attitude_q"]),
+                                  np.asarray(s["bodies"][body]["position_ned_m"]),
+                                  p["size_m"] / 2.0)
+            if proj is None or not in_image(cam, proj[0] - proj[2], proj[1] - proj[2]) \
+                    or not in_image(cam, proj[0] + proj[2], proj[1] + proj[2]):
+                continue
+            in_view += 1
+            detected += bool(f["detected"])
+
+    def rms(values):
+        return float(np.sqrt(np.mean(np.square(values)))) if values else None
+
+    hover = {
+        "rms_horizontal_error_m": rms(horizontal),
+        "p95_horizontal_error_m": float(np.percentile(horizontal, 95)) if horizontal else None,
+        "max_horizontal_error_m": max(horizontal) if horizontal else None,
+        "rms_vertical_error_m": rms(vertical),
+        "rms_yaw_error_deg": rms(yaw_errors),
+        "detection_rate": detected / in_view if in_view else None,
+        "frames_in_view": in_view,
+        "found_after_s": (found[0] - intervals[0][0]) if found else None,
+        "scored_s": (sum(b - a for a, b in intervals) - (start - intervals[0][0]))
+        if start is not None else 0.0,
+        "time_per_frame_ms_p50": float(np.percentile(times_ms, 50)) if times_ms else None,
+        "time_per_frame_ms_p95": float(np.percentile(times_ms, 95)) if times_ms else None,
+    }
+    target = FollowedTarget(p["name"], p["camera"], body, p["size_m"], 0.0)
+    return {"hover": hover, "estimation": estimation_metrics(log, intervals, target)}
+
+
+register(StepKind(
+    "hover_image", HoverImageParams, _behavior,
+    pipelines=lambda params, config: (image_spec(config, params.image, params.size_m),),
+    metrics=hover_metrics,
+    report=("trajectory", "detections", "estimate", "latency"),
+    description="hover over a known image on the ground (down camera) for duration_s"))
