@@ -33,6 +33,21 @@ from autopilot.estimation.target import TargetEstimate
 from drivers.base import CameraInfo, VehicleState
 
 
+def estimate_record(name: str, time_s: float, result, measurement,
+                    est: TargetEstimate, **extra) -> dict:
+    """The flight log's record of one filter update (``/estimation/target``), the same for
+    every pipeline; ``extra``: what its kind adds (a heading, …)."""
+    std = np.sqrt(np.diag(est.covariance))
+    return {"time_s": time_s, "pipeline": name, "measurement_time_s": time_s,
+            "accepted": result.accepted, "reinitialised": result.reinitialised,
+            "mahalanobis2": result.mahalanobis2,
+            "measured_position_ned_m": measurement.position_ned_m,
+            "position_ned_m": est.position_ned_m, "velocity_ned_m_s": est.velocity_ned_m_s,
+            "position_std_m": std[:3], "velocity_std_m_s": std[3:],
+            "position_cov_m2": est.covariance[:3, :3].reshape(-1), "updates": est.updates,
+            **extra}
+
+
 class Pipeline(Protocol):
     name: str  # unique in a run; the log channel /perception/<name>
     kind: str  # the registered kind ("ball", "marker", …)

@@ -22,7 +22,7 @@ from autopilot.estimation.target import (
 from autopilot.flightlog import records as ch
 from autopilot.perception.ball import BallDetection, BallDetector, BallDetectorSettings
 from autopilot.perception.colors import COLORS
-from autopilot.pipeline import PipelineSpec, register
+from autopilot.pipeline import PipelineSpec, estimate_record, register
 from drivers.base import CameraInfo, VehicleState
 from drivers.camera_model import project_points
 from drivers.geometry import quat_to_matrix
@@ -121,15 +121,7 @@ class BallPipeline:
             noise_scale=self.border_noise_scale if detection.cut_by_border else 1.0)
         result = self.filter.update(meas)
         est = self._with_navigation(self.filter.estimate(time_s), pose.position_ned_m)
-        std = np.sqrt(np.diag(est.covariance))
-        return {"time_s": time_s, "pipeline": self.name, "measurement_time_s": time_s,
-                "accepted": result.accepted, "reinitialised": result.reinitialised,
-                "mahalanobis2": result.mahalanobis2,
-                "measured_position_ned_m": meas.position_ned_m,
-                "position_ned_m": est.position_ned_m, "velocity_ned_m_s": est.velocity_ned_m_s,
-                "position_std_m": std[:3], "velocity_std_m_s": std[3:],
-                "position_cov_m2": est.covariance[:3, :3].reshape(-1),
-                "updates": est.updates}
+        return estimate_record(self.name, time_s, result, meas, est)
 
     def target(self, time_s: float) -> TargetEstimate | None:
         """The estimate at ``time_s``, its σ including the vehicle's navigation errors."""

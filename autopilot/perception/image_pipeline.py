@@ -22,7 +22,6 @@ from autopilot.estimation.target import (
     TargetEstimate,
     TargetFilter,
     camera_measurement,
-    with_navigation,
 )
 from autopilot.flightlog import records as ch
 from autopilot.perception.ball_pipeline import filter_settings, navigation_settings
@@ -33,7 +32,8 @@ from autopilot.perception.image_target import (
     ImageTargetSettings,
     load_target_image,
 )
-from autopilot.pipeline import PipelineSpec, register
+from autopilot.perception.marker_pipeline import oriented_target
+from autopilot.pipeline import PipelineSpec, estimate_record, register
 from drivers.base import CameraInfo, VehicleState
 from drivers.geometry import matrix_to_quat, quat_to_matrix
 
@@ -108,34 +108,13 @@ class ImagePipeline:
                     self.heading.settings.gate_chi2:
                 self.heading.update(time_s, heading, self.heading_std_rad)
         est = self.target(time_s, pose.position_ned_m)
-        std = np.sqrt(np.diag(est.covariance))
-        return {"time_s": time_s, "pipeline": self.name, "measurement_time_s": time_s,
-                "accepted": result.accepted, "reinitialised": result.reinitialised,
-                "mahalanobis2": result.mahalanobis2,
-                "measured_position_ned_m": meas.position_ned_m,
-                "position_ned_m": est.position_ned_m, "velocity_ned_m_s": est.velocity_ned_m_s,
-                "position_std_m": std[:3], "velocity_std_m_s": std[3:],
-                "position_cov_m2": est.covariance[:3, :3].reshape(-1),
-                "updates": est.updates, "heading_rad": est.heading_rad,
-                "heading_std_rad": est.heading_std_rad}
+        return estimate_record(self.name, time_s, result, meas, est,
+                               heading_rad=est.heading_rad, heading_std_rad=est.heading_std_rad)
 
     def target(self, time_s: float, vehicle_position_ned_m=None) -> TargetEstimate | None:
         """The image at ``time_s``: its centre (σ including the vehicle's navigation errors)
         and the heading of its top."""
-        est = self.filter.estimate(time_s)
-        if est is None:
-            return None
-        if vehicle_position_ned_m is None:
-            latest = self.history.latest
-            vehicle_position_ned_m = latest.position_ned_m if latest is not None \
-                else est.position_ned_m
-        est = with_navigation(est, vehicle_position_ned_m, self.navigation)
-        heading = self.heading.estimate(time_s, self.filter_settings.max_extrapolation_s)
-        fresh = heading is not None and heading.age_s <= self.filter_settings.stale_after_s
-        return dataclasses.replace(
-            est, kind=KIND, heading_rad=heading.heading_rad if fresh else None,
-            heading_rate_rad_s=heading.rate_rad_s if fresh else 0.0,
-            heading_std_rad=heading.std_rad if fresh else None)
+        return oriented_target(self, KIND, time_s, vehicle_position_ned_m)
 
     def detection_record(self, seq: int, time_s: float, camera: str,
                          det: ImageTargetDetection | None, hint: object | None) -> dict:

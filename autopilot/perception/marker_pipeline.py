@@ -35,7 +35,7 @@ from autopilot.perception.marker import (
     MarkerDetectorSettings,
     MarkerHint,
 )
-from autopilot.pipeline import PipelineSpec, register
+from autopilot.pipeline import PipelineSpec, estimate_record, register
 from drivers.base import CameraInfo, VehicleState
 from drivers.camera_model import project_points
 from drivers.geometry import quat_to_matrix
@@ -63,6 +63,30 @@ def face_rotation_ned(heading_rad: float) -> np.ndarray:
     z = np.array([math.cos(heading_rad), math.sin(heading_rad), 0.0])
     y = np.array([0.0, 0.0, -1.0])
     return np.column_stack((np.cross(y, z), y, z))
+
+
+def oriented_target(pipeline, kind: str, time_s: float,
+                    vehicle_position_ned_m=None) -> TargetEstimate | None:
+    """A pipeline's target with a heading (a marker's face, an image's top): the centre from
+    ``pipeline.filter`` (σ including the vehicle's navigation errors) and the heading from
+    ``pipeline.heading`` while it is fresh."""
+    est = pipeline.filter.estimate(time_s)
+    if est is None:
+        return None
+    if vehicle_position_ned_m is None:
+        latest = pipeline.history.latest
+        vehicle_position_ned_m = latest.position_ned_m if latest is not None \
+            else est.position_ned_m
+    est = with_navigation(est, vehicle_position_ned_m, pipeline.navigation)
+    settings = pipeline.filter_settings
+    heading: HeadingEstimate | None = pipeline.heading.estimate(time_s,
+                                                                settings.max_extrapolation_s)
+    fresh = heading is not None and heading.age_s <= settings.stale_after_s
+    return dataclasses.replace(
+        est, kind=kind,
+        heading_rad=heading.heading_rad if fresh else None,
+        heading_rate_rad_s=heading.rate_rad_s if fresh else 0.0,
+        heading_std_rad=heading.std_rad if fresh else None)
 
 
 class MarkerPipeline:
@@ -135,16 +159,9 @@ class MarkerPipeline:
         if result.accepted:
             heading_used = self._update_heading(time_s, camera, pose, detection)
         est = self.target(time_s, pose.position_ned_m)
-        std = np.sqrt(np.diag(est.covariance))
-        return {"time_s": time_s, "pipeline": self.name, "measurement_time_s": time_s,
-                "accepted": result.accepted, "reinitialised": result.reinitialised,
-                "mahalanobis2": result.mahalanobis2,
-                "measured_position_ned_m": meas.position_ned_m,
-                "position_ned_m": est.position_ned_m, "velocity_ned_m_s": est.velocity_ned_m_s,
-                "position_std_m": std[:3], "velocity_std_m_s": std[3:],
-                "position_cov_m2": est.covariance[:3, :3].reshape(-1),
-                "updates": est.updates, "heading_rad": est.heading_rad,
-                "heading_std_rad": est.heading_std_rad, "heading_source": heading_used}
+        return estimate_record(self.name, time_s, result, meas, est,
+                               heading_rad=est.heading_rad, heading_std_rad=est.heading_std_rad,
+                               heading_source=heading_used)
 
     def _update_heading(self, time_s: float, camera: CameraInfo, pose: Pose,
                         detection: MarkerDetection) -> str | None:
@@ -168,22 +185,7 @@ class MarkerPipeline:
     def target(self, time_s: float, vehicle_position_ned_m=None) -> TargetEstimate | None:
         """The marker at ``time_s``: its centre (σ including the vehicle's navigation errors)
         and the direction its face points."""
-        est = self.filter.estimate(time_s)
-        if est is None:
-            return None
-        if vehicle_position_ned_m is None:
-            latest = self.history.latest
-            vehicle_position_ned_m = latest.position_ned_m if latest is not None \
-                else est.position_ned_m
-        est = with_navigation(est, vehicle_position_ned_m, self.navigation)
-        heading: HeadingEstimate | None = self.heading.estimate(
-            time_s, self.filter_settings.max_extrapolation_s)
-        fresh = heading is not None and heading.age_s <= self.filter_settings.stale_after_s
-        return dataclasses.replace(
-            est, kind=KIND,
-            heading_rad=heading.heading_rad if fresh else None,
-            heading_rate_rad_s=heading.rate_rad_s if fresh else 0.0,
-            heading_std_rad=heading.std_rad if fresh else None)
+        return oriented_target(self, KIND, time_s, vehicle_position_ned_m)
 
     # -- records ----------------------------------------------------------------------------
 
