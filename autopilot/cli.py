@@ -217,16 +217,32 @@ def build_parser() -> argparse.ArgumentParser:
         follow.add_argument("--set", dest="overrides", action="append", default=[],
                             metavar="KEY=VALUE", help="override a mission or configuration key")
 
+    for name, seed in (("hover_image", "seed 000's ORB 300 + FLANN + solvePnPRansac"),
+                       ("land_pad", "seed 001's multi-scale TM_CCOEFF template matching")):
+        down = benches.add_parser(
+            name, help=f"{name}: default and hard (gusts, target offset and turned"
+            f"{', decoys' if name == 'land_pad' else ''}) scenarios over a few seeds, our "
+            f"detector against {seed}, flown with our controller")
+        down.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+        down.add_argument("--seeds", type=int, default=3, metavar="N",
+                          help="scenario seeds per scenario and detector (default 3)")
+        down.add_argument("--scenario", dest="scenarios", action="append", default=None,
+                          metavar="NAME", help="only this scenario (repeatable)")
+        down.add_argument("--set", dest="overrides", action="append", default=[],
+                          metavar="KEY=VALUE", help="override a mission or configuration key")
+
     perception = benches.add_parser(
         "perception", help="each detector on frames rendered from known poses, against truth: "
         "ball (centre, range) and marker at 1, 3, 5 m and 0-60 degrees obliquity (position, "
-        "orientation, detection rate, time per frame)")
+        "orientation, detection rate, time per frame); down camera: image and pad at 1, 3, "
+        "8 m, ours against seed 000's and seed 001's detectors")
     perception.add_argument("--json", action="store_true",
                             help="print one JSON object on stdout")
     perception.add_argument("--quick", action="store_true",
                             help="a few frames per cell (what the test suite runs)")
     perception.add_argument("--detector", dest="detectors", action="append", default=None,
-                            metavar="NAME", help="only this detector (repeatable: ball, marker)")
+                            metavar="NAME",
+                            help="only this detector (repeatable: ball, marker, image, pad)")
     _add_config_options(perception)
 
     calibration = benches.add_parser(
@@ -604,6 +620,20 @@ def _bench(args: argparse.Namespace) -> int:
         result = follow.run_bench(args.bench, args.mission, args.overrides, log,
                                   args.scenarios)
         print(json.dumps(result) if args.json else follow.format_table(result))
+        return EXIT_OK
+
+    if args.bench in ("hover_image", "land_pad"):
+        from autopilot.bench import down
+
+        known = down.BENCHES[args.bench].scenarios
+        unknown = [s for s in args.scenarios or () if s not in known]
+        if unknown:
+            raise InputError(f"--scenario {unknown[0]}: no such scenario (known: "
+                             f"{', '.join(known)})")
+        if args.seeds < 1:
+            raise InputError(f"--seeds {args.seeds}: at least 1")
+        result = down.run_bench(args.bench, args.seeds, args.overrides, log, args.scenarios)
+        print(json.dumps(result) if args.json else down.format_table(result))
         return EXIT_OK
 
     if args.bench == "perception":

@@ -106,12 +106,48 @@ class ImagePerceptionConfig(_Model):
     ratio: Annotated[float, Field(gt=0, lt=1)]
     ransac_px: Positive
     min_inliers: Annotated[int, Field(ge=6)]
+    #: frames tracked (Lucas–Kanade) between full detections; 0: a full detection every frame
+    track_frames: Annotated[int, Field(ge=0, le=100)] = 0
+    #: ours, or seed 000's pipeline as a baseline (autopilot bench hover_image)
+    detector: Literal["ours", "seed000"] = "ours"
+
+
+class PadPerceptionConfig(_Model):
+    """How a landing pad (land_pad, seed 001) is found; its kind, colour and size are the
+    mission step's."""
+
+    camera: str
+    #: circle pads: explicit HSV ranges instead of the step's colour's preset
+    hsv_ranges: list[tuple[HsvTriple, HsvTriple]] | None = None
+    min_radius_px: Positive
+    max_fit_error: Annotated[float, Field(gt=0, le=0.5)]  # RMS radial residual ÷ radius
+    #: circle pads with a rangefinder height: the disc fitted on the ground may be this much
+    #: smaller or larger than its size (else it is something else of that colour)
+    size_tolerance: Annotated[float, Field(gt=0, lt=1)]
+    #: marker pads: the dictionary of its markers (their ids: the mission step's)
+    backend: Literal["aruco", "apriltag"]
+    dictionary: str
+    min_perimeter_px: Positive
+    #: ours, or seed 001's multi-scale template matching (circle pads) as a baseline
+    #: (autopilot bench land_pad)
+    detector: Literal["ours", "seed001"] = "ours"
+
+    @field_validator("dictionary")
+    @classmethod
+    def _known_dictionary(cls, name: str, info: ValidationInfo) -> str:
+        from autopilot.perception.marker import apriltag_family_name, aruco_dictionary_name
+
+        if info.data.get("backend") == "apriltag":
+            apriltag_family_name(name)
+        aruco_dictionary_name(name)
+        return name
 
 
 class PerceptionConfig(_Model):
     ball: BallPerceptionConfig
     marker: MarkerPerceptionConfig
     image: ImagePerceptionConfig
+    pad: PadPerceptionConfig
 
 
 class ImageEstimationConfig(_Model):
@@ -152,10 +188,19 @@ class MarkerEstimationConfig(_Model):
     heading_accel_noise_deg_s2: Positive  # how hard the face may turn
 
 
+class PadEstimationConfig(_Model):
+    accel_noise_m_s2: Positive  # how hard the pad may move (a pad on the ground: hardly)
+    position_noise_px: Positive  # bearing noise of the pad's centre
+    size_noise_px: Positive  # of its apparent size (range noise, without the rangefinder)
+    height_noise_m: Positive  # of the ground's height from the rangefinder
+    heading_noise_deg: Positive  # marker pads: of the direction of its top, one detection
+
+
 class EstimationConfig(_Model):
     target: TargetEstimationConfig
     marker: MarkerEstimationConfig
     image: ImageEstimationConfig
+    pad: PadEstimationConfig
     navigation: NavigationUncertaintyConfig
 
 

@@ -114,14 +114,38 @@ class ImageScenario(_Model):
     yaw_deg: Annotated[float, Field(ge=-360, le=360)] = 0.0  # heading of its top
 
 
+class PadScenario(_Model):
+    """A landing pad on the ground (land_pad): a coloured circle (``size_m`` across, on a white
+    square a quarter wider) or the nested marker pad (``size_m`` square; its markers' ``ids``:
+    the small centre one first)."""
+
+    kind: Literal["circle", "markers"] = "circle"
+    color: ColorName = "red"  # circle: red = land here (seed 001)
+    size_m: Annotated[float, Field(gt=0.1, le=10)] = 0.8
+    north_east_m: tuple[float, float] = (0.0, 0.0)  # its centre, from the vehicle's start
+    yaw_deg: Annotated[float, Field(ge=-360, le=360)] = 0.0  # heading of its top
+    dictionary: str = "DICT_4X4_50"  # markers
+    ids: tuple[int, int, int, int, int] = (0, 1, 2, 3, 4)  # markers: centre, then the four
+
+    @model_validator(mode="after")
+    def _layout(self) -> PadScenario:
+        if self.kind == "markers":
+            from autopilot.perception.pad import marker_pad_layout
+
+            marker_pad_layout(self.size_m, self.ids, self.dictionary)  # raises ValueError
+        return self
+
+
 class Scenario(_Model):
     seed: Annotated[int, Field(ge=0)] = 0
     ball: BallScenario | None = BallScenario()  # null: no ball
     distractors: Annotated[int, Field(ge=0, le=30)] = 0  # orange-ish objects near the ball
     marker: MarkerScenario | None = None
     image: ImageScenario | None = None
+    pad: PadScenario | None = None
     #: decoy markers beside the marker's path: how many (ids drawn from its dictionary), or
-    #: their ids
+    #: their ids; with a pad, decoy pads around it (other colours, blue first: keep away;
+    #: marker pads with other ids): how many
     decoys: Annotated[int, Field(ge=0, le=30)] | list[Annotated[int, Field(ge=0)]] = 0
     wind: WindScenario = WindScenario()
 
@@ -134,6 +158,19 @@ class Scenario(_Model):
                 aruco_dictionary_name(self.marker.dictionary)
             except ValueError as exc:
                 raise ValueError(f"marker.dictionary: {exc}") from None
+        if self.pad is not None and isinstance(self.decoys, list):
+            raise ValueError("decoys: with a pad, the number of decoy pads (not a list of ids)")
+        if self.pad is not None and self.pad.kind == "markers" and self.decoys:
+            from autopilot.perception.pad import marker_pad_layout
+
+            ids = self.pad.ids
+            top = max(ids) + (max(ids) - min(ids) + 1) * int(self.decoys)
+            try:
+                marker_pad_layout(self.pad.size_m, [top - 4, top - 3, top - 2, top - 1, top],
+                                  self.pad.dictionary)
+            except ValueError:
+                raise ValueError(f"decoys: {self.decoys} decoy marker pads need marker ids up "
+                                 f"to {top}, more than {self.pad.dictionary} has") from None
         return self
 
 

@@ -43,6 +43,11 @@ from autopilot.steps.metrics import mission_metrics, plan_steps
 #: The follow metrics a replay recomputes (the others describe the flight itself).
 DETECTION_KEYS = ("detection_rate", "frames_in_view", "frames_processed",
                   "false_detection_rate", "max_lost_s")
+#: Per metrics group, the detection figures a replay recomputes: the flight's path and its
+#: errors are the flight's (a replay does not fly), what the detector saw in its frames is not.
+REPLAY_KEYS = {"follow": DETECTION_KEYS,
+               "hover": ("detection_rate", "frames_in_view", "found_after_s"),
+               "landing": ("frames", "detected_frames", "found_after_s")}
 
 
 class ReplayError(InputError):
@@ -114,9 +119,13 @@ def replay(run_dir: Path, overrides: Sequence[str] = ()) -> dict:
 
 def _replay_groups(metrics: dict) -> dict:
     """The groups a replay can tell about: detection figures and the estimation."""
-    follow = metrics.get("follow") or {}
-    return {"follow": {k: follow.get(k) for k in DETECTION_KEYS} if follow else {},
-            "estimation": metrics.get("estimation") or {}}
+    groups: dict = {}
+    for group, keys in REPLAY_KEYS.items():
+        found = metrics.get(group) or {}
+        if found or group == "follow":
+            groups[group] = {k: found.get(k) for k in keys} if found else {}
+    groups["estimation"] = metrics.get("estimation") or {}
+    return groups
 
 
 def _flown_pipelines(records, cfg: AppConfig) -> dict[str, PipelineSpec]:
@@ -222,8 +231,8 @@ def format_replay(result: dict) -> str:
     if not result["log_complete"]:
         lines.append("the log was cut short: this replays what it holds")
     lines.append(f"{'':28}{'flight':>10}{'replay':>10}")
-    for section in ("follow", "estimation"):
-        now, then = result["metrics"][section], result["flight_metrics"][section]
+    for section in result["metrics"]:
+        now, then = result["metrics"][section], result["flight_metrics"].get(section) or {}
         for key, value in now.items():
             if isinstance(value, (list, dict)):
                 continue

@@ -56,7 +56,7 @@ from autopilot.mission import (
 from autopilot.pipeline import Pipeline, make_pipeline
 from autopilot.progress import report_progress
 from autopilot.steps import step_kind
-from drivers.base import Frame, Setpoint, Vehicle, VehicleError, VehicleState
+from drivers.base import Frame, LandingTarget, Setpoint, Vehicle, VehicleError, VehicleState
 from drivers.slots import LatestSlot
 
 
@@ -279,6 +279,9 @@ class Runtime:
 
     async def _perform(self, request: VehicleRequest) -> None:
         v = self.vehicle
+        if request.kind is RequestKind.LANDING_TARGET:  # a stream, as setpoints: not an event
+            await v.send_landing_target(LandingTarget(request.time_s, request.position_ned_m))
+            return
         self._event(self.clock.now(), "request", f"request {request.kind.value}")
         if request.kind is RequestKind.ARM:
             await v.arm()
@@ -295,6 +298,8 @@ class Runtime:
             await v.hold()
         elif request.kind is RequestKind.LAND:
             await v.land()
+        elif request.kind is RequestKind.PRECISION_LAND:
+            await v.precision_land()
 
     async def _last_resort(self) -> None:
         """The orderly stop failed or the link broke: one bounded attempt to land."""

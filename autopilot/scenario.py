@@ -32,6 +32,9 @@ from drivers.sim.scenario import (
 BALL = "ball"
 MARKER = "marker"
 IMAGE = "image"
+PAD = "pad"
+#: decoy circle pads' colours, in order (blue first: seed 001's "keep away")
+DECOY_COLORS = ("blue", "yellow", "green", "orange")
 
 
 def build_world(scenario: Scenario | None, sim: SimConfig) -> tuple[SimConfig,
@@ -52,7 +55,48 @@ def build_world(scenario: Scenario | None, sim: SimConfig) -> tuple[SimConfig,
         objects += marker_board(scenario, sim)
     if scenario.image is not None:
         objects += ground_image(scenario, sim)
+    if scenario.pad is not None:
+        objects += landing_pads(scenario, sim, with_ground=scenario.image is None)
     return sim, objects
+
+
+def landing_pads(scenario: Scenario, sim: SimConfig, *,
+                 with_ground: bool = True) -> list[ScenarioObject]:
+    """The landing pad (body ``pad``) and ``scenario.decoys`` decoy pads around it (circles of
+    other colours, or marker pads with other ids), on gravel and grass."""
+    from autopilot.perception.pad import pad_texture
+
+    p = scenario.pad
+    north, east = sim.vehicle.initial_north_east_m
+    centre = np.array([north + p.north_east_m[0], east + p.north_east_m[1]])
+    image, width = pad_texture(p.kind, p.size_m, color=p.color, ids=p.ids,
+                               dictionary=p.dictionary)
+    objects: list[ScenarioObject] = [FeatureGround(seed=scenario.seed + 7)] if with_ground else []
+    objects.append(GroundImage(PAD, image, width, tuple(centre), p.yaw_deg))
+    rng = np.random.default_rng(scenario.seed + 4241)
+    placed = [centre]
+    start = np.array([north, east])
+    for k in range(int(scenario.decoys)):
+        if p.kind == "circle":
+            colors = [c for c in DECOY_COLORS if c != p.color]
+            kwargs = {"color": colors[k % len(colors)]}
+        else:
+            span = max(p.ids) - min(p.ids) + 1  # ids that are not the pad's
+            kwargs = {"ids": tuple(i + span * (k + 1) for i in p.ids),
+                      "dictionary": p.dictionary}
+        decoy, decoy_width = pad_texture(p.kind, p.size_m, **kwargs)
+        spot = centre
+        for _ in range(200):  # clear of the pad, the other decoys and the take-off spot
+            angle = rng.uniform(0.0, 2.0 * math.pi)
+            spot = centre + rng.uniform(1.3, 3.0) * width * np.array(
+                [math.cos(angle), math.sin(angle)])
+            if all(np.linalg.norm(spot - q) > 1.3 * width for q in placed) and \
+                    np.linalg.norm(spot - start) > 0.8 + width / 2.0:
+                break
+        placed.append(spot)
+        objects.append(GroundImage(f"decoy{k}_pad", decoy, decoy_width, tuple(spot),
+                                   float(rng.uniform(-180.0, 180.0))))
+    return objects
 
 
 def ground_image(scenario: Scenario, sim: SimConfig) -> list[ScenarioObject]:

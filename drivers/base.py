@@ -55,6 +55,7 @@ class FlightMode(enum.Enum):
     RETURN = "return"
     MISSION = "mission"
     OFFBOARD = "offboard"
+    PRECLAND = "precland"  # AUTO.PRECLAND: PX4's precision landing on LANDING_TARGET
 
 
 class LandedState(enum.Enum):
@@ -277,6 +278,21 @@ class Frame:
 # --------------------------------------------------------------------------------------------
 
 
+@dataclass(frozen=True, slots=True)
+class LandingTarget:
+    """Where the landing target is (MAVLink LANDING_TARGET with ``position_valid``): its
+    position in the vehicle's local NED frame, at ``time_s`` (the vehicle's clock)."""
+
+    time_s: float
+    position_ned_m: tuple[float, float, float]
+    target_num: int = 0
+
+    def __post_init__(self) -> None:
+        if len(self.position_ned_m) != 3 or not all(map(math.isfinite, self.position_ned_m)):
+            raise ValueError(f"landing target position must be 3 finite numbers, got "
+                             f"{self.position_ned_m}")
+
+
 class VehicleError(Exception):
     """Base class for everything a driver raises."""
 
@@ -375,6 +391,17 @@ class Vehicle(abc.ABC):
     @abc.abstractmethod
     async def send_setpoint(self, setpoint: Setpoint) -> None:
         """Send one setpoint. Never re-sent by the driver: stream it to keep OFFBOARD alive."""
+
+    async def precision_land(self) -> None:
+        """Switch to PX4's precision landing (AUTO.PRECLAND): it lands on the target that
+        :meth:`send_landing_target` reports (searching for it, then falling back to a normal
+        landing, as its PLD_* parameters say)."""
+        raise CommandDenied("precision land", "this vehicle has no precision landing mode")
+
+    async def send_landing_target(self, target: LandingTarget) -> None:
+        """Report the landing target's position (MAVLink LANDING_TARGET, MAV_FRAME_LOCAL_NED:
+        what PX4's precision landing flies to). Fire and forget; stream it while it is seen."""
+        raise CommandDenied("landing target", "this vehicle takes no landing target")
 
     @abc.abstractmethod
     def telemetry(self, buffer: int = 1) -> AsyncIterator[VehicleState]:

@@ -25,12 +25,17 @@ class RequestKind(enum.Enum):
     START_OFFBOARD = "start_offboard"  # the runtime streams the current setpoint first
     HOLD = "hold"
     LAND = "land"
+    PRECISION_LAND = "precision_land"  # PX4's AUTO.PRECLAND, on LANDING_TARGET
+    LANDING_TARGET = "landing_target"  # report where the landing target is (not logged)
 
 
 @dataclass(frozen=True, slots=True)
 class VehicleRequest:
     kind: RequestKind
     altitude_m: float | None = None  # TAKEOFF
+    #: LANDING_TARGET: the target's position (local NED) at ``time_s``
+    position_ned_m: tuple[float, float, float] | None = None
+    time_s: float = 0.0
 
 
 @dataclass(frozen=True, slots=True)

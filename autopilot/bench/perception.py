@@ -531,3 +531,6 @@ def _ball_table(section: dict) -> list[str]:
 
 register(DetectorBench("ball", _run_ball, _ball_table))
 register(DetectorBench("marker", _run_marker, _marker_table))
+
+# the down camera's detectors (image, pad) register themselves
+import autopilot.bench.down_perception  # noqa: E402, F401

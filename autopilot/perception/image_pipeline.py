@@ -45,7 +45,8 @@ def detector_settings(cfg: AppConfig, size_m: float) -> ImageTargetSettings:
     return ImageTargetSettings(size_m=size_m, features=i.features,
                                reference_features=i.reference_features,
                                frame_features=i.frame_features, reference_px=i.reference_px,
-                               ratio=i.ratio, ransac_px=i.ransac_px, min_inliers=i.min_inliers)
+                               ratio=i.ratio, ransac_px=i.ransac_px, min_inliers=i.min_inliers,
+                               track_frames=i.track_frames)
 
 
 def image_spec(cfg: AppConfig, image: str = DEFAULT_TARGET, size_m: float = 1.0,
@@ -68,8 +69,13 @@ class ImagePipeline:
         self.name = spec.key
         self.camera = spec.camera
         self.size_m = spec.target_size_m
-        self.detector = ImageTargetDetector(load_target_image(spec.target or DEFAULT_TARGET),
-                                            detector_settings(cfg, self.size_m))
+        reference = load_target_image(spec.target or DEFAULT_TARGET)
+        if cfg.perception.image.detector == "seed000":
+            from autopilot.perception.baselines import Seed000ImageDetector
+
+            self.detector = Seed000ImageDetector(reference, self.size_m)
+        else:
+            self.detector = ImageTargetDetector(reference, detector_settings(cfg, self.size_m))
         e = cfg.estimation.image
         self.filter_settings = dataclasses.replace(
             filter_settings(cfg), pixel_noise_px=e.position_noise_px,
@@ -86,7 +92,7 @@ class ImagePipeline:
         self.history.add(state)
 
     def hint(self, time_s: float, camera: CameraInfo) -> None:
-        return None  # the whole frame is searched (frame-to-frame tracking: to come)
+        return None  # the whole frame is searched (the detector tracks between searches)
 
     def detect(self, image_bgr: np.ndarray, camera: CameraInfo, time_s: float,
                hint: object | None) -> ImageTargetDetection | None:
@@ -134,14 +140,15 @@ def detection_record(seq: int, time_s: float, camera: str,
         return {**record, "u_px": None, "v_px": None, "radius_px": None, "range_m": None,
                 "position_cam_m": [None] * 3, "corners_px": None,
                 "quaternion_cam_image": None, "matches": None, "inliers": None,
-                "reprojection_error_px": None, "score": None}
+                "reprojection_error_px": None, "score": None, "tracked": None}
     u, v = det.center_px
     width = float(np.linalg.norm(det.corners_px[1] - det.corners_px[0]))
     return {**record, "u_px": u, "v_px": v, "radius_px": width / 2.0, "range_m": det.range_m,
             "position_cam_m": det.position_cam_m, "corners_px": det.corners_px.reshape(-1),
             "quaternion_cam_image": matrix_to_quat(det.rotation_cam_image),
             "matches": det.matches, "inliers": det.inliers,
-            "reprojection_error_px": det.reprojection_error_px, "score": None}
+            "reprojection_error_px": det.reprojection_error_px, "score": None,
+            "tracked": det.tracked}
 
 
 _NUM, _BOOL, _INT, _STR = ({"type": ["number", "null"]}, {"type": ["boolean", "null"]},
@@ -158,6 +165,7 @@ ch.register_schema(ch.detection_topic(KIND), {
         "time_s": _NUM, "seq": _INT, "camera": _STR, "detected": _BOOL, "u_px": _NUM,
         "v_px": _NUM, "radius_px": _NUM, "range_m": _NUM, "position_cam_m": _arr(3),
         "corners_px": _arr(8), "quaternion_cam_image": _arr(4), "matches": _INT,
-        "inliers": _INT, "reprojection_error_px": _NUM, "score": _NUM, "hint_u_px": _NUM,
+        "inliers": _INT, "reprojection_error_px": _NUM, "score": _NUM, "tracked": _BOOL,
+        "hint_u_px": _NUM,
         "hint_v_px": _NUM, "hint_radius_px": _NUM, "processing_ms": _NUM, "received_s": _NUM,
         "detected_s": _NUM}})

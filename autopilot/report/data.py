@@ -29,6 +29,13 @@ def targets(records: Records) -> list[FollowedTarget]:
     seen: dict[str, FollowedTarget] = {}
     for _, _, target in followed_targets(records):
         seen.setdefault(target.pipeline, target)
+    # steps with a target but no standoff (hover over an image, land on a pad)
+    plan = (records.get(ch.MISSION_PLAN) or [{}])[0]
+    for step in plan.get("steps", []):
+        for p in step.get("pipelines") or []:
+            if p.get("truth_body"):
+                seen.setdefault(p["name"], FollowedTarget(
+                    p["name"], p["camera"], p["truth_body"], p.get("size_m") or 0.0, 0.0))
     return list(seen.values())
 
 
@@ -117,6 +124,29 @@ def standoff_error(records: Records, target: FollowedTarget | None
         out["estimated_t"] = t
         out["estimated_error_m"] = np.linalg.norm(tr["target_estimate"] - vehicle, axis=1) \
             - standoff
+    return out
+
+
+def over_target(records: Records, target: FollowedTarget | None) -> dict[str, np.ndarray]:
+    """The vehicle's horizontal offset from a target on the ground (north, east; truth), and
+    as the autopilot saw it (telemetry minus the target's estimate)."""
+    tr = trajectories(records, target)
+    out = {"t": np.empty(0), "offset_ne": np.empty((0, 2)), "estimated_t": np.empty(0),
+           "estimated_offset_ne": np.empty((0, 2)), "height_m": np.empty(0)}
+    if len(tr["target_truth_t"]) >= 2 and len(tr["vehicle_truth_t"]):
+        t = tr["vehicle_truth_t"]
+        inside = (t >= tr["target_truth_t"][0]) & (t <= tr["target_truth_t"][-1])
+        t = t[inside]
+        target_ne = np.stack([np.interp(t, tr["target_truth_t"], tr["target_truth"][:, i])
+                              for i in range(3)], axis=1)
+        vehicle = tr["vehicle_truth"][inside]
+        out.update(t=t, offset_ne=vehicle[:, :2] - target_ne[:, :2],
+                   height_m=target_ne[:, 2] - vehicle[:, 2])
+    if len(tr["target_estimate_t"]) and len(tr["vehicle_t"]):
+        t = tr["target_estimate_t"]
+        vehicle = np.stack([np.interp(t, tr["vehicle_t"], tr["vehicle"][:, i])
+                            for i in range(2)], axis=1)
+        out.update(estimated_t=t, estimated_offset_ne=vehicle - tr["target_estimate"][:, :2])
     return out
 
 

@@ -138,6 +138,40 @@ def _standoff(fig, records, phases, target) -> None:
     ax.legend(fontsize=8)
 
 
+def _over_target(fig, records, phases, target) -> None:
+    o = data.over_target(records, target)
+    if not len(o["t"]):
+        raise _NoData("no ground truth of the target in this log")
+    top, err = fig.subplots(1, 2, gridspec_kw={"width_ratios": [1, 2], "wspace": 0.45})
+    # top-down, the target's centre at the origin: the part of the flight within 2 m of it
+    near = np.hypot(o["offset_ne"][:, 0], o["offset_ne"][:, 1]) < 2.0
+    r = target.size_m / 2.0 if target is not None else 0.5
+    from matplotlib.patches import Circle
+
+    top.add_patch(Circle((0.0, 0.0), r, fill=False, color="tab:red", lw=1, label="target"))
+    if near.any():
+        sc = top.scatter(o["offset_ne"][near, 1], o["offset_ne"][near, 0], c=o["height_m"][near],
+                         s=2, cmap="viridis")
+        fig.colorbar(sc, ax=top, label="height (m)", shrink=0.8)
+        last = o["offset_ne"][-1]
+        top.plot(last[1], last[0], "kx", label="last position")
+    lim = max(0.6, 1.3 * r)
+    top.set(xlabel="east of it (m)", ylabel="north of it (m)", title="over the target (truth)",
+            xlim=(-lim, lim), ylim=(-lim, lim), aspect="equal")
+    top.legend(fontsize=7)
+    err.plot(o["t"], np.hypot(o["offset_ne"][:, 0], o["offset_ne"][:, 1]), lw=1,
+             label="true horizontal offset")
+    if len(o["estimated_t"]):
+        err.plot(o["estimated_t"], np.hypot(o["estimated_offset_ne"][:, 0],
+                                            o["estimated_offset_ne"][:, 1]), ":", lw=1,
+                 label="as the autopilot saw it")
+    err.set_yscale("log")
+    err.set(xlabel="time (s)", ylabel="m (log scale)", ylim=(0.003, 5.0),
+            title="horizontal offset from the target's centre")
+    _shade(err, phases)
+    err.legend(fontsize=8)
+
+
 def _detections(fig, records, phases, target) -> None:
     d = data.detection_timeline(records, target)
     if not len(d["t"]):
@@ -210,6 +244,7 @@ def _latency(fig, records, phases, target) -> None:
 PLOTS = {
     "trajectory": ("Trajectories", _trajectories, False),
     "standoff": ("Standoff error", _standoff, True),
+    "over_target": ("Over the target on the ground", _over_target, True),
     "detections": ("Detections", _detections, True),
     "estimate": ("Target estimate the controller flew on, against truth", _estimate, True),
     "velocity": ("Commanded and actual velocity", _velocity, False),

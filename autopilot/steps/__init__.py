@@ -10,6 +10,7 @@ from autopilot.steps import (  # noqa: F401 (registers them)
     follow_ball,
     follow_marker,
     hover_image,
+    land_pad,
 )
 from autopilot.steps.registry import STEP_KINDS, StepContext, StepKind, register, step_kind
 

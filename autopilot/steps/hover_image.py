@@ -127,5 +127,5 @@ register(StepKind(
     "hover_image", HoverImageParams, _behavior,
     pipelines=lambda params, config: (image_spec(config, params.image, params.size_m),),
     metrics=hover_metrics,
-    report=("trajectory", "detections", "estimate", "latency"),
+    report=("trajectory", "over_target", "detections", "estimate", "latency"),
     description="hover over a known image on the ground (down camera) for duration_s"))

@@ -37,7 +37,7 @@ from typing import ClassVar
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from drivers.base import CommandDenied, VehicleError, VehicleState
+from drivers.base import CommandDenied, LandingTarget, VehicleError, VehicleState
 from drivers.mavlink import px4
 from drivers.mavlink.common import cancel_all
 from drivers.mavlink.face_commands import CommandHandler, ModeNotAvailable
@@ -74,6 +74,7 @@ class FaceStats:
     commands: int = 0
     setpoints: int = 0
     rejected_setpoints: int = 0
+    landing_targets: int = 0
 
 
 class _Link(asyncio.DatagramProtocol):
@@ -464,6 +465,21 @@ class MavlinkFace:
         return px4.setpoint_from_mavlink(px4.MAV_FRAME_LOCAL_NED, msg.type_mask, (n, e, d),
                                          (msg.vx, msg.vy, msg.vz), msg.yaw, msg.yaw_rate)
 
+    def _on_landing_target(self, link: _Link, msg) -> None:
+        """LANDING_TARGET, as PX4's receiver takes it: a position in MAV_FRAME_LOCAL_NED is the
+        target for precision landing (stamped on arrival); another frame is refused with a
+        critical status text; angles only (IR-LOCK style, no ``position_valid``) need PX4's
+        landing target estimator, which the simulator does not model: ignored."""
+        if getattr(msg, "position_valid", 0) and msg.frame == px4.MAV_FRAME_LOCAL_NED:
+            target = LandingTarget(self.vehicle.clock.now(), (msg.x, msg.y, msg.z),
+                                   msg.target_num)
+            self.stats.landing_targets += 1
+            self._spawn(self.vehicle.send_landing_target(target))
+        elif getattr(msg, "position_valid", 0):
+            self._say(link, f"Landing target: coordinate frame {msg.frame} unsupported", 2)
+        else:
+            self.stats.ignored += 1
+
     def _on_timesync(self, link: _Link, msg) -> None:
         """MAVLink time synchronisation: answer a request (tc1 = 0) with our boot time."""
         if msg.tc1 == 0:
@@ -489,6 +505,7 @@ class MavlinkFace:
         "MISSION_CLEAR_ALL": lambda self, link, msg: self.missions.on_clear_all(link, msg),
         "MISSION_SET_CURRENT": lambda self, link, msg: self.missions.on_set_current(link, msg),
         "TIMESYNC": _on_timesync,
+        "LANDING_TARGET": _on_landing_target,
         "HEARTBEAT": _on_heartbeat,
     }
 

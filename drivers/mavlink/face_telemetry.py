@@ -41,7 +41,7 @@ _MISSION_MODE_ACTIVE, _MISSION_MODE_SUSPENDED = 1, 2
 _AUTO_FLAGS = (mavlink.MAV_MODE_FLAG_AUTO_ENABLED | mavlink.MAV_MODE_FLAG_GUIDED_ENABLED
                | mavlink.MAV_MODE_FLAG_STABILIZE_ENABLED)
 _AUTO_MODES = {FlightMode.HOLD, FlightMode.TAKEOFF, FlightMode.LAND, FlightMode.MISSION,
-               FlightMode.RETURN, FlightMode.OFFBOARD}
+               FlightMode.RETURN, FlightMode.OFFBOARD, FlightMode.PRECLAND}
 
 
 def base_mode(state: VehicleState | None) -> int:

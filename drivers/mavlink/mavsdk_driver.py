@@ -41,6 +41,7 @@ from drivers.base import (
     FlightMode,
     Health,
     LandedState,
+    LandingTarget,
     Setpoint,
     VehicleNotFound,
 )
@@ -87,6 +88,7 @@ class MavsdkDriver(MavlinkVehicle):
         self._last_sample_s = -math.inf
         self._status_text: tuple[float, str] = (-math.inf, "")
         self._ignored: set[tuple[int, int]] = set()
+        self._precland = False  # the vehicle's HEARTBEAT says AUTO.PRECLAND
         self._timesync_sent = TimesyncRequests()
         self._sender = ThreadPoolExecutor(max_workers=1, thread_name_prefix="mavsdk-send")
 
@@ -159,6 +161,21 @@ class MavsdkDriver(MavlinkVehicle):
     async def hold(self) -> None:
         await self._act("hold", self._require_action().hold())
 
+    async def precision_land(self) -> None:
+        """AUTO.PRECLAND (MAVSDK's action has no call for it: DO_SET_MODE)."""
+        main, sub = px4.PX4_MODES[FlightMode.PRECLAND]
+        base = px4.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (px4.MAV_MODE_FLAG_SAFETY_ARMED
+                                                        if self._armed else 0)
+        await self._command("precision land", 176, base, main, sub)
+
+    async def send_landing_target(self, target: LandingTarget) -> None:
+        x, y, z = (float(v) for v in target.position_ned_m)
+        fields = {"time_usec": int(self._clock.now() * 1e6), "target_num": target.target_num,
+                  "frame": px4.MAV_FRAME_LOCAL_NED, "angle_x": 0.0, "angle_y": 0.0,
+                  "distance": 0.0, "size_x": 0.0, "size_y": 0.0, "x": x, "y": y, "z": z,
+                  "q": [1.0, 0.0, 0.0, 0.0], "type": 0, "position_valid": 1}
+        await self._send_message("LANDING_TARGET", fields)
+
     async def start_offboard(self) -> None:
         main, sub = px4.PX4_MODES[FlightMode.OFFBOARD]
         base = px4.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (px4.MAV_MODE_FLAG_SAFETY_ARMED
@@ -169,8 +186,6 @@ class MavsdkDriver(MavlinkVehicle):
         await self.hold()
 
     async def send_setpoint(self, setpoint: Setpoint) -> None:
-        from mavsdk.asyncio.plugins.mavlink_direct import MavlinkMessage
-
         self._check_alive()
         system, component = self._target
         frame, mask, pos, vel, yaw, rate = px4.setpoint_to_mavlink(setpoint)
@@ -179,9 +194,16 @@ class MavsdkDriver(MavlinkVehicle):
                   "coordinate_frame": frame, "type_mask": mask, "x": pos[0], "y": pos[1],
                   "z": pos[2], "vx": vel[0], "vy": vel[1], "vz": vel[2], "afx": 0.0,
                   "afy": 0.0, "afz": 0.0, "yaw": yaw, "yaw_rate": rate}
-        message = MavlinkMessage(message_name="SET_POSITION_TARGET_LOCAL_NED",
-                                 target_system_id=system, target_component_id=component,
-                                 fields_json=json.dumps(fields))
+        await self._send_message("SET_POSITION_TARGET_LOCAL_NED", fields)
+
+    async def _send_message(self, name: str, fields: dict) -> None:
+        """One message through MAVSDK's mavlink_direct, in order on the sender thread."""
+        from mavsdk.asyncio.plugins.mavlink_direct import MavlinkMessage
+
+        self._check_alive()
+        system, component = self._target
+        message = MavlinkMessage(message_name=name, target_system_id=system,
+                                 target_component_id=component, fields_json=json.dumps(fields))
         cancelled = threading.Event()
         plugin = self._direct._plugin
 
@@ -252,6 +274,11 @@ class MavsdkDriver(MavlinkVehicle):
             self._q = np.array([msg.q1, msg.q2, msg.q3, msg.q4])
             self._rates = np.array([msg.rollspeed, msg.pitchspeed, msg.yawspeed])
             self._attitude_vehicle_s = msg.time_boot_ms / 1000.0
+        elif kind == "HEARTBEAT" and src == self._target:
+            # MAVSDK's flight modes have no precision land: read it off the custom mode
+            self._precland = px4.px4_flight_mode(msg.custom_mode) is FlightMode.PRECLAND
+            if self._precland:
+                self._mode = FlightMode.PRECLAND
         elif kind == "TIMESYNC" and msg.tc1 != 0:
             sent = self._timesync_sent.answer(msg.ts1)
             if sent is not None:
@@ -349,7 +376,8 @@ class MavsdkDriver(MavlinkVehicle):
 
     async def _flight_mode(self) -> None:
         async for mode in self._telemetry_plugin.subscribe_flight_mode():
-            self._mode = _MODES.get(mode.name, FlightMode.UNKNOWN)
+            self._mode = FlightMode.PRECLAND if self._precland else \
+                _MODES.get(mode.name, FlightMode.UNKNOWN)
 
     async def _landed_state(self) -> None:
         async for landed in self._telemetry_plugin.subscribe_landed_state():

@@ -53,6 +53,7 @@ PX4_MODES: dict[FlightMode, tuple[int, int]] = {
     FlightMode.MISSION: (4, 4),
     FlightMode.RETURN: (4, 5),
     FlightMode.LAND: (4, 6),
+    FlightMode.PRECLAND: (4, 9),
     FlightMode.OFFBOARD: (6, 0),
 }
 _MODES_BY_PAIR = {pair: mode for mode, pair in PX4_MODES.items()}

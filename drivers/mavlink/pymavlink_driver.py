@@ -40,6 +40,7 @@ from drivers.base import (
     ConnectionLost,
     FlightMode,
     Health,
+    LandingTarget,
     Setpoint,
     VehicleNotFound,
 )
@@ -163,6 +164,19 @@ class PymavlinkDriver(MavlinkVehicle):
 
     async def hold(self) -> None:
         await self._set_mode(FlightMode.HOLD)
+
+    async def precision_land(self) -> None:
+        if self.is_ardupilot:  # ArduPilot: LAND with PLND_ENABLED lands on the target
+            await self._set_mode(FlightMode.LAND)
+            return
+        await self._set_mode(FlightMode.PRECLAND)
+
+    async def send_landing_target(self, target: LandingTarget) -> None:
+        self._check_alive()
+        self._send(self._link.mav.landing_target_encode(
+            int(self._clock.now() * 1e6), target.target_num, px4.MAV_FRAME_LOCAL_NED,
+            0.0, 0.0, 0.0, 0.0, 0.0, *(float(v) for v in target.position_ned_m),
+            [1.0, 0.0, 0.0, 0.0], 0, 1))
 
     async def start_offboard(self) -> None:
         await self._set_mode(FlightMode.OFFBOARD)

@@ -37,6 +37,7 @@ from drivers.base import (
     ConnectionLost,
     FlightMode,
     Frame,
+    LandingTarget,
     Setpoint,
     Vehicle,
     VehicleError,
@@ -145,6 +146,12 @@ class SimDriver(Vehicle):
 
     async def hold(self) -> None:
         await self._command("hold")
+
+    async def precision_land(self) -> None:
+        await self._command("precision_land")
+
+    async def send_landing_target(self, target: LandingTarget) -> None:
+        await self._command("landing_target", target.position_ned_m, target.time_s)
 
     async def start_offboard(self) -> None:
         await self._command("start_offboard")

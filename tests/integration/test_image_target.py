@@ -71,3 +71,21 @@ def test_nothing_is_found_where_the_image_is_not(scene):
     sim.set_vehicle_pose(np.array([WHERE[0] + 6.0, WHERE[1], -2.0]), quat_from_euler(0, 0, 0))
     frame = sim.capture("down")
     assert detector.detect(frame.image, sim.camera_infos()["down"], frame.time_s) is None
+
+
+def test_tracked_between_full_detections_against_truth(scene):
+    sim, _, yaw_deg = scene
+    detector = ImageTargetDetector(default_target_image(),
+                                   ImageTargetSettings(size_m=SIZE_M, track_frames=3))
+    tracked = []
+    for k in range(8):  # drifting 1.5 cm and turning 1° a frame
+        sim.set_vehicle_pose(np.array([WHERE[0] + 0.015 * k, WHERE[1] - 0.01 * k, -2.0]),
+                             quat_from_euler(0.02, -0.03, math.radians(40.0 + k)))
+        frame = sim.capture("down")
+        camera, position, _ = _truth_in_camera(sim, yaw_deg)
+        found = detector.detect(frame.image, camera, frame.time_s)
+        assert found is not None
+        assert np.linalg.norm(found.position_cam_m - position) <= 0.01
+        tracked.append(found.tracked)
+    # a full detection, three tracked frames, a full one, three tracked, …
+    assert tracked == [False, True, True, True, False, True, True, True]

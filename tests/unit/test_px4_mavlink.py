@@ -21,7 +21,10 @@ def test_px4_custom_modes_round_trip(mode, value):
 
 def test_unknown_custom_mode_is_unknown():
     assert px4.px4_flight_mode(0x09090000) is FlightMode.UNKNOWN
-    assert px4.px4_mode_from_pair(4, 9) is None
+    assert px4.px4_mode_from_pair(4, 7) is None  # follow target: not modelled
+    # precision land is (AUTO, PRECLAND)
+    assert px4.px4_mode_from_pair(4, 9) is FlightMode.PRECLAND
+    assert px4.px4_flight_mode(px4.px4_custom_mode(FlightMode.PRECLAND)) is FlightMode.PRECLAND
 
 
 def test_mavsdk_velocity_yaw_mask_reads_as_velocity_with_yaw():

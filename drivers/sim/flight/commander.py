@@ -176,7 +176,8 @@ class Commander:
             return
         self.armed = False
         self._failsafes.clear()
-        if self.user_mode in (FlightMode.TAKEOFF, FlightMode.LAND, FlightMode.RETURN):
+        if self.user_mode in (FlightMode.TAKEOFF, FlightMode.LAND, FlightMode.RETURN,
+                              FlightMode.PRECLAND):
             self.user_mode = FlightMode.HOLD  # done: the next flight starts from HOLD
         self._event(why)
         self.on_disarm()

@@ -240,6 +240,17 @@ class FlightStack:
     def hold(self) -> None:
         self._user_mode(FlightMode.HOLD)
 
+    def precision_land(self) -> None:
+        """AUTO.PRECLAND: land on the reported landing target (:mod:`precland`)."""
+        self._require_estimate()
+        if not self.armed or self.landed:
+            raise CommandRejected("precision landing needs the vehicle in the air")
+        self._user_mode(FlightMode.PRECLAND)
+
+    def landing_target(self, position_ned_m: Sequence[float], time_s: float) -> None:
+        """LANDING_TARGET (MAV_FRAME_LOCAL_NED) for precision landing."""
+        self.navigator.precland.landing_target(time_s, position_ned_m)
+
     def start_offboard(self) -> None:
         if self.mode is not FlightMode.OFFBOARD:
             self._offboard_yaw = yaw_from_quat(self._require_estimate().q_ned_frd)
@@ -258,7 +269,8 @@ class FlightStack:
         """DO_SET_MODE to one of the modes the simulator flies."""
         actions = {FlightMode.HOLD: self.hold, FlightMode.LAND: self.land,
                    FlightMode.OFFBOARD: self.start_offboard, FlightMode.MISSION: self.start_mission,
-                   FlightMode.RETURN: self.return_to_launch, FlightMode.TAKEOFF: self.takeoff}
+                   FlightMode.RETURN: self.return_to_launch, FlightMode.TAKEOFF: self.takeoff,
+                   FlightMode.PRECLAND: self.precision_land}
         action = actions.get(mode)
         if action is None:
             raise CommandRejected(f"{mode.value} mode is not available (no manual control "
@@ -336,7 +348,7 @@ class FlightStack:
             if not self._setpoint_flyable():
                 return "offboard setpoint needs a valid local position"
         if mode in (FlightMode.HOLD, FlightMode.MISSION, FlightMode.RETURN,
-                    FlightMode.TAKEOFF) and not h.local_position_ok:
+                    FlightMode.TAKEOFF, FlightMode.PRECLAND) and not h.local_position_ok:
             return "no valid local position"
         if mode is FlightMode.MISSION:
             problem = self.navigator.mission_problem(landed=self.landed or arming)

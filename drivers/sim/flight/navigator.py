@@ -58,6 +58,7 @@ from drivers.mission import (
 )
 from drivers.sim.flight.params import Parameters
 from drivers.sim.flight.position_control import ControlSetpoint
+from drivers.sim.flight.precland import PrecLand
 from drivers.sim.flight.trajectory import LineTracker, Profile1D
 
 NAN = float("nan")
@@ -148,6 +149,8 @@ class Navigator:
         self.takeoff_altitude_override_m: float | None = None
         self._land_xy = np.zeros(2)
         self._yaw_sp = 0.0
+        #: AUTO.PRECLAND, on the landing target a companion reports
+        self.precland = PrecLand(params, event)
 
         # mission
         self._lists: dict[int, list[MissionItem]] = {t: [] for t in MissionType}
@@ -285,6 +288,9 @@ class Navigator:
         elif mode is FlightMode.LAND:
             self._land_xy = self._stopping_point(est, landed)[:2]
             self._hold_yaw = est.yaw_rad
+        elif mode is FlightMode.PRECLAND:
+            self._hold_yaw = est.yaw_rad
+            self.precland.activate(self._now, self._stopping_point(est, landed))
         elif mode is FlightMode.MISSION:
             if self._state is MissionState.COMPLETE or self._restart:  # from the beginning
                 self.current = 0
@@ -331,6 +337,8 @@ class Navigator:
             return self._takeoff_tick(dt, est, FlightMode.TAKEOFF)
         if mode is FlightMode.LAND:
             return self._land_tick(est, height_agl_m, self._land_xy)
+        if mode is FlightMode.PRECLAND:
+            return self._precland_tick(dt, est, height_agl_m, landed)
         if mode is FlightMode.MISSION:
             out = self._mission_tick(dt, est, height_agl_m, landed)
             self._publish()
@@ -433,6 +441,17 @@ class Navigator:
                                            z_vel_max_down_m_s=max(speed,
                                                                   p["MPC_Z_VEL_MAX_DN"])),
                            landing=True)
+
+    def _precland_tick(self, dt: float, est: Estimate, height_agl_m: float,
+                       landed: bool) -> NavSetpoint:
+        origin_down = self.home[2] if self.home is not None else 0.0
+        out = self.precland.tick(self._now, est.position_ned_m, est.velocity_ned_m_s, landed,
+                                 origin_down)
+        if out.land:
+            return self._land_tick(est, height_agl_m, out.position_ned_m[:2])
+        yaw = self._slew_yaw(self._hold_yaw, dt)
+        return NavSetpoint(ControlSetpoint(out.position_ned_m.tolist(), [NAN, NAN, NAN], yaw,
+                                           xy_vel_max_m_s=self.params["MPC_XY_CRUISE"]))
 
     def _stopping_point(self, est: Estimate, landed: bool) -> np.ndarray:
         """Where the vehicle comes to rest braking at MPC_ACC_HOR (PX4's loiter brake)."""

@@ -122,6 +122,13 @@ PX4_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("MPC_YAW_MODE", I, 0, 0, 4, "", "auto-mode heading (0: towards waypoint)"),
     ParamSpec("MPC_YAWRAUTO_MAX", F, 45.0, 5.0, 360.0, "deg/s", "auto-mode max yaw rate"),
     ParamSpec("MPC_JERK_AUTO", F, 4.0, 1.0, 80.0, "m/s³", "auto-mode jerk limit"),
+    # --- precision landing (navigator/precland_params.c)
+    ParamSpec("PLD_BTOUT", F, 5.0, 0.0, 50.0, "s", "landing target timeout"),
+    ParamSpec("PLD_HACC_RAD", F, 0.2, 0.0, INF, "m", "horizontal acceptance radius"),
+    ParamSpec("PLD_FAPPR_ALT", F, 0.1, 0.0, INF, "m", "final approach altitude"),
+    ParamSpec("PLD_SRCH_ALT", F, 10.0, 0.0, INF, "m", "search altitude"),
+    ParamSpec("PLD_SRCH_TOUT", F, 10.0, 0.0, INF, "s", "search timeout"),
+    ParamSpec("PLD_MAX_SRCH", I, 3, 0, 100, "", "maximum number of searches"),
     # --- commander
     ParamSpec("COM_OF_LOSS_T", F, 1.0, 0.0, 60.0, "s", "offboard setpoint timeout"),
     ParamSpec("COM_OBL_RC_ACT", I, 0, 0, 7, "", "offboard loss action"),

@@ -1,0 +1,398 @@
+"""Precision landing on a pad seen by the down camera (seed 001), flown in offboard.
+
+Phases (each shown as the step's phase):
+
+``searching``
+    Not seen yet: climb (or stay) at ``search_altitude_m`` above the take-off point, then fly a
+    square spiral around where the search began, out to ``search_radius_m``, legs a camera
+    footprint apart; then wait over the start. Not found within ``search_timeout_s``: the step
+    fails (the mission's fallback lands where it is).
+``aligning``
+    Over the pad's estimate at the current height until within ``acceptance_radius_m`` for
+    ``settle_s`` (PX4's ``PLD_HACC_RAD``).
+``descending``
+    Down over the pad at ``descent_speed_m_s``, slowing to ``final_speed_m_s`` below
+    ``slow_height_m``; the descent pauses while the vehicle is outside a cone over the pad
+    (``acceptance_radius_m`` plus ``cone_slope`` × height) and goes on when it is back inside.
+``lost``
+    No fresh estimate above the commit height: hold for ``lost_timeout_s`` (it may come back);
+    then ``reacquiring``: climb ``reacquire_climb_m`` (up to the search altitude) over where the
+    pad was and look again; after ``max_retries`` such climbs the step fails (PX4: ``PLD_BTOUT``,
+    ``PLD_MAX_SRCH``).
+``committed``
+    Below ``commit_height_m`` the pad may overflow the frame: the descent goes on at
+    ``final_speed_m_s`` over the newest estimate (updated while detections still come), without
+    aborting on loss.
+``touching down``
+    At ``touchdown_height_m`` (or ground contact: the descent stalls), the vehicle's own LAND
+    mode finishes: it holds the horizontal position, detects the touchdown and disarms.
+``precision landing``
+    ``method: px4_precland``: once aligned, the descent is PX4's own precision landing
+    (AUTO.PRECLAND): the pad's estimate streams to it as LANDING_TARGET (local NED) while the
+    pad is seen; PX4 approaches, descends, searches when it loses the target and falls back to
+    a normal landing by its PLD_* parameters. The step ends when the vehicle has landed and
+    disarmed, and fails if the vehicle leaves that mode in the air.
+
+Over the pad, the position setpoint is the pad's estimate plus a trim that integrates the
+remaining horizontal offset between the vehicle's estimated position and the pad's
+(``trim_gain_per_s``, at most ``max_trim_m``): the vehicle's velocity estimate is never quite
+consistent with its position estimate, so a position controller settles a few centimetres off
+its setpoint; integral action on the offset the camera sees removes that.
+
+Height above the pad: the rangefinder's reading projected on the vertical while it reads, else
+the height over the pad's estimate.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Annotated, Literal
+
+import numpy as np
+from pydantic import Field
+
+from autopilot.behaviors.base import (
+    Behavior,
+    BehaviorInputs,
+    BehaviorOutput,
+    Params,
+    RequestKind,
+    Status,
+    VehicleRequest,
+)
+from autopilot.config import ColorName
+from drivers.base import FlightMode, Setpoint, VehicleState
+from drivers.geometry import quat_to_matrix
+
+Positive = Annotated[float, Field(gt=0)]
+
+
+class LandPadParams(Params):
+    pad: Literal["circle", "markers"] = "circle"  # a coloured disc, or the nested marker pad
+    color: ColorName = "red"  # circle: its colour (seed 001: red = land here)
+    size_m: Annotated[float, Field(gt=0.1, le=10)] = 0.8  # disc diameter / marker pad side
+    ids: tuple[int, int, int, int, int] = (0, 1, 2, 3, 4)  # markers: centre first
+    #: offboard: this step flies the descent; px4_precland: PX4's precision landing does
+    method: Literal["offboard", "px4_precland"] = "offboard"
+    search_altitude_m: Annotated[float, Field(gt=0.5, le=100)] = 6.0  # PLD_SRCH_ALT
+    search_timeout_s: Positive = 40.0  # PLD_SRCH_TOUT
+    search_radius_m: Annotated[float, Field(ge=0, le=100)] = 4.0  # 0: climb and look only
+    search_speed_m_s: Annotated[float, Field(gt=0, le=10)] = 2.0
+    acceptance_radius_m: Annotated[float, Field(gt=0, le=5)] = 0.1  # PLD_HACC_RAD
+    settle_s: Annotated[float, Field(ge=0, le=10)] = 1.0
+    cone_slope: Annotated[float, Field(ge=0, le=2)] = 0.15
+    descent_speed_m_s: Annotated[float, Field(gt=0, le=3)] = 1.0
+    final_speed_m_s: Annotated[float, Field(gt=0, le=1.5)] = 0.35
+    slow_height_m: Annotated[float, Field(gt=0, le=20)] = 1.5
+    commit_height_m: Annotated[float, Field(gt=0, le=5)] = 0.5  # blind below this
+    touchdown_height_m: Annotated[float, Field(ge=0, le=2)] = 0.15  # LAND takes over
+    lost_timeout_s: Annotated[float, Field(gt=0, le=60)] = 2.0  # PLD_BTOUT
+    reacquire_climb_m: Annotated[float, Field(gt=0, le=20)] = 1.5
+    max_retries: Annotated[int, Field(ge=0, le=20)] = 3  # PLD_MAX_SRCH
+    yaw_deg: float | None = None  # markers: heading from the pad's top; None: keep the heading
+    trim_gain_per_s: Annotated[float, Field(ge=0, le=5)] = 0.6  # integral action over the pad
+    max_trim_m: Annotated[float, Field(ge=0, le=2)] = 0.3
+    timeout_s: Positive = 180.0
+
+
+@dataclass(frozen=True, slots=True)
+class LandPadSettings:
+    lost_after_s: float  # no fresh estimate this long: lost
+    #: the down camera's footprint on the ground (shorter side) per metre of height
+    footprint_per_m: float = 1.2
+
+
+def height_above(state: VehicleState, pad_down_m: float | None) -> float:
+    """Height above the ground under the vehicle: the rangefinder's reading on the vertical
+    while it reads; else above the pad's estimate (else the take-off point)."""
+    r = state.distance_to_ground_m
+    if math.isfinite(r):
+        tilt_cos = float(quat_to_matrix(state.attitude_q)[2, 2])
+        if tilt_cos > 0.5:
+            return r * tilt_cos
+    ground = pad_down_m if pad_down_m is not None else 0.0
+    return ground - float(state.position_ned_m[2])
+
+
+def square_spiral(centre_ne, spacing_m: float, radius_m: float) -> list[np.ndarray]:
+    """Corners of a square spiral out from ``centre_ne``, legs ``spacing_m`` apart, out to
+    ``radius_m`` (ending back at the centre)."""
+    centre = np.asarray(centre_ne, dtype=float)
+    points = [centre]
+    if radius_m <= 0.0 or spacing_m <= 0.0:
+        return points
+    x = y = 0.0
+    leg, k = spacing_m, 0
+    dirs = ((1, 0), (0, 1), (-1, 0), (0, -1))
+    while leg <= 2.0 * radius_m + 1e-9:
+        for _ in range(2):
+            dx, dy = dirs[k % 4]
+            x, y = x + dx * leg, y + dy * leg
+            k += 1
+            points.append(centre + np.array([x, y]))
+        leg += spacing_m
+    points.append(centre)
+    return points
+
+
+class LandPad(Behavior):
+    name = "land_pad"
+
+    def __init__(self, params: LandPadParams, settings: LandPadSettings) -> None:
+        self.params = params
+        self.settings = settings
+        self.phase = "searching"
+        self.retries = 0
+        self._start = 0.0
+        self._phase_since = 0.0
+        self._search_start = 0.0
+        self._waypoints: list[np.ndarray] = []
+        self._hold = np.zeros(3)
+        self._yaw = 0.0
+        self._z_ref = 0.0
+        self._last_tick = 0.0
+        self._pad: np.ndarray | None = None  # the pad's newest estimate (NED)
+        self._pad_heading: float | None = None
+        self._seen_at: float | None = None
+        self._aligned_since: float | None = None
+        self._stalled_since: float | None = None
+        self._trim = np.zeros(2)
+
+    # -- helpers -------------------------------------------------------------------------
+
+    def _set_phase(self, phase: str, now: float) -> None:
+        if phase != self.phase:
+            self.phase, self._phase_since = phase, now
+
+    def _setpoint(self, position, now: float, vz: float = math.nan) -> Setpoint:
+        vel = (math.nan, math.nan, vz) if math.isfinite(vz) else (math.nan,) * 3
+        return Setpoint(position_ned_m=position, velocity_m_s=vel, yaw_rad=self._yaw,
+                        time_s=now)
+
+    def _out(self, setpoint: Setpoint | None, status: Status = Status.RUNNING,
+             requests=(), reason: str = "") -> BehaviorOutput:
+        return BehaviorOutput(status, setpoint=setpoint, requests=requests, phase=self.phase,
+                              reason=reason)
+
+    def _fresh(self, inputs: BehaviorInputs) -> bool:
+        t = inputs.target
+        return t is not None and not t.stale and t.confirmed \
+            and t.age_s <= self.settings.lost_after_s
+
+    def _start_search(self, inputs: BehaviorInputs, centre_ne) -> None:
+        p = self.params
+        self._search_start = inputs.now_s
+        spacing = 0.8 * self.settings.footprint_per_m * p.search_altitude_m
+        self._waypoints = square_spiral(centre_ne, min(spacing, max(p.search_radius_m, 1e-3)),
+                                        p.search_radius_m)
+        self._set_phase("searching", inputs.now_s)
+
+    # -- lifecycle -----------------------------------------------------------------------
+
+    def activate(self, inputs: BehaviorInputs) -> BehaviorOutput:
+        s = inputs.state
+        self._start = self._last_tick = inputs.now_s
+        self._hold = np.array(s.position_ned_m, dtype=float)
+        self._yaw = s.yaw_rad
+        self._z_ref = float(s.position_ned_m[2])
+        self._start_search(inputs, s.position_ned_m[:2])
+        return BehaviorOutput(Status.RUNNING, setpoint=self._setpoint(self._hold, inputs.now_s),
+                              requests=(VehicleRequest(RequestKind.START_OFFBOARD),),
+                              phase=self.phase)
+
+    def update(self, inputs: BehaviorInputs) -> BehaviorOutput:
+        p, s, now = self.params, inputs.state, inputs.now_s
+        dt = min(max(now - self._last_tick, 0.0), 0.5)
+        self._last_tick = now
+        if self.phase == "touching down":
+            if not s.armed and not s.in_air:
+                return self._out(None, Status.SUCCEEDED)
+            if now - self._phase_since > 30.0:
+                return self._out(None, Status.FAILED, reason="no touchdown after LAND")
+            return self._out(None)
+        fresh = self._fresh(inputs)
+        if fresh:
+            t = inputs.target
+            self._pad = np.array(t.position_ned_m, dtype=float)
+            self._pad_heading = t.heading_rad
+            self._seen_at = now
+            if p.yaw_deg is not None and t.heading_rad is not None:
+                self._yaw = math.remainder(t.heading_rad + math.radians(p.yaw_deg),
+                                           2.0 * math.pi)
+        if self.phase == "precision landing":
+            return self._precision_landing(inputs, fresh)
+        if now - self._start > p.timeout_s:
+            return self._out(self._setpoint(self._hold_here(s), now), Status.FAILED,
+                             reason=f"not landed within {p.timeout_s:g} s")
+        handler = {"searching": self._searching, "aligning": self._aligning,
+                   "descending": self._descending, "lost": self._lost,
+                   "reacquiring": self._reacquiring, "committed": self._committed}[self.phase]
+        return handler(inputs, fresh, dt)
+
+    def _hold_here(self, s: VehicleState) -> np.ndarray:
+        return np.array(s.position_ned_m, dtype=float)
+
+    # -- phases --------------------------------------------------------------------------
+
+    def _searching(self, inputs: BehaviorInputs, fresh: bool, dt: float) -> BehaviorOutput:
+        p, s, now = self.params, inputs.state, inputs.now_s
+        if fresh:
+            self._z_ref = float(s.position_ned_m[2])
+            self._aligned_since = None
+            self._set_phase("aligning", now)
+            return self._aligning(inputs, fresh, dt)
+        if now - self._search_start > p.search_timeout_s:
+            return self._out(self._setpoint(self._hold_here(s), now), Status.FAILED,
+                             reason=f"pad not found in {p.search_timeout_s:g} s")
+        z_search = -p.search_altitude_m
+        if abs(float(s.position_ned_m[2]) - z_search) > 0.3 and len(self._waypoints) > 0 \
+                and self._waypoints[0] is not None:
+            # climb (or descend) to the search altitude where the search began
+            here = self._waypoints[0]
+            return self._out(self._setpoint((here[0], here[1], z_search), now))
+        while len(self._waypoints) > 1 and np.linalg.norm(
+                s.position_ned_m[:2] - self._waypoints[0]) < 0.3:
+            self._waypoints.pop(0)
+        goal = self._waypoints[0]
+        # towards the next corner at the search speed (a moving position setpoint)
+        here = np.asarray(s.position_ned_m[:2], dtype=float)
+        step = goal - here
+        dist = float(np.linalg.norm(step))
+        lead = min(dist, p.search_speed_m_s * 1.0)
+        target = here + (step / dist * lead if dist > 1e-6 else 0.0)
+        return self._out(self._setpoint((target[0], target[1], z_search), now))
+
+    def _aligning(self, inputs: BehaviorInputs, fresh: bool, dt: float) -> BehaviorOutput:
+        p, s, now = self.params, inputs.state, inputs.now_s
+        if not fresh:
+            return self._go_lost(inputs)
+        error = float(np.hypot(*(s.position_ned_m[:2] - self._pad[:2])))
+        speed = float(np.hypot(*s.velocity_ned_m_s[:2]))
+        if error <= p.acceptance_radius_m and speed < 0.3:
+            if self._aligned_since is None:
+                self._aligned_since = now
+            if now - self._aligned_since >= p.settle_s:
+                self._z_ref = float(s.position_ned_m[2])
+                if p.method == "px4_precland":
+                    self._set_phase("precision landing", now)
+                    return self._out(None, requests=(self._landing_target(inputs),
+                                                     VehicleRequest(RequestKind.PRECISION_LAND)))
+                self._set_phase("descending", now)
+        else:
+            self._aligned_since = None
+        xy = self._over_pad(s, dt)
+        return self._out(self._setpoint((xy[0], xy[1], self._z_ref), now))
+
+    def _over_pad(self, s: VehicleState, dt: float) -> np.ndarray:
+        """The horizontal setpoint over the pad: its estimate plus the integrated offset."""
+        p = self.params
+        offset = self._pad[:2] - np.asarray(s.position_ned_m[:2], dtype=float)
+        if float(np.linalg.norm(offset)) < 2.0 * p.max_trim_m:
+            self._trim = self._trim + p.trim_gain_per_s * offset * dt
+            norm = float(np.linalg.norm(self._trim))
+            if norm > p.max_trim_m:
+                self._trim *= p.max_trim_m / norm
+        return self._pad[:2] + self._trim
+
+    def _descent_speed(self, height: float) -> float:
+        p = self.params
+        return p.descent_speed_m_s if height > p.slow_height_m else p.final_speed_m_s
+
+    def _lower(self, s: VehicleState, speed: float, dt: float) -> float:
+        """Move the height reference down by ``speed`` × dt, never far below the vehicle."""
+        self._z_ref = min(self._z_ref + speed * dt, float(s.position_ned_m[2]) + 0.6)
+        return speed
+
+    def _descending(self, inputs: BehaviorInputs, fresh: bool, dt: float) -> BehaviorOutput:
+        p, s, now = self.params, inputs.state, inputs.now_s
+        if not fresh:
+            return self._go_lost(inputs)
+        height = height_above(s, self._pad[2])
+        if height <= p.commit_height_m:
+            self._set_phase("committed", now)
+            return self._committed(inputs, fresh, dt)
+        error = float(np.hypot(*(s.position_ned_m[:2] - self._pad[:2])))
+        vz = math.nan
+        if error <= p.acceptance_radius_m + p.cone_slope * height:
+            vz = self._lower(s, self._descent_speed(height), dt)
+        xy = self._over_pad(s, dt)
+        return self._out(self._setpoint((xy[0], xy[1], self._z_ref), now, vz))
+
+    def _go_lost(self, inputs: BehaviorInputs) -> BehaviorOutput:
+        self._hold = self._hold_here(inputs.state)
+        self._set_phase("lost", inputs.now_s)
+        return self._out(self._setpoint(self._hold, inputs.now_s))
+
+    def _lost(self, inputs: BehaviorInputs, fresh: bool, dt: float) -> BehaviorOutput:
+        p, s, now = self.params, inputs.state, inputs.now_s
+        if fresh:
+            self._z_ref = float(s.position_ned_m[2])
+            self._aligned_since = None
+            self._set_phase("aligning", now)
+            return self._aligning(inputs, fresh, dt)
+        if now - self._phase_since < p.lost_timeout_s:
+            return self._out(self._setpoint(self._hold, now))
+        if self.retries >= p.max_retries:
+            return self._out(self._setpoint(self._hold, now), Status.FAILED,
+                             reason=f"pad lost, {self.retries} retries used")
+        self.retries += 1
+        where = self._pad[:2] if self._pad is not None else s.position_ned_m[:2]
+        z = float(s.position_ned_m[2])
+        # up by reacquire_climb_m, but not above the search altitude (unless already there)
+        up = max(z - p.reacquire_climb_m, min(z, -p.search_altitude_m))
+        self._hold = np.array([where[0], where[1], up])
+        self._set_phase("reacquiring", now)
+        return self._out(self._setpoint(self._hold, now))
+
+    def _reacquiring(self, inputs: BehaviorInputs, fresh: bool, dt: float) -> BehaviorOutput:
+        p, s, now = self.params, inputs.state, inputs.now_s
+        if fresh:
+            self._z_ref = float(s.position_ned_m[2])
+            self._aligned_since = None
+            self._set_phase("aligning", now)
+            return self._aligning(inputs, fresh, dt)
+        arrived = np.linalg.norm(s.position_ned_m - self._hold) < 0.3
+        waited = now - self._phase_since
+        if (arrived and waited > p.lost_timeout_s + 2.0) or waited > 15.0:
+            self._start_search(inputs, self._hold[:2])
+            return self._searching(inputs, fresh, dt)
+        return self._out(self._setpoint(self._hold, now))
+
+    def _landing_target(self, inputs: BehaviorInputs) -> VehicleRequest:
+        return VehicleRequest(RequestKind.LANDING_TARGET,
+                              position_ned_m=tuple(float(v) for v in self._pad),
+                              time_s=inputs.now_s)
+
+    def _precision_landing(self, inputs: BehaviorInputs, fresh: bool) -> BehaviorOutput:
+        """PX4 lands; the pad's estimate goes to it while the pad is seen."""
+        s, now = inputs.state, inputs.now_s
+        if not s.armed and not s.in_air:
+            return self._out(None, Status.SUCCEEDED)
+        if now - self._start > self.params.timeout_s:
+            return self._out(None, Status.FAILED,
+                             reason=f"not landed within {self.params.timeout_s:g} s")
+        grace_s = 1.5  # the mode change shows in telemetry a little later
+        if s.in_air and now - self._phase_since > grace_s and s.mode is not FlightMode.PRECLAND:
+            return self._out(None, Status.FAILED,
+                             reason=f"precision landing interrupted: the vehicle is in "
+                                    f"{s.mode.value}")
+        if fresh:
+            return self._out(None, requests=(self._landing_target(inputs),))
+        return self._out(None)
+
+    def _committed(self, inputs: BehaviorInputs, fresh: bool, dt: float) -> BehaviorOutput:
+        p, s, now = self.params, inputs.state, inputs.now_s
+        height = height_above(s, self._pad[2])
+        descending = float(s.velocity_ned_m_s[2])
+        if descending < 0.05 and now - self._phase_since > 1.0:
+            self._stalled_since = self._stalled_since or now
+        else:
+            self._stalled_since = None
+        stalled = self._stalled_since is not None and now - self._stalled_since > 1.0
+        if height <= p.touchdown_height_m or stalled:
+            self._set_phase("touching down", now)
+            return self._out(None, requests=(VehicleRequest(RequestKind.LAND),))
+        vz = self._lower(s, p.final_speed_m_s, dt)
+        xy = self._over_pad(s, dt)
+        return self._out(self._setpoint((xy[0], xy[1], self._z_ref), now, vz))

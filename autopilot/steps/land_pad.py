@@ -1,0 +1,104 @@
+"""The ``land_pad`` step kind: precision landing on a pad seen by the down camera (seed 001).
+
+Its behaviour is :class:`~autopilot.behaviors.land_pad.LandPad`, its pipeline the pad pipeline
+(:mod:`autopilot.perception.pad_pipeline`) on ``perception.pad.camera``. Its metrics
+(``metrics.landing``) score where the vehicle truly came to rest against the pad's true centre
+(simulator ground truth), how fast it touched down, how long it took and how many times it had
+to climb and look again; ``metrics.estimation`` scores the pad estimate it flew on.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+from autopilot.behaviors.land_pad import LandPad, LandPadParams, LandPadSettings
+from autopilot.flightlog import records as ch
+from autopilot.flightlog.metrics import FollowedTarget, estimation_metrics
+from autopilot.perception.pad_pipeline import pad_spec
+from autopilot.steps.follow_ball import camera_of
+from autopilot.steps.registry import StepContext, StepKind, register
+
+#: resting: within this of the height the vehicle finally rests at
+_REST_BAND_M = 0.015
+
+
+def _behavior(params: LandPadParams, ctx: StepContext) -> LandPad:
+    config = ctx.config
+    camera = camera_of(ctx, config.perception.pad.camera, "perception.pad.camera")
+    intr = camera.intrinsics
+    footprint = min(intr.width_px / intr.fx, intr.height_px / intr.fy)
+    return LandPad(params, LandPadSettings(config.control.follow.lost_after_s, footprint))
+
+
+def _spec(params: LandPadParams, config):
+    return (pad_spec(config, params.pad, params.size_m, color=params.color, ids=params.ids),)
+
+
+def landing_metrics(log: Mapping[str, Sequence[Mapping]], intervals: list[tuple[float, float]],
+                    step: Mapping) -> dict:
+    """``landing``: the true resting point's horizontal distance from the pad's true centre
+    (``error_m``), whether that is on the pad, the descent speed at touchdown, the time from the
+    step's start to touchdown, the climbs to look again (``retries``); detection figures.
+    ``estimation``: the pad estimate flown on, against truth."""
+    pipelines = step.get("pipelines") or []
+    if not pipelines or not intervals:
+        return {}
+    p = pipelines[0]
+    params = LandPadParams(**step["params"])
+    body = p["truth_body"]
+    start, end = intervals[0][0], intervals[-1][1]
+    truth = [s for s in log.get(ch.GROUND_TRUTH, [])
+             if body in s["bodies"] and start <= s["time_s"] <= end + 0.5]
+    if not truth:
+        return {}
+    frames = [f for f in log.get(ch.detection_topic(p["name"]), [])
+              if start <= f["time_s"] <= end]
+    found = [f["time_s"] for f in frames if f["detected"]]
+    times_ms = [f["processing_ms"] for f in frames if f.get("processing_ms") is not None]
+    phases = [r.get("phase") for r in log.get(ch.SETPOINTS, [])
+              if start <= r["time_s"] <= end and r.get("step") == step["name"]]
+    retries = sum(1 for a, b in itertools.pairwise(phases)
+                  if b == "reacquiring" and a != "reacquiring")
+    succeeded = any(e.get("kind") == "step_succeeded" and e.get("step_index") == step["index"]
+                    for e in log.get(ch.MISSION_EVENTS, []))
+    z = np.array([s["vehicle_position_ned_m"][2] for s in truth])
+    t = np.array([s["time_s"] for s in truth])
+    vz = np.array([s["vehicle_velocity_ned_m_s"][2] for s in truth])
+    rest_z = float(z[-1])
+    landing: dict = {
+        "landed": False, "error_m": None, "on_pad": False, "touchdown_speed_m_s": None,
+        "touchdown_horizontal_speed_m_s": None, "time_to_land_s": None, "retries": retries,
+        "found_after_s": (found[0] - start) if found else None,
+        "frames": len(frames), "detected_frames": len(found),
+        "time_per_frame_ms_p50": float(np.percentile(times_ms, 50)) if times_ms else None,
+        "time_per_frame_ms_p95": float(np.percentile(times_ms, 95)) if times_ms else None,
+    }
+    still = abs(float(vz[-1])) < 0.05 and float(np.hypot(
+        *truth[-1]["vehicle_velocity_ned_m_s"][:2])) < 0.05
+    on_ground = succeeded and still
+    if on_ground:
+        k = len(z) - 1
+        while k > 0 and z[k - 1] >= rest_z - _REST_BAND_M:
+            k -= 1
+        before = (t >= t[k] - 0.3) & (t <= t[k])
+        rest = np.asarray(truth[-1]["vehicle_position_ned_m"])
+        pad = np.asarray(truth[-1]["bodies"][body]["position_ned_m"])
+        error = float(np.hypot(*(rest[:2] - pad[:2])))
+        vh = [float(np.hypot(*s["vehicle_velocity_ned_m_s"][:2]))
+              for s, b in zip(truth, before, strict=True) if b]
+        landing.update({
+            "landed": True, "error_m": error, "on_pad": error <= params.size_m / 2.0,
+            "touchdown_speed_m_s": float(np.max(vz[before])) if before.any() else None,
+            "touchdown_horizontal_speed_m_s": max(vh) if vh else None,
+            "time_to_land_s": float(t[k] - start)})
+    target = FollowedTarget(p["name"], p["camera"], body, p["size_m"], 0.0)
+    return {"landing": landing, "estimation": estimation_metrics(log, intervals, target)}
+
+
+register(StepKind(
+    "land_pad", LandPadParams, _behavior, pipelines=_spec, metrics=landing_metrics,
+    report=("trajectory", "over_target", "detections", "estimate", "latency"),
+    description="search for a landing pad with the down camera, descend onto it, disarm"))
