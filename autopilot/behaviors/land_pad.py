@@ -238,10 +238,7 @@ class LandPad(Behavior):
     def _searching(self, inputs: BehaviorInputs, fresh: bool, dt: float) -> BehaviorOutput:
         p, s, now = self.params, inputs.state, inputs.now_s
         if fresh:
-            self._z_ref = float(s.position_ned_m[2])
-            self._aligned_since = None
-            self._set_phase("aligning", now)
-            return self._aligning(inputs, fresh, dt)
+            return self._start_aligning(inputs, dt)
         if now - self._search_start > p.search_timeout_s:
             return self._out(self._setpoint(self._hold_here(s), now), Status.FAILED,
                              reason=f"pad not found in {p.search_timeout_s:g} s")
@@ -262,6 +259,13 @@ class LandPad(Behavior):
         lead = min(dist, p.search_speed_m_s * 1.0)
         target = here + (step / dist * lead if dist > 1e-6 else 0.0)
         return self._out(self._setpoint((target[0], target[1], z_search), now))
+
+    def _start_aligning(self, inputs: BehaviorInputs, dt: float) -> BehaviorOutput:
+        """The pad is seen (first, or again): over it at this height."""
+        self._z_ref = float(inputs.state.position_ned_m[2])
+        self._aligned_since = None
+        self._set_phase("aligning", inputs.now_s)
+        return self._aligning(inputs, True, dt)
 
     def _aligning(self, inputs: BehaviorInputs, fresh: bool, dt: float) -> BehaviorOutput:
         p, s, now = self.params, inputs.state, inputs.now_s
@@ -327,10 +331,7 @@ class LandPad(Behavior):
     def _lost(self, inputs: BehaviorInputs, fresh: bool, dt: float) -> BehaviorOutput:
         p, s, now = self.params, inputs.state, inputs.now_s
         if fresh:
-            self._z_ref = float(s.position_ned_m[2])
-            self._aligned_since = None
-            self._set_phase("aligning", now)
-            return self._aligning(inputs, fresh, dt)
+            return self._start_aligning(inputs, dt)
         if now - self._phase_since < p.lost_timeout_s:
             return self._out(self._setpoint(self._hold, now))
         if self.retries >= p.max_retries:
@@ -348,10 +349,7 @@ class LandPad(Behavior):
     def _reacquiring(self, inputs: BehaviorInputs, fresh: bool, dt: float) -> BehaviorOutput:
         p, s, now = self.params, inputs.state, inputs.now_s
         if fresh:
-            self._z_ref = float(s.position_ned_m[2])
-            self._aligned_since = None
-            self._set_phase("aligning", now)
-            return self._aligning(inputs, fresh, dt)
+            return self._start_aligning(inputs, dt)
         arrived = np.linalg.norm(s.position_ned_m - self._hold) < 0.3
         waited = now - self._phase_since
         if (arrived and waited > p.lost_timeout_s + 2.0) or waited > 15.0:

@@ -111,6 +111,28 @@ SCHEMAS: dict[str, dict] = {
 }
 
 
+#: Nullable JSON Schema types for detection records (a frame without a detection has nulls).
+NUM, BOOL = {"type": ["number", "null"]}, {"type": ["boolean", "null"]}
+INT, STR = {"type": ["integer", "null"]}, {"type": ["string", "null"]}
+
+
+def nullable_array(n: int | None = None, items: dict = NUM) -> dict:
+    schema: dict = {"type": ["array", "null"], "items": items}
+    if n is not None:
+        schema.update(minItems=n, maxItems=n)
+    return schema
+
+
+def detection_schema(title: str, **properties: dict) -> dict:
+    """A pipeline's detection record schema: the fields every pipeline writes (the frame, the
+    target's centre, radius and range in it, the hint, the timing) and ``properties``."""
+    return {"title": title, "type": "object", "properties": {
+        "time_s": NUM, "seq": INT, "camera": STR, "detected": BOOL, "u_px": NUM, "v_px": NUM,
+        "radius_px": NUM, "range_m": NUM, "position_cam_m": nullable_array(3), "score": NUM,
+        "hint_u_px": NUM, "hint_v_px": NUM, "hint_radius_px": NUM, "processing_ms": NUM,
+        "received_s": NUM, "detected_s": NUM, **properties}}
+
+
 def register_schema(topic: str, schema: dict) -> None:
     """A channel's JSON Schema (pipelines register theirs as they are defined)."""
     SCHEMAS[topic] = schema

@@ -151,21 +151,8 @@ def detection_record(seq: int, time_s: float, camera: str,
             "tracked": det.tracked}
 
 
-_NUM, _BOOL, _INT, _STR = ({"type": ["number", "null"]}, {"type": ["boolean", "null"]},
-                           {"type": ["integer", "null"]}, {"type": ["string", "null"]})
-
-
-def _arr(n: int) -> dict:
-    return {"type": ["array", "null"], "items": _NUM, "minItems": n, "maxItems": n}
-
-
 register(KIND, ImagePipeline)
-ch.register_schema(ch.detection_topic(KIND), {
-    "title": "ImageTargetDetection", "type": "object", "properties": {
-        "time_s": _NUM, "seq": _INT, "camera": _STR, "detected": _BOOL, "u_px": _NUM,
-        "v_px": _NUM, "radius_px": _NUM, "range_m": _NUM, "position_cam_m": _arr(3),
-        "corners_px": _arr(8), "quaternion_cam_image": _arr(4), "matches": _INT,
-        "inliers": _INT, "reprojection_error_px": _NUM, "score": _NUM, "tracked": _BOOL,
-        "hint_u_px": _NUM,
-        "hint_v_px": _NUM, "hint_radius_px": _NUM, "processing_ms": _NUM, "received_s": _NUM,
-        "detected_s": _NUM}})
+ch.register_schema(ch.detection_topic(KIND), ch.detection_schema(
+    "ImageTargetDetection", corners_px=ch.nullable_array(8),
+    quaternion_cam_image=ch.nullable_array(4), matches=ch.INT, inliers=ch.INT,
+    reprojection_error_px=ch.NUM, tracked=ch.BOOL))

@@ -240,25 +240,10 @@ def detection_record(seq: int, time_s: float, camera: str, det: MarkerDetection 
             "chosen_by": det.chosen_by, "other_ids": list(det.other_ids), "score": None}
 
 
-_NUM, _BOOL, _INT, _STR = ({"type": ["number", "null"]}, {"type": ["boolean", "null"]},
-                           {"type": ["integer", "null"]}, {"type": ["string", "null"]})
-
-
-def _arr(n: int | None = None) -> dict:
-    schema: dict = {"type": ["array", "null"], "items": _NUM}
-    if n is not None:
-        schema.update(minItems=n, maxItems=n)
-    return schema
-
-
 register(KIND, MarkerPipeline)
-ch.register_schema(ch.detection_topic(KIND), {
-    "title": "MarkerDetection", "type": "object", "properties": {
-        "time_s": _NUM, "seq": _INT, "camera": _STR, "detected": _BOOL, "u_px": _NUM,
-        "v_px": _NUM, "radius_px": _NUM, "range_m": _NUM, "position_cam_m": _arr(3),
-        "marker_id": _INT, "corners_px": _arr(8), "quaternion_cam_marker": _arr(4),
-        "reprojection_error_px": _NUM, "ambiguity_ratio": _NUM, "ambiguous": _BOOL,
-        "chosen_by": _STR, "other_ids": {"type": "array", "items": {"type": "integer"}},
-        "hint_u_px": _NUM, "hint_v_px": _NUM, "hint_radius_px": _NUM,
-        "hint_quaternion_cam_marker": _arr(4), "processing_ms": _NUM, "received_s": _NUM,
-        "detected_s": _NUM}})
+ch.register_schema(ch.detection_topic(KIND), ch.detection_schema(
+    "MarkerDetection", marker_id=ch.INT, corners_px=ch.nullable_array(8),
+    quaternion_cam_marker=ch.nullable_array(4), reprojection_error_px=ch.NUM,
+    ambiguity_ratio=ch.NUM, ambiguous=ch.BOOL, chosen_by=ch.STR,
+    other_ids={"type": "array", "items": {"type": "integer"}},
+    hint_quaternion_cam_marker=ch.nullable_array(4)))

@@ -107,16 +107,30 @@ class GroundFit:
     height_m: float  # the camera's height above the ground
 
 
+def ground_level(state: VehicleState) -> float:
+    """The ground's level under the vehicle (local NED down) from its rangefinder reading
+    (along the body's z axis); NaN without a reading, or tilted more than 60°."""
+    r = state.distance_to_ground_m
+    tilt_cos = float(quat_to_matrix(state.attitude_q)[2, 2])
+    if not math.isfinite(r) or tilt_cos < 0.5:
+        return math.nan
+    return float(state.position_ned_m[2]) + r * tilt_cos
+
+
 def ground_fit(detection: PadDetection, camera: CameraInfo, pose: Pose,
-               range_m: float) -> GroundFit | None:
-    """The circle's outline on the ground plane ``range_m`` (the rangefinder's reading, along
-    the body's z axis) below the vehicle."""
-    if detection.outline_norm is None or not math.isfinite(range_m):
+               range_m: float = math.nan, *,
+               ground_down_m: float = math.nan) -> GroundFit | None:
+    """The circle's outline on the ground plane: at ``ground_down_m`` (local NED), or
+    ``range_m`` (a rangefinder's reading along the body's z axis) below the vehicle."""
+    if detection.outline_norm is None:
         return None
     r_world_body = quat_to_matrix(pose.attitude_q)
-    if r_world_body[2, 2] < 0.5:
-        return None  # tilted more than 60°: the reading is not the height
-    ground_down = pose.position_ned_m[2] + range_m * r_world_body[2, 2]
+    if math.isfinite(ground_down_m):
+        ground_down = ground_down_m
+    elif math.isfinite(range_m) and r_world_body[2, 2] >= 0.5:
+        ground_down = pose.position_ned_m[2] + range_m * r_world_body[2, 2]
+    else:
+        return None
     cam = pose.position_ned_m + r_world_body @ camera.position_body_m
     r_world_cam = r_world_body @ camera.rotation_body_cam
     n = detection.outline_norm
@@ -152,20 +166,30 @@ class PadPipeline:
             gate_chi2=10.8, stale_after_s=cfg.estimation.target.stale_after_s))
         self.heading_std_rad = math.radians(e.heading_noise_deg)
         self.history = PoseHistory()
-        self._ranges: deque[tuple[float, float]] = deque(maxlen=200)
+        self._ranges: deque[tuple[float, float]] = deque(maxlen=200)  # (time, ground level)
+        self._last_reading = math.nan
         self.navigation = navigation_settings(cfg)
         self.last_fit: GroundFit | None = None
 
     def add_state(self, state: VehicleState) -> None:
         self.history.add(state)
-        self._ranges.append((state.time_s, state.distance_to_ground_m))
+        # the ground's level at each new reading, when it first shows: telemetry repeats the
+        # last reading (a rangefinder at 10 Hz, positions at 50 Hz), and a held reading with
+        # a newer altitude would put the ground wrong by the climb since the reading
+        r = state.distance_to_ground_m
+        if math.isfinite(r) and r != self._last_reading:
+            level = ground_level(state)
+            if math.isfinite(level):
+                self._ranges.append((state.time_s, level))
+        self._last_reading = r
 
-    def range_at(self, time_s: float, max_gap_s: float = 0.2) -> float:
-        """The rangefinder's reading nearest ``time_s`` (NaN: none that close, or none)."""
+    def ground_at(self, time_s: float, max_gap_s: float = 0.5) -> float:
+        """The ground's level (local NED down) from the reading nearest ``time_s`` (NaN: none
+        that close)."""
         best, gap = math.nan, max_gap_s
-        for t, r in reversed(self._ranges):
+        for t, level in reversed(self._ranges):
             if abs(t - time_s) <= gap:
-                best, gap = r, abs(t - time_s)
+                best, gap = level, abs(t - time_s)
             elif t < time_s - max_gap_s:
                 break
         return best
@@ -186,7 +210,7 @@ class PadPipeline:
         noise_scale = 1.0
         self.last_fit = None
         if detection.kind == "circle":
-            fit = ground_fit(detection, camera, pose, self.range_at(time_s))
+            fit = ground_fit(detection, camera, pose, ground_down_m=self.ground_at(time_s))
             if fit is not None:
                 if abs(fit.diameter_m / self.size_m - 1.0) > self.size_tolerance:
                     return None  # the wrong size for the pad (or the reading is not its ground)
@@ -245,20 +269,7 @@ def detection_record(seq: int, time_s: float, camera: str, det: PadDetection | N
             "score": None}
 
 
-_NUM, _BOOL, _INT, _STR = ({"type": ["number", "null"]}, {"type": ["boolean", "null"]},
-                           {"type": ["integer", "null"]}, {"type": ["string", "null"]})
-
-
-def _arr(n: int) -> dict:
-    return {"type": ["array", "null"], "items": _NUM, "minItems": n, "maxItems": n}
-
-
 register(KIND, PadPipeline)
-ch.register_schema(ch.detection_topic(KIND), {
-    "title": "PadDetection", "type": "object", "properties": {
-        "time_s": _NUM, "seq": _INT, "camera": _STR, "detected": _BOOL, "u_px": _NUM,
-        "v_px": _NUM, "radius_px": _NUM, "range_m": _NUM, "position_cam_m": _arr(3),
-        "quaternion_cam_pad": _arr(4), "clipped": _BOOL,
-        "ids": {"type": ["array", "null"], "items": {"type": "integer"}}, "fit_error": _NUM,
-        "score": _NUM, "hint_u_px": _NUM, "hint_v_px": _NUM, "hint_radius_px": _NUM,
-        "processing_ms": _NUM, "received_s": _NUM, "detected_s": _NUM}})
+ch.register_schema(ch.detection_topic(KIND), ch.detection_schema(
+    "PadDetection", quaternion_cam_pad=ch.nullable_array(4), clipped=ch.BOOL,
+    ids=ch.nullable_array(items={"type": "integer"}), fit_error=ch.NUM))

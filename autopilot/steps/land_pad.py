@@ -10,6 +10,7 @@ to climb and look again; ``metrics.estimation`` scores the pad estimate it flew 
 from __future__ import annotations
 
 import itertools
+import math
 from collections.abc import Mapping, Sequence
 
 import numpy as np
@@ -39,9 +40,11 @@ def _spec(params: LandPadParams, config):
 
 def landing_metrics(log: Mapping[str, Sequence[Mapping]], intervals: list[tuple[float, float]],
                     step: Mapping) -> dict:
-    """``landing``: the true resting point's horizontal distance from the pad's true centre
-    (``error_m``), whether that is on the pad, the descent speed at touchdown, the time from the
-    step's start to touchdown, the climbs to look again (``retries``); detection figures.
+    """``landing``: whether the step landed (``landed``); where the vehicle came to rest on the
+    ground — after the step's landing, or after the mission's fallback when the step failed —
+    as the true resting point's horizontal distance from the pad's true centre (``error_m``)
+    and whether that is on the pad; the descent speed at touchdown, the time from the step's
+    start to touchdown, the climbs to look again (``retries``); detection figures.
     ``estimation``: the pad estimate flown on, against truth."""
     pipelines = step.get("pipelines") or []
     if not pipelines or not intervals:
@@ -50,8 +53,13 @@ def landing_metrics(log: Mapping[str, Sequence[Mapping]], intervals: list[tuple[
     params = LandPadParams(**step["params"])
     body = p["truth_body"]
     start, end = intervals[0][0], intervals[-1][1]
+    succeeded = any(e.get("kind") == "step_succeeded" and e.get("step_index") == step["index"]
+                    for e in log.get(ch.MISSION_EVENTS, []))
+    # where the vehicle came to rest: after its own landing, or after what the mission did
+    # when the step failed (its fallback's landing): to the end of the log
+    until = end + 0.5 if succeeded else math.inf
     truth = [s for s in log.get(ch.GROUND_TRUTH, [])
-             if body in s["bodies"] and start <= s["time_s"] <= end + 0.5]
+             if body in s["bodies"] and start <= s["time_s"] <= until]
     if not truth:
         return {}
     frames = [f for f in log.get(ch.detection_topic(p["name"]), [])
@@ -62,8 +70,6 @@ def landing_metrics(log: Mapping[str, Sequence[Mapping]], intervals: list[tuple[
               if start <= r["time_s"] <= end and r.get("step") == step["name"]]
     retries = sum(1 for a, b in itertools.pairwise(phases)
                   if b == "reacquiring" and a != "reacquiring")
-    succeeded = any(e.get("kind") == "step_succeeded" and e.get("step_index") == step["index"]
-                    for e in log.get(ch.MISSION_EVENTS, []))
     z = np.array([s["vehicle_position_ned_m"][2] for s in truth])
     t = np.array([s["time_s"] for s in truth])
     vz = np.array([s["vehicle_velocity_ned_m_s"][2] for s in truth])
@@ -78,7 +84,8 @@ def landing_metrics(log: Mapping[str, Sequence[Mapping]], intervals: list[tuple[
     }
     still = abs(float(vz[-1])) < 0.05 and float(np.hypot(
         *truth[-1]["vehicle_velocity_ned_m_s"][:2])) < 0.05
-    on_ground = succeeded and still
+    pad_down = float(truth[-1]["bodies"][body]["position_ned_m"][2])
+    on_ground = still and abs(rest_z - pad_down) < 0.3
     if on_ground:
         k = len(z) - 1
         while k > 0 and z[k - 1] >= rest_z - _REST_BAND_M:
@@ -90,7 +97,7 @@ def landing_metrics(log: Mapping[str, Sequence[Mapping]], intervals: list[tuple[
         vh = [float(np.hypot(*s["vehicle_velocity_ned_m_s"][:2]))
               for s, b in zip(truth, before, strict=True) if b]
         landing.update({
-            "landed": True, "error_m": error, "on_pad": error <= params.size_m / 2.0,
+            "landed": succeeded, "error_m": error, "on_pad": error <= params.size_m / 2.0,
             "touchdown_speed_m_s": float(np.max(vz[before])) if before.any() else None,
             "touchdown_horizontal_speed_m_s": max(vh) if vh else None,
             "time_to_land_s": float(t[k] - start)})

@@ -40,6 +40,21 @@ def test_ball_against_truth(quick):
     assert ball["all"]["frames"] == 5 * 6
 
 
+def test_down_camera_detectors_ours_and_the_seeds(quick):
+    image, pad = quick["image"], quick["pad"]
+    for height in ("at_1m", "at_3m"):
+        assert image["ours"][height]["detection_rate"] == 1.0
+        assert image["ours"][height]["lateral_error_m_p50"] <= 0.005
+        assert image["seed000"][height]["frames"] == image["ours"][height]["frames"]
+    for height in ("at_3m", "at_8m"):
+        assert pad["ours"][height]["detection_rate"] == 1.0
+        assert pad["ours"][height]["lateral_error_m_p50"] <= 0.01
+    assert pad["ours"]["at_1m"]["detection_rate"] == 1.0
+    # seed 001's largest template is smaller than the disc seen from 1 m: not found there
+    assert pad["seed001"]["at_1m"]["detection_rate"] == 0.0
+    assert pad["seed001"]["at_3m"]["detection_rate"] == 1.0
+
+
 def test_cli_json_and_errors(capsys):
     assert main(["bench", "perception", "--quick", "--json", "--detector", "marker"]) == 0
     out = json.loads(capsys.readouterr().out)

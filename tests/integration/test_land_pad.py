@@ -41,4 +41,8 @@ def test_a_pad_that_is_not_there_is_not_found_and_the_fallback_lands():
     summary = asyncio.run(fly(plan, None))
     assert summary["status"] == "failed"
     assert "pad not found" in summary["reason"]
-    assert summary["metrics"]["landing"]["landed"] is False
+    landing = summary["metrics"]["landing"]
+    assert landing["landed"] is False
+    # the fallback landed where the search ended, far from the pad
+    assert landing["on_pad"] is False
+    assert landing["error_m"] > 30.0
