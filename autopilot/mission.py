@@ -273,6 +273,15 @@ def load_mission(name_or_path: str, overrides: list[str] = (),
     base = load_yaml(config_path or default_config_path())
     config = collect(lambda: validate(AppConfig, apply_overrides(
         _merge_located(base, located, ("config",)), config_overrides)))
+    if not problems and steps is not None and config is not None:
+        # what a step needs of the configuration (its pipelines: a detector that can find
+        # its target, …)
+        for i, step in enumerate(steps):
+            try:
+                step_kind(step.name).pipelines(step.params, config)
+            except ValueError as exc:
+                source, line = located.locate(("steps", i, step.name))
+                problems.append(Problem(source, line, f"steps.{i}.{step.name}", str(exc)))
     if problems:
         problems.sort(key=lambda p: (p.source == "--set", p.source, p.line or 0))
         raise ConfigError(problems)

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from typing import Annotated
 
 import numpy as np
-from pydantic import Field
+from pydantic import Field, field_validator
 
 from autopilot.behaviors.base import (
     Behavior,
@@ -36,6 +36,15 @@ class HoverImageParams(Params):
     altitude_m: Annotated[float, Field(gt=0.3, le=50)] = 2.0  # above the image
     offset_m: tuple[float, float] = (0.0, 0.0)  # forward (towards its top), right
     yaw_deg: Annotated[float, Field(ge=-360, le=360)] = 0.0  # heading from its top
+
+    @field_validator("image")
+    @classmethod
+    def _readable(cls, image: str) -> str:
+        if image != "default":
+            from autopilot.perception.image_target import load_target_image
+
+            load_target_image(image)  # raises with what is wrong with it
+        return image
 
 
 @dataclass(frozen=True, slots=True)

@@ -41,15 +41,20 @@ def _frames(options: BenchOptions) -> int:
 
 
 def _run(cfg: AppConfig, options: BenchOptions, log: Callable[[str], None], *, name: str,
-         texture: np.ndarray, width_m: float, detectors: dict) -> dict:
+         texture: np.ndarray, width_m: float, detectors: dict,
+         with_range: str | None = None) -> dict:
+    """``with_range``: also score that detector's circle laid on the ground with the true
+    attitude and a rangefinder reading (what the pad pipeline flies on), as
+    ``<name>+rangefinder`` (the reading: the true range, without noise)."""
     sim = Simulator(cfg.sim, scenario=[FeatureGround(seed=options.seed),
                                        GroundImage(name, texture, width_m, WHERE, 25.0)])
     rng = np.random.default_rng(options.seed)
     section: dict = {"target": name, "width_m": width_m, "frames_per_height": _frames(options)}
     try:
         camera = sim.camera_infos()[CAMERA]
+        labels = [*detectors] + ([f"{with_range}+rangefinder"] if with_range else [])
         samples: dict[str, dict[float, list]] = {d: {h: [] for h in HEIGHTS_M}
-                                                 for d in detectors}
+                                                 for d in labels}
         for height in HEIGHTS_M:
             log(f"{name}: {height:g} m …")
             for _ in range(_frames(options)):
@@ -69,20 +74,49 @@ def _run(cfg: AppConfig, options: BenchOptions, log: Callable[[str], None], *, n
                     t0 = time.perf_counter()
                     found = detector.detect(frame.image, camera, frame.time_s)
                     ms = (time.perf_counter() - t0) * 1e3
-                    if found is None:
-                        samples[label][height].append((False, None, None, ms))
-                        continue
-                    error = found.position_cam_m - p
-                    # across the line of sight: the centre's direction, at the true range
-                    direction = found.position_cam_m / np.linalg.norm(found.position_cam_m)
-                    lateral = float(np.linalg.norm(direction * np.linalg.norm(p) - p))
-                    samples[label][height].append((True, float(np.linalg.norm(error)),
-                                                   lateral, ms))
+                    samples[label][height].append(_score(found, p, ms))
+                    if label == with_range:
+                        position = _on_ground(found, camera, truth, r, name)
+                        samples[f"{label}+rangefinder"][height].append(_score(
+                            None if position is None else _Found(position), p, ms))
     finally:
         sim.close()
     for label, by_height in samples.items():
         section[label] = {f"at_{h:g}m": _stats(s) for h, s in by_height.items()}
     return section
+
+
+class _Found:
+    def __init__(self, position_cam_m: np.ndarray) -> None:
+        self.position_cam_m = position_cam_m
+
+
+def _score(found, truth_cam: np.ndarray, ms: float) -> tuple:
+    if found is None:
+        return (False, None, None, ms)
+    error = float(np.linalg.norm(found.position_cam_m - truth_cam))
+    # across the line of sight: the centre's direction, at the true range
+    direction = found.position_cam_m / np.linalg.norm(found.position_cam_m)
+    lateral = float(np.linalg.norm(direction * np.linalg.norm(truth_cam) - truth_cam))
+    return (True, error, lateral, ms)
+
+
+def _on_ground(found, camera, truth, r_ned_body: np.ndarray, name: str) -> np.ndarray | None:
+    """A circle detection laid on the ground (the rangefinder's range along the body's z
+    axis), back in the camera frame."""
+    from autopilot.estimation.pose_history import Pose
+    from autopilot.perception.pad_pipeline import ground_fit
+
+    if found is None:
+        return None
+    vehicle = np.asarray(truth.vehicle.position_ned_m)
+    ground = float(truth.bodies[name].position_ned_m[2])
+    pose = Pose(truth.time_s, vehicle, truth.vehicle.attitude_q)
+    fit = ground_fit(found, camera, pose, (ground - vehicle[2]) / r_ned_body[2, 2])
+    if fit is None:
+        return None
+    cam = vehicle + r_ned_body @ camera.position_body_m
+    return camera.rotation_body_cam.T @ (r_ned_body.T @ (fit.centre_ned_m - cam))
 
 
 def _stats(samples: list) -> dict:
@@ -119,30 +153,37 @@ def _run_pad(cfg: AppConfig, options: BenchOptions, log: Callable[[str], None]) 
     texture, width = pad_texture("circle", size_m, color="red")
     return _run(cfg, options, log, name="pad", texture=texture, width_m=width, detectors={
         "ours": make_detector(cfg, pad_target("circle", "red"), size_m, detector="ours"),
-        "seed001": Seed001PadDetector("red", size_m)})
+        "seed001": Seed001PadDetector("red", size_m)}, with_range="ours")
+
+
+def _mm(value: float | None) -> str:
+    return "—" if value is None else f"{value * 1e3:.1f}"
 
 
 def _table(title: str, section: dict) -> list[str]:
-    lines = [title,
-             f"  {'':<16}{'frames':>7}{'found':>7}{'error p50':>10}{'p95':>7}"
-             f"{'lateral p50':>12}{'p95':>7}{'ms p50':>8}{'lateral ÷ ours':>16}"]
     labels = [k for k in section if isinstance(section[k], dict) and "at_1m" in section[k]]
+    width = max(16, max(len(k) for k in labels) + 7)
+    lines = [title + " (errors in mm)",
+             f"  {'':<{width}}{'frames':>7}{'found':>7}{'error p50':>10}{'p95':>7}"
+             f"{'lateral p50':>12}{'p95':>7}{'ms p50':>8}{'error ÷ ours':>14}"
+             f"{'lateral ÷ ours':>16}"]
     for h in HEIGHTS_M:
         key = f"at_{h:g}m"
-        ours = section[labels[0]][key]["lateral_error_m_p50"]
+        ours = section[labels[0]][key]
         for label in labels:
             s = section[label][key]
-            ratio = (s["lateral_error_m_p50"] / ours) if ours and \
-                s["lateral_error_m_p50"] is not None else None
+            ratios = [(s[k] / ours[k]) if ours[k] and s[k] is not None else None
+                      for k in ("position_error_m_p50", "lateral_error_m_p50")]
             lines.append(
-                f"  {f'{h:g} m {label}':<16}{s['frames']:>7}"
+                f"  {f'{h:g} m {label}':<{width}}{s['frames']:>7}"
                 f"{_num(s['detection_rate'], '.2f'):>7}"
-                f"{_num(s['position_error_m_p50'], '.3f'):>10}"
-                f"{_num(s['position_error_m_p95'], '.3f'):>7}"
-                f"{_num(s['lateral_error_m_p50'], '.3f'):>12}"
-                f"{_num(s['lateral_error_m_p95'], '.3f'):>7}"
+                f"{_mm(s['position_error_m_p50']):>10}"
+                f"{_mm(s['position_error_m_p95']):>7}"
+                f"{_mm(s['lateral_error_m_p50']):>12}"
+                f"{_mm(s['lateral_error_m_p95']):>7}"
                 f"{_num(s['time_per_frame_ms_p50'], '.1f'):>8}"
-                f"{('' if label == labels[0] else _num(ratio, '.1f') + '×'):>16}")
+                + "".join(f"{('' if label.startswith(labels[0]) else _num(x, '.1f') + '×'):>{w}}"
+                          for x, w in zip(ratios, (14, 16), strict=True)))
     return lines
 
 

@@ -35,6 +35,10 @@ def _behavior(params: LandPadParams, ctx: StepContext) -> LandPad:
 
 
 def _spec(params: LandPadParams, config):
+    if config.perception.pad.detector == "seed001" and params.pad != "circle":
+        raise ValueError(f"pad: {params.pad} cannot be found by perception.pad.detector "
+                         "seed001 (template matching of a disc): use a circle pad or the "
+                         "detector 'ours'")
     return (pad_spec(config, params.pad, params.size_m, color=params.color, ids=params.ids),)
 
 

@@ -64,3 +64,14 @@ def test_an_image_never_found_fails_and_a_long_enough_hover_succeeds():
     hover.activate(BehaviorInputs(0.0, state))
     assert hover.update(BehaviorInputs(5.0, state, target=_image(5.0))).status is \
         Status.SUCCEEDED
+
+
+def test_an_image_file_that_cannot_be_read_is_refused_before_flying(tmp_path):
+    from autopilot.config import ConfigError
+    from autopilot.mission import load_mission
+
+    with pytest.raises(ConfigError, match=r"hover_image\.image.*no such image file"):
+        load_mission("hover_image", [f"steps.1.hover_image.image={tmp_path / 'nope.png'}"])
+    (tmp_path / "text.png").write_text("not an image")
+    with pytest.raises(ConfigError, match="not an image OpenCV can read"):
+        load_mission("hover_image", [f"steps.1.hover_image.image={tmp_path / 'text.png'}"])

@@ -232,3 +232,11 @@ def test_px4_precland_interrupted_in_the_air_fails_the_step():
     out = _fly(land, 3.0, (PAD[0], PAD[1], -5.0), mode=FlightMode.HOLD)
     assert out.status is Status.FAILED
     assert "interrupted" in out.reason
+
+
+def test_a_detector_that_cannot_find_the_pad_is_refused_before_flying():
+    with pytest.raises(ConfigError) as err:
+        load_mission("land_pad", ["config.perception.pad.detector=seed001",
+                                  "steps.1.land_pad.pad=markers"])
+    assert "steps.1.land_pad" in str(err.value)
+    assert "seed001" in str(err.value)
