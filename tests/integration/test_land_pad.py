@@ -8,6 +8,7 @@ import pytest
 
 from autopilot.mission import load_mission
 from autopilot.replay import replay
+from autopilot.report.html import write_report
 from autopilot.run import fly
 
 
@@ -30,6 +31,10 @@ def test_land_pad_closed_loop_and_replay(tmp_path):
     assert replayed["at_update"]["estimates"] == flown["at_update"]["estimates"]
     assert replayed["rms_position_error_m"] == pytest.approx(flown["rms_position_error_m"],
                                                              rel=0.05)
+    # the report's panels over the pad: a picture each, none empty
+    page = write_report(tmp_path).read_text()
+    assert "Over the target on the ground" in page
+    assert "class='none'" not in page
     # and a pipeline told the pad is blue finds nothing in the same frames
     blind = replay(tmp_path, ["perception.pad.hsv_ranges=[[[100, 120, 60], [125, 255, 255]]]"])
     assert blind["metrics"]["landing"]["detected_frames"] == 0
