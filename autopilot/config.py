@@ -151,6 +151,9 @@ class PerceptionConfig(_Model):
 
 
 class ImageEstimationConfig(_Model):
+    #: an image lies still on the ground: how hard it may seem to move, and how fast at first
+    accel_noise_m_s2: Positive = 0.3
+    initial_velocity_std_m_s: Positive = 0.3
     position_noise_px: Positive  # the image centre's bearing noise
     size_noise_px: Positive  # noise of its apparent width (range noise)
     heading_noise_deg: Positive  # of the direction of its top, one detection
@@ -190,6 +193,7 @@ class MarkerEstimationConfig(_Model):
 
 class PadEstimationConfig(_Model):
     accel_noise_m_s2: Positive  # how hard the pad may move (a pad on the ground: hardly)
+    initial_velocity_std_m_s: Positive = 0.5  # how fast it may be moving when first seen
     position_noise_px: Positive  # bearing noise of the pad's centre
     size_noise_px: Positive  # of its apparent size (range noise, without the rangefinder)
     height_noise_m: Positive  # of the ground's height from the rangefinder

@@ -159,7 +159,8 @@ class PadPipeline:
         self.height_noise_m = e.height_noise_m
         self.filter_settings = dataclasses.replace(
             filter_settings(cfg), pixel_noise_px=e.position_noise_px,
-            radius_noise_px=e.size_noise_px, accel_noise_m_s2=e.accel_noise_m_s2)
+            radius_noise_px=e.size_noise_px, accel_noise_m_s2=e.accel_noise_m_s2,
+            initial_velocity_std_m_s=e.initial_velocity_std_m_s)
         self.filter = TargetFilter(self.filter_settings)
         self.heading = HeadingFilter(HeadingSettings(
             accel_noise_rad_s2=math.radians(30.0), initial_rate_std_rad_s=math.radians(30.0),
