@@ -30,13 +30,14 @@ async def _up(driver, altitude_m: float) -> np.ndarray:
 
 def test_precision_landing_on_the_reported_target_through_mavsdk(no_camera_config):
     target = (2.0, -1.5, 0.0)
+    config = no_camera_config.model_copy(update={"params": {"MPC_LAND_SPEED": 1.2}})
 
     async def main():
-        async with served(no_camera_config) as (vehicle, face):
+        async with served(config) as (vehicle, face):
             driver = MavsdkDriver(CLIENT_URL)
             await driver.connect(timeout_s=10.0)
             try:
-                await _up(driver, 4.0)
+                await _up(driver, 3.0)
 
                 async def stream():  # the companion's pad estimate, 10 a second
                     while True:
@@ -64,15 +65,16 @@ def test_precision_landing_on_the_reported_target_through_mavsdk(no_camera_confi
 
 
 def test_no_target_climbs_to_search_then_falls_back_to_a_normal_landing(no_camera_config):
+    # (a quicker descent than PX4's default, for the test's time)
     config = no_camera_config.model_copy(update={"params": {
-        "PLD_SRCH_ALT": 5.0, "PLD_SRCH_TOUT": 3.0}})
+        "PLD_SRCH_ALT": 4.0, "PLD_SRCH_TOUT": 2.0, "MPC_LAND_SPEED": 1.5}})
 
     async def main():
         async with served(config) as (vehicle, _face):
             driver = PymavlinkDriver(CLIENT_URL)
             await driver.connect(timeout_s=10.0)
             try:
-                start = await _up(driver, 3.0)
+                start = await _up(driver, 2.5)
                 await driver.precision_land()
                 top = 0.0
 
@@ -82,8 +84,8 @@ def test_no_target_climbs_to_search_then_falls_back_to_a_normal_landing(no_camer
                     return not s.armed
 
                 await wait_for_state(driver, watch, 60.0, "fallback landing, disarmed")
-                # PX4: 2 s at the start point, climb to PLD_SRCH_ALT, 3 s search, land there
-                assert top == pytest.approx(5.0, abs=0.4)
+                # PX4: 2 s at the start point, climb to PLD_SRCH_ALT, 2 s search, land there
+                assert top == pytest.approx(4.0, abs=0.4)
                 rest = vehicle.latest_state.position_ned_m
                 assert np.hypot(*(rest[:2] - start[:2])) < 0.5
                 print(list(driver._statustext))
