@@ -49,6 +49,21 @@ def detector_settings(cfg: AppConfig, size_m: float) -> ImageTargetSettings:
                                track_frames=i.track_frames)
 
 
+def set_ground_target_filters(pipeline, cfg: AppConfig, e) -> None:
+    """A target lying on the ground (an image, a pad): its position filter with the noises of
+    its estimation section ``e`` (``estimation.image`` / ``.pad``), and the filter of the
+    heading of its top."""
+    pipeline.filter_settings = dataclasses.replace(
+        filter_settings(cfg), pixel_noise_px=e.position_noise_px,
+        radius_noise_px=e.size_noise_px, accel_noise_m_s2=e.accel_noise_m_s2,
+        initial_velocity_std_m_s=e.initial_velocity_std_m_s)
+    pipeline.filter = TargetFilter(pipeline.filter_settings)
+    pipeline.heading = HeadingFilter(HeadingSettings(
+        accel_noise_rad_s2=math.radians(30.0), initial_rate_std_rad_s=math.radians(30.0),
+        gate_chi2=10.8, stale_after_s=cfg.estimation.target.stale_after_s))
+    pipeline.heading_std_rad = math.radians(e.heading_noise_deg)
+
+
 def image_spec(cfg: AppConfig, image: str = DEFAULT_TARGET, size_m: float = 1.0,
                truth_body: str = "image") -> PipelineSpec:
     return PipelineSpec(KIND, cfg.perception.image.camera, truth_body=truth_body,
@@ -76,16 +91,7 @@ class ImagePipeline:
             self.detector = Seed000ImageDetector(reference, self.size_m)
         else:
             self.detector = ImageTargetDetector(reference, detector_settings(cfg, self.size_m))
-        e = cfg.estimation.image
-        self.filter_settings = dataclasses.replace(
-            filter_settings(cfg), pixel_noise_px=e.position_noise_px,
-            radius_noise_px=e.size_noise_px, accel_noise_m_s2=e.accel_noise_m_s2,
-            initial_velocity_std_m_s=e.initial_velocity_std_m_s)
-        self.filter = TargetFilter(self.filter_settings)
-        self.heading = HeadingFilter(HeadingSettings(
-            accel_noise_rad_s2=math.radians(30.0), initial_rate_std_rad_s=math.radians(30.0),
-            gate_chi2=10.8, stale_after_s=cfg.estimation.target.stale_after_s))
-        self.heading_std_rad = math.radians(e.heading_noise_deg)
+        set_ground_target_filters(self, cfg, cfg.estimation.image)
         self.history = PoseHistory()
         self.navigation = navigation_settings(cfg)
 

@@ -146,6 +146,22 @@ class ImageTargetDetection:
         return float(np.linalg.norm(self.position_cam_m))
 
 
+def planar_pose(obj: np.ndarray, img: np.ndarray, k: np.ndarray, dist: np.ndarray):
+    """A plane's pose from points on it (``obj``, z = 0) and their pixels: IPPE refined by
+    Levenberg–Marquardt through the lens. (rvec, tvec, R_cam_plane, RMS reprojection error px),
+    or None if it fails or the plane is behind the camera or seen from below."""
+    ok, rvec, tvec = cv2.solvePnP(obj, img, k, dist, flags=cv2.SOLVEPNP_IPPE)
+    if not ok:
+        return None
+    rvec, tvec = cv2.solvePnPRefineLM(obj, img, k, dist, rvec, tvec)
+    rotation, _ = cv2.Rodrigues(rvec)
+    if tvec[2, 0] <= 0.0 or rotation[2, 2] <= 0.0:
+        return None
+    projected, _ = cv2.projectPoints(obj, rvec, tvec, k, dist)
+    error = float(np.sqrt(np.mean(np.sum((projected.reshape(-1, 2) - img) ** 2, axis=1))))
+    return rvec, tvec, rotation, error
+
+
 class ImageTargetDetector:
     """Finds one known planar image and measures its pose (see the module's notes)."""
 
@@ -270,15 +286,10 @@ class ImageTargetDetector:
         if int(inliers.sum()) < s.min_inliers:
             return None
         obj, img = plane[inliers], frame_px[inliers]
-        ok, rvec, tvec = cv2.solvePnP(obj, img, k, dist, flags=cv2.SOLVEPNP_IPPE)
-        if not ok:
+        pose = planar_pose(obj, img, k, dist)
+        if pose is None:
             return None
-        rvec, tvec = cv2.solvePnPRefineLM(obj, img, k, dist, rvec, tvec)
-        rotation, _ = cv2.Rodrigues(rvec)
-        if tvec[2, 0] <= 0.0 or rotation[2, 2] <= 0.0:
-            return None  # behind the camera, or seen from below the ground
-        projected, _ = cv2.projectPoints(obj, rvec, tvec, k, dist)
-        error = float(np.sqrt(np.mean(np.sum((projected.reshape(-1, 2) - img) ** 2, axis=1))))
+        rvec, tvec, rotation, error = pose
         corners, _ = cv2.projectPoints(self.corners_plane_m, rvec, tvec, k, dist)
         centre, _ = cv2.projectPoints(np.zeros((1, 3)), rvec, tvec, k, dist)
         u, v = centre.reshape(2)

@@ -30,6 +30,7 @@ import cv2
 import numpy as np
 
 from autopilot.perception.colors import COLORS, HsvRange
+from autopilot.perception.image_target import planar_pose
 from autopilot.perception.marker import MarkerDetector, MarkerDetectorSettings
 from drivers.base import CameraInfo
 from drivers.camera_model import distortion_coefficients, project_points, undistort_points
@@ -299,16 +300,10 @@ class MarkerPadDetector:
         obj = np.vstack([self._markers[i].corners_m() for i in seen])
         img = np.vstack([seen[i] for i in seen])
         intr = camera.intrinsics
-        k, dist = intr.matrix, distortion_coefficients(intr)
-        ok, rvec, tvec = cv2.solvePnP(obj, img, k, dist, flags=cv2.SOLVEPNP_IPPE)
-        if not ok:
+        pose = planar_pose(obj, img, intr.matrix, distortion_coefficients(intr))
+        if pose is None:
             return None
-        rvec, tvec = cv2.solvePnPRefineLM(obj, img, k, dist, rvec, tvec)
-        rotation, _ = cv2.Rodrigues(rvec)
-        if tvec[2, 0] <= 0.0 or rotation[2, 2] <= 0.0:
-            return None
-        projected, _ = cv2.projectPoints(obj, rvec, tvec, k, dist)
-        error = float(np.sqrt(np.mean(np.sum((projected.reshape(-1, 2) - img) ** 2, axis=1))))
+        _, tvec, rotation, error = pose
         position = tvec.reshape(3).copy()
         u, v = project_points(intr, position)
         radius_px = intr.fx * self.layout.size_m / 2.0 / max(position[2], 1e-6)

@@ -24,17 +24,15 @@ from collections import deque
 import numpy as np
 
 from autopilot.config import AppConfig
-from autopilot.estimation.heading import HeadingFilter, HeadingSettings
 from autopilot.estimation.pose_history import Pose, PoseHistory
 from autopilot.estimation.target import (
     TargetEstimate,
-    TargetFilter,
     camera_measurement,
 )
 from autopilot.flightlog import records as ch
-from autopilot.perception.ball_pipeline import filter_settings, navigation_settings
+from autopilot.perception.ball_pipeline import navigation_settings
 from autopilot.perception.colors import COLORS
-from autopilot.perception.image_pipeline import image_heading
+from autopilot.perception.image_pipeline import image_heading, set_ground_target_filters
 from autopilot.perception.marker_pipeline import oriented_target
 from autopilot.perception.pad import (
     CirclePadDetector,
@@ -157,15 +155,7 @@ class PadPipeline:
         self.size_tolerance = cfg.perception.pad.size_tolerance
         e = cfg.estimation.pad
         self.height_noise_m = e.height_noise_m
-        self.filter_settings = dataclasses.replace(
-            filter_settings(cfg), pixel_noise_px=e.position_noise_px,
-            radius_noise_px=e.size_noise_px, accel_noise_m_s2=e.accel_noise_m_s2,
-            initial_velocity_std_m_s=e.initial_velocity_std_m_s)
-        self.filter = TargetFilter(self.filter_settings)
-        self.heading = HeadingFilter(HeadingSettings(
-            accel_noise_rad_s2=math.radians(30.0), initial_rate_std_rad_s=math.radians(30.0),
-            gate_chi2=10.8, stale_after_s=cfg.estimation.target.stale_after_s))
-        self.heading_std_rad = math.radians(e.heading_noise_deg)
+        set_ground_target_filters(self, cfg, e)
         self.history = PoseHistory()
         self._ranges: deque[tuple[float, float]] = deque(maxlen=200)  # (time, ground level)
         self._last_reading = math.nan
