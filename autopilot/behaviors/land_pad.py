@@ -153,8 +153,6 @@ class LandPad(Behavior):
         self._z_ref = 0.0
         self._last_tick = 0.0
         self._pad: np.ndarray | None = None  # the pad's newest estimate (NED)
-        self._pad_heading: float | None = None
-        self._seen_at: float | None = None
         self._aligned_since: float | None = None
         self._stalled_since: float | None = None
         self._trim = np.zeros(2)
@@ -215,8 +213,6 @@ class LandPad(Behavior):
         if fresh:
             t = inputs.target
             self._pad = np.array(t.position_ned_m, dtype=float)
-            self._pad_heading = t.heading_rad
-            self._seen_at = now
             if p.yaw_deg is not None and t.heading_rad is not None:
                 self._yaw = math.remainder(t.heading_rad + math.radians(p.yaw_deg),
                                            2.0 * math.pi)

@@ -163,10 +163,7 @@ class MavsdkDriver(MavlinkVehicle):
 
     async def precision_land(self) -> None:
         """AUTO.PRECLAND (MAVSDK's action has no call for it: DO_SET_MODE)."""
-        main, sub = px4.PX4_MODES[FlightMode.PRECLAND]
-        base = px4.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (px4.MAV_MODE_FLAG_SAFETY_ARMED
-                                                        if self._armed else 0)
-        await self._command("precision land", 176, base, main, sub)
+        await self._set_mode("precision land", FlightMode.PRECLAND)
 
     async def send_landing_target(self, target: LandingTarget) -> None:
         x, y, z = (float(v) for v in target.position_ned_m)
@@ -177,10 +174,14 @@ class MavsdkDriver(MavlinkVehicle):
         await self._send_message("LANDING_TARGET", fields)
 
     async def start_offboard(self) -> None:
-        main, sub = px4.PX4_MODES[FlightMode.OFFBOARD]
+        await self._set_mode("start offboard", FlightMode.OFFBOARD)
+
+    async def _set_mode(self, name: str, mode: FlightMode) -> None:
+        """DO_SET_MODE with PX4's custom mode (for modes MAVSDK's action has no call for)."""
+        main, sub = px4.PX4_MODES[mode]
         base = px4.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (px4.MAV_MODE_FLAG_SAFETY_ARMED
                                                         if self._armed else 0)
-        await self._command("start offboard", 176, base, main, sub)
+        await self._command(name, 176, base, main, sub)
 
     async def stop_offboard(self) -> None:
         await self.hold()
