@@ -229,8 +229,37 @@ class FollowControlConfig(_Model):
     lost_timeout_s: Positive
 
 
+class TrajectoryControlConfig(_Model):
+    """Limits of the time-parametrised trajectories (goto, orbit, survey)."""
+
+    max_speed_m_s: Annotated[float, Field(gt=0, le=20)]  # a step's speed_m_s above this: refused
+    accel_m_s2: Annotated[float, Field(gt=0, le=10)]  # along the path
+    lateral_accel_m_s2: Annotated[float, Field(gt=0, le=10)]  # on curves (v²κ)
+    jerk_m_s3: Annotated[float, Field(gt=0, le=50)]
+    climb_speed_m_s: Annotated[float, Field(gt=0, le=10)]
+    descent_speed_m_s: Annotated[float, Field(gt=0, le=10)]
+    yaw_rate_deg_s: Annotated[float, Field(gt=0, le=360)]  # turning to a new heading
+    rounding_m: Annotated[float, Field(ge=0, le=5)]  # corners and joins (Gaussian σ along the path)
+    #: fallen this far behind: the reference waits
+    lag_slowdown_m: Annotated[float, Field(gt=0, le=20)]
+    arrival_tolerance_m: Annotated[float, Field(gt=0, le=5)]  # done: the end reached within this
+    #: ... or this long after the reference ended
+    settle_timeout_s: Annotated[float, Field(gt=0, le=120)]
+
+
+class PhotoConfig(_Model):
+    """Photos of the offboard steps (orbit, survey): what the JPEGs' EXIF says of the camera."""
+
+    camera: str  # default camera for photos (a step may name another)
+    jpeg_quality: Annotated[int, Field(ge=10, le=100)]
+    make: str
+    model: str
+    sensor_width_mm: Annotated[float, Field(gt=0, le=100)]  # focal length in mm = fx × this / width
+
+
 class ControlConfig(_Model):
     follow: FollowControlConfig
+    trajectory: TrajectoryControlConfig
 
 
 class FrameLogConfig(_Model):
@@ -284,6 +313,7 @@ class AppConfig(_Model):
     perception: PerceptionConfig
     estimation: EstimationConfig
     control: ControlConfig
+    photos: PhotoConfig
     log: LogConfig
     sim: SimConfig  # its cameras are vehicle.cameras
 

@@ -278,6 +278,7 @@ def load_mission(name_or_path: str, overrides: list[str] = (),
         # its target, …)
         for i, step in enumerate(steps):
             try:
+                step_kind(step.name).check(step.params, config)
                 step_kind(step.name).pipelines(step.params, config)
             except ValueError as exc:
                 source, line = located.locate(("steps", i, step.name))
@@ -392,6 +393,9 @@ class MissionOutput:
     step: str
     phase: str
     step_index: int = -1  # the running step's place in the plan (−1: the fallback, or none)
+    photos: tuple = ()  # (step index, PhotoRequest) of what ran this tick
+    progress: float = float("nan")  # of the running step (0..1; NaN: not said)
+    plan: dict | None = None  # the running step's plan, the tick it made it
 
 
 @dataclass
@@ -406,6 +410,7 @@ class MissionExecutor:
     _status: str = field(default="running", init=False)
     _in_fallback: bool = field(default=False, init=False)
     _failure: str = field(default="", init=False)
+    _extras: tuple = field(default=((), float("nan"), None), init=False)
 
     @property
     def status(self) -> str:
@@ -454,6 +459,10 @@ class MissionExecutor:
 
     def _handle(self, out: BehaviorOutput, inputs: BehaviorInputs,
                 events: list[str]) -> MissionOutput:
+        photos, _, plan = self._extras  # (a step's last tick and the next one's first add up)
+        self._extras = (photos + tuple((self._index, ph) for ph in out.photos), out.progress,
+                        plan if out.plan is None else
+                        dict(out.plan, step_index=self._index, step=self._current.name))
         if out.status is Status.RUNNING:
             return self._output(out.setpoint, out.requests, events, out.phase)
         name = self._current.name
@@ -492,5 +501,7 @@ class MissionExecutor:
         return self._handle(self._current.activate(inputs), inputs, events)
 
     def _output(self, setpoint, requests, events, phase, finished=False) -> MissionOutput:
+        photos, progress, plan = self._extras
+        self._extras = ((), float("nan"), None)
         return MissionOutput(setpoint, tuple(requests), tuple(events), finished, self._status,
-                             self.step_name, phase, self.step_index)
+                             self.step_name, phase, self.step_index, photos, progress, plan)

@@ -11,6 +11,7 @@ from __future__ import annotations
 import datetime as dt
 import json
 import math
+from dataclasses import dataclass
 from fractions import Fraction
 from pathlib import Path
 
@@ -52,23 +53,79 @@ def exif_gps_block(lat_deg: float, lon_deg: float, alt_amsl_m: float,
     return gps
 
 
-def write_geotagged_jpeg(path: Path, image_bgr: np.ndarray, *, lat_deg: float, lon_deg: float,
-                         alt_amsl_m: float, taken_utc: dt.datetime,
-                         heading_deg: float | None = None, quality: int = 95) -> None:
-    """Write ``image_bgr`` as a JPEG with its position in EXIF."""
+@dataclass(frozen=True, slots=True)
+class CameraExif:
+    """What a photo's EXIF says of the camera that took it."""
+
+    make: str = "autopilot"
+    model: str = "simulated down camera"
+    focal_length_mm: float | None = None
+    focal_length_35mm: int | None = None  # 35 mm equivalent (36 mm wide frame)
+
+
+@dataclass(frozen=True, slots=True)
+class CameraPose:
+    """The camera's attitude when it took a photo, as drone photos carry it in XMP (degrees:
+    yaw clockwise from north, pitch up from level (−90: straight down), roll right)."""
+
+    yaw_deg: float
+    pitch_deg: float
+    roll_deg: float
+    relative_altitude_m: float | None = None  # above home
+
+
+def xmp_packet(pose: CameraPose) -> bytes:
+    """An XMP packet with the camera's attitude in the properties photogrammetry tools read
+    (DJI's ``drone-dji`` namespace, which OpenDroneMap and OpenSfM understand, and the
+    ``Camera`` namespace of multispectral cameras)."""
+    rel = "" if pose.relative_altitude_m is None else \
+        f' drone-dji:RelativeAltitude="{pose.relative_altitude_m:+.3f}"'
+    return (
+        '<?xpacket begin="\ufeff" id="W5M0MpCehiHzreSzNTczkc9d"?>'
+        '<x:xmpmeta xmlns:x="adobe:ns:meta/"><rdf:RDF '
+        'xmlns:rdf="http://www.w3.org/1999/02/22-rdf-syntax-ns#">'
+        '<rdf:Description rdf:about="" xmlns:drone-dji="http://www.dji.com/drone-dji/1.0/" '
+        'xmlns:Camera="http://pix4d.com/camera/1.0/"'
+        f' drone-dji:GimbalYawDegree="{pose.yaw_deg:+.2f}"'
+        f' drone-dji:GimbalPitchDegree="{pose.pitch_deg:+.2f}"'
+        f' drone-dji:GimbalRollDegree="{pose.roll_deg:+.2f}"'
+        f' drone-dji:FlightYawDegree="{pose.yaw_deg:+.2f}"'
+        f'{rel}'
+        f' Camera:Yaw="{pose.yaw_deg:.2f}" Camera:Pitch="{pose.pitch_deg + 90.0:.2f}"'
+        f' Camera:Roll="{pose.roll_deg:.2f}"/>'
+        '</rdf:RDF></x:xmpmeta><?xpacket end="w"?>').encode()
+
+
+def write_geotagged_jpeg(path: Path, image_bgr: np.ndarray, *, lat_deg: float | None,
+                         lon_deg: float | None, alt_amsl_m: float | None,
+                         taken_utc: dt.datetime, heading_deg: float | None = None,
+                         quality: int = 95, camera: CameraExif = CameraExif(),
+                         pose: CameraPose | None = None) -> None:
+    """Write ``image_bgr`` as a JPEG with its position (if known: a vehicle that has not said
+    where its origin is gives none), time and camera in EXIF, and its attitude in XMP."""
     image = Image.fromarray(cv2.cvtColor(image_bgr, cv2.COLOR_BGR2RGB))
     exif = Image.Exif()
-    exif[ExifTags.Base.Make] = "autopilot"
-    exif[ExifTags.Base.Model] = "simulated down camera"
-    exif.get_ifd(ExifTags.IFD.Exif)[ExifTags.Base.DateTimeOriginal] = \
-        taken_utc.strftime("%Y:%m:%d %H:%M:%S")
-    gps = exif.get_ifd(ExifTags.IFD.GPSInfo)
-    gps.update(exif_gps_block(lat_deg, lon_deg, alt_amsl_m, heading_deg))
-    gps[ExifTags.GPS.GPSDateStamp] = taken_utc.strftime("%Y:%m:%d")
-    gps[ExifTags.GPS.GPSTimeStamp] = (_rational(taken_utc.hour, 1), _rational(taken_utc.minute, 1),
-                                      _rational(taken_utc.second + taken_utc.microsecond / 1e6,
-                                                1000))
-    image.save(path, "JPEG", quality=quality, exif=exif)
+    exif[ExifTags.Base.Make] = camera.make
+    exif[ExifTags.Base.Model] = camera.model
+    exif[ExifTags.Base.DateTime] = taken_utc.strftime("%Y:%m:%d %H:%M:%S")
+    sub = exif.get_ifd(ExifTags.IFD.Exif)
+    sub[ExifTags.Base.DateTimeOriginal] = taken_utc.strftime("%Y:%m:%d %H:%M:%S")
+    sub[ExifTags.Base.SubsecTimeOriginal] = f"{taken_utc.microsecond // 1000:03d}"
+    sub[ExifTags.Base.ExifImageWidth] = image.width
+    sub[ExifTags.Base.ExifImageHeight] = image.height
+    if camera.focal_length_mm is not None:
+        sub[ExifTags.Base.FocalLength] = _rational(camera.focal_length_mm, 1000)
+    if camera.focal_length_35mm is not None:
+        sub[ExifTags.Base.FocalLengthIn35mmFilm] = int(camera.focal_length_35mm)
+    if lat_deg is not None and lon_deg is not None and alt_amsl_m is not None:
+        gps = exif.get_ifd(ExifTags.IFD.GPSInfo)
+        gps.update(exif_gps_block(lat_deg, lon_deg, alt_amsl_m, heading_deg))
+        gps[ExifTags.GPS.GPSDateStamp] = taken_utc.strftime("%Y:%m:%d")
+        gps[ExifTags.GPS.GPSTimeStamp] = (
+            _rational(taken_utc.hour, 1), _rational(taken_utc.minute, 1),
+            _rational(taken_utc.second + taken_utc.microsecond / 1e6, 1000))
+    extra = {"xmp": xmp_packet(pose)} if pose is not None else {}
+    image.save(path, "JPEG", quality=quality, exif=exif, **extra)
 
 
 def read_exif_position(path: Path) -> tuple[float, float, float]:

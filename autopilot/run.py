@@ -193,7 +193,8 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
         for camera, setup in setups.items():  # the cameras the mission needs must be
             await first_frame(vehicle, camera,  # streaming before anything takes off
                               plan.config.link.connect_timeout_s, setup.url)
-        runtime = Runtime(vehicle, plan, log, progress=progress, log_cameras=log_cameras)
+        runtime = Runtime(vehicle, plan, log, progress=progress, log_cameras=log_cameras,
+                          photos_dir=out_dir / "photos" if out_dir is not None else None)
         if handle_signals:
             for sig in signals:
                 loop.add_signal_handler(sig, on_signal, sig.name)
@@ -234,6 +235,11 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
             "latency_ms": latency_metrics(log.records),
         },
         "stats": vars(runtime.stats) if runtime is not None else {},
+        "mission_status": int(runtime.status_code) if runtime is not None else None,
+        "photos": ({"taken": runtime.photos.taken, "folder": "photos" if out_dir else None,
+                    "errors": runtime.photos.errors}
+                   if runtime is not None and (runtime.photos.taken or runtime.photos.errors)
+                   else None),
         "warnings": warnings,
         "log": "flight.mcap" if out_dir is not None else None,
     }

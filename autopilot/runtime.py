@@ -38,10 +38,16 @@ import time
 from collections.abc import Callable, Mapping
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
-from autopilot.behaviors.base import BehaviorInputs, Percept, RequestKind, VehicleRequest
+from autopilot.behaviors.base import (
+    BehaviorInputs,
+    Percept,
+    RequestKind,
+    VehicleRequest,
+)
 from autopilot.estimation.target import TargetEstimate
 from autopilot.flightlog import records as ch
 from autopilot.flightlog.log import FlightLog
@@ -53,8 +59,10 @@ from autopilot.mission import (
     MissionPlan,
     build_behavior,
 )
+from autopilot.photo_lane import PhotoLane
 from autopilot.pipeline import Pipeline, make_pipeline
 from autopilot.progress import report_progress
+from autopilot.status import MissionStatus, StatusTracker
 from autopilot.steps import step_kind
 from drivers.base import Frame, LandingTarget, Setpoint, Vehicle, VehicleError, VehicleState
 from drivers.slots import LatestSlot
@@ -125,7 +133,8 @@ def _detect_all(pipelines: list[Pipeline], frame: Frame, hints: list[object | No
 class Runtime:
     def __init__(self, vehicle: Vehicle, plan: MissionPlan, log: FlightLog, *,
                  progress: Callable[[str], None] | None = None,
-                 log_cameras: Mapping[str, float] | None = None) -> None:
+                 log_cameras: Mapping[str, float] | None = None,
+                 photos_dir: Path | None = None) -> None:
         self.vehicle = vehicle
         self.plan = plan
         self.config = plan.config
@@ -158,6 +167,12 @@ class Runtime:
         self._lanes: dict[str, Lane] = {}
         self._group: asyncio.TaskGroup | None = None
         self._detect_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="detect")
+        self._step_photo_camera = [step_kind(step.name).photo_camera(step.params, cfg)
+                                   for step in plan.steps]
+        self.photos = PhotoLane(vehicle, log, cfg, photos_dir)
+        self.status_tracker = StatusTracker()
+        self._status_logged: MissionStatus | None = None
+        self.step_progress = math.nan
         # camera frames for the log: by default the cameras the steps use, at the log's rate
         if log_cameras is None:
             frames = cfg.log.frames
@@ -197,6 +212,7 @@ class Runtime:
                     *self._simulator_tasks(tasks),
                     *self.frame_logger.tasks(tasks),
                 ]
+                self.photos.group = tasks
                 if self._progress is not None:
                     background.append(tasks.create_task(report_progress(
                         self.progress_line, self._progress,
@@ -205,6 +221,7 @@ class Runtime:
                     await self._control()
                 finally:
                     self._use_pipelines(())
+                    await self.photos.use(None)
                     for task in background:
                         task.cancel()
         except* Exception as group:  # the link broke, or a bug: never leave the motors running
@@ -215,6 +232,7 @@ class Runtime:
         finally:
             self._group = None
             self._detect_pool.shutdown(wait=True, cancel_futures=True)
+            self.photos.close()
             self.frame_logger.close()
             self.stats.frames_log_dropped = self.frame_logger.dropped
         return self.status
@@ -261,9 +279,18 @@ class Runtime:
         for event in out.events:
             self._mission_event(now, event)
         self._step, self._phase = out.step, out.phase
+        self.step_progress = out.progress
+        if out.plan is not None:
+            self.log.write(ch.PLANNED_PATH, now, ch.clean(dict(out.plan, time_s=now)))
+        for index, photo in out.photos:
+            self.photos.request(index, self.plan.steps[index].name, photo)
         if out.step_index != self._step_index:
             self._step_index = out.step_index
             self._use_pipelines(self._step_keys[out.step_index] if out.step_index >= 0 else ())
+            await self.photos.use(self._step_photo_camera[out.step_index]
+                                  if out.step_index >= 0 else None)
+        if out.finished and self._state is not None:
+            self._set_status(self.status_tracker.idle(self._state.in_air))
         if out.setpoint is not None and not self._stale:
             self._intent = Intent(out.setpoint, now, now + self.config.runtime.setpoint_expiry_s,
                                   source_frame_s, out.step, out.phase)
@@ -382,6 +409,7 @@ class Runtime:
         async with contextlib.aclosing(self.vehicle.telemetry(buffer=64)) as samples:
             async for state in samples:
                 self._state = state
+                self.photos.add_state(state)
                 for pipeline in pipelines:
                     pipeline.add_state(state)
                 record = ch.vehicle_state_record(state)
@@ -412,7 +440,8 @@ class Runtime:
                 "time_s": now, "source_frame_time_s": intent.source_frame_time_s,
                 "latency_ms": latency, "frame": sp.frame.value,
                 "position_ned_m": sp.position_ned_m, "velocity_m_s": sp.velocity_m_s,
-                "yaw_rad": sp.yaw_rad, "yaw_rate_rad_s": sp.yaw_rate_rad_s,
+                "acceleration_m_s2": sp.acceleration_m_s2, "yaw_rad": sp.yaw_rad,
+                "yaw_rate_rad_s": sp.yaw_rate_rad_s,
                 "expires_s": intent.expires_s, "step": intent.step, "phase": intent.phase})
 
     def _simulator_tasks(self, tasks: asyncio.TaskGroup) -> list[asyncio.Task]:
@@ -478,7 +507,9 @@ class Runtime:
         first = percepts[0] if percepts else None
         return BehaviorInputs(now_s=now, state=state,
                               target=first.target if first is not None else None,
-                              percept=first, percepts=percepts)
+                              percept=first, percepts=percepts,
+                              home_ned_m=self.vehicle.home_ned_m,
+                              global_origin=self.vehicle.global_origin)
 
     def _percept(self, key: str, now: float) -> Percept:
         track = self.tracks[key]
@@ -504,6 +535,30 @@ class Runtime:
 
     def _mission_event(self, time_s: float, event: MissionEvent) -> None:
         self._write_event(time_s, event.kind, event.step_index, event.step, event.text)
+        tracker = self.status_tracker
+        if event.kind == "step_started" and event.step_index >= 0:
+            kind = step_kind(self.plan.steps[event.step_index].name)
+            self._set_status(tracker.step_started(kind.status), event.step_index)
+        elif event.kind == "step_succeeded" and event.step_index >= 0:
+            kind = step_kind(self.plan.steps[event.step_index].name)
+            self._set_status(tracker.step_succeeded(kind.status), event.step_index)
+        elif event.kind in ("fallback_started", "aborted"):
+            self._set_status(tracker.abort())
+
+    @property
+    def status_code(self) -> MissionStatus:
+        return self.status_tracker.code
+
+    def _set_status(self, code: MissionStatus, step_index: int | None = None) -> None:
+        if code == self._status_logged:
+            return
+        self._status_logged = code
+        now = self.clock.now()
+        index = self._step_index if step_index is None else step_index
+        step = self.plan.steps[index].name if 0 <= index < len(self.plan.steps) else ""
+        self.log.write(ch.MISSION_STATUS, now, {
+            "time_s": now, "code": int(code), "status": code.label, "step": step,
+            "step_index": index, "goal_id": None})
 
     def _event(self, time_s: float, kind: str, text: str) -> None:
         """The runtime's own events (``request``, ``runtime``), in the running step."""
@@ -539,7 +594,13 @@ class Runtime:
     def progress_line(self) -> str:
         s = self._state
         now = self.clock.now()
-        parts = [f"t={now:6.1f}s", f"step={self._step or '-'}", f"phase={self._phase or '-'}"]
+        code = self.status_tracker.code
+        parts = [f"t={now:6.1f}s", f"status={int(code)} {code.label}",
+                 f"step={self._step or '-'}", f"phase={self._phase or '-'}"]
+        if math.isfinite(self.step_progress):
+            parts.append(f"progress={100 * self.step_progress:3.0f}%")
+        if self.photos.taken:
+            parts.append(f"photos={self.photos.taken}")
         if s is not None:
             parts += [f"mode={s.mode.value}", f"alt={s.altitude_m:4.1f}m"]
         if self._active:

@@ -30,6 +30,7 @@ from drivers.geometry import yaw_from_quat
 
 if TYPE_CHECKING:
     from drivers.clock import Clock
+    from drivers.geo import GlobalOrigin
 
 NAN = float("nan")
 
@@ -168,8 +169,10 @@ class Setpoint:
 
     NaN in a field means "not controlled" (PX4's convention). Per axis, a finite position is
     tracked with the velocity as feed-forward; with the position NaN the velocity is tracked.
-    Yaw: a finite ``yaw_rad`` is held; otherwise a finite ``yaw_rate_rad_s`` is flown;
-    otherwise the heading is kept. In :attr:`SetpointFrame.BODY_FRD` only velocity is allowed.
+    A finite ``acceleration_m_s2`` is added as feed-forward (a time-parametrised trajectory's
+    second derivative). Yaw: a finite ``yaw_rad`` is held, with a finite ``yaw_rate_rad_s`` as
+    its feed-forward; otherwise a finite ``yaw_rate_rad_s`` is flown; otherwise the heading is
+    kept. In :attr:`SetpointFrame.BODY_FRD` only velocity is allowed.
 
     ``time_s`` is when the setpoint was computed (for latency accounting); drivers do not send it.
     """
@@ -180,13 +183,17 @@ class Setpoint:
     yaw_rate_rad_s: float = NAN
     frame: SetpointFrame = SetpointFrame.LOCAL_NED
     time_s: float = NAN
+    acceleration_m_s2: np.ndarray = field(default_factory=lambda: np.full(3, NAN))
 
     def __post_init__(self) -> None:
         pos = _frozen_array(self.position_ned_m, (3,))
         vel = _frozen_array(self.velocity_m_s, (3,))
+        acc = _frozen_array(self.acceleration_m_s2, (3,))
         object.__setattr__(self, "position_ned_m", pos)
         object.__setattr__(self, "velocity_m_s", vel)
-        if self.frame is SetpointFrame.BODY_FRD and np.isfinite(pos).any():
+        object.__setattr__(self, "acceleration_m_s2", acc)
+        if self.frame is SetpointFrame.BODY_FRD and (np.isfinite(pos).any()
+                                                      or np.isfinite(acc).any()):
             raise ValueError("a BODY_FRD setpoint carries velocity only")
         undefined = ~np.isfinite(pos) & ~np.isfinite(vel)
         if undefined.any():
@@ -212,9 +219,11 @@ class Setpoint:
 
     @classmethod
     def position_velocity(cls, position_ned_m, velocity_ned_m_s, *, yaw_rad: float = NAN,
-                          yaw_rate_rad_s: float = NAN, time_s: float = NAN) -> Setpoint:
+                          yaw_rate_rad_s: float = NAN, time_s: float = NAN,
+                          acceleration_ned_m_s2=(NAN, NAN, NAN)) -> Setpoint:
         return cls(position_ned_m=position_ned_m, velocity_m_s=velocity_ned_m_s,
-                   yaw_rad=yaw_rad, yaw_rate_rad_s=yaw_rate_rad_s, time_s=time_s)
+                   yaw_rad=yaw_rad, yaw_rate_rad_s=yaw_rate_rad_s, time_s=time_s,
+                   acceleration_m_s2=acceleration_ned_m_s2)
 
 
 @dataclass(frozen=True, slots=True)
@@ -397,6 +406,18 @@ class Vehicle(abc.ABC):
         :meth:`send_landing_target` reports (searching for it, then falling back to a normal
         landing, as its PLD_* parameters say)."""
         raise CommandDenied("precision land", "this vehicle has no precision landing mode")
+
+    @property
+    def home_ned_m(self) -> np.ndarray | None:
+        """Home (where the vehicle armed, or was told home is) in the local frame; None while
+        not known (MAVLink: HOME_POSITION)."""
+        return None
+
+    @property
+    def global_origin(self) -> GlobalOrigin | None:
+        """Where the local NED frame's origin is on Earth (PX4's EKF origin), None while not
+        known (a MAVLink vehicle tells it with GPS_GLOBAL_ORIGIN or HOME_POSITION)."""
+        return None
 
     async def send_landing_target(self, target: LandingTarget) -> None:
         """Report the landing target's position (MAVLink LANDING_TARGET, MAV_FRAME_LOCAL_NED:

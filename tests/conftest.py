@@ -35,3 +35,25 @@ def no_camera_config(sim_config):
     """The simulator configuration with both cameras disabled (nothing renders)."""
     cams = {k: v.model_copy(update={"enabled": False}) for k, v in sim_config.cameras.items()}
     return sim_config.model_copy(update={"cameras": cams})
+
+
+# -- long suites: real-time flights of external clients, soak and long profiles --------------
+
+def pytest_addoption(parser):
+    parser.addoption("--run-long", action="store_true", default=False,
+                     help="also run the long real-time flights (MAVSDK's mission, offboard "
+                          "and MAVProxy examples flown end to end: several minutes)")
+
+
+def pytest_configure(config):
+    config.addinivalue_line("markers", "long: a long real-time flight; runs with --run-long")
+
+
+def pytest_collection_modifyitems(config, items):
+    if config.getoption("--run-long"):
+        return
+    skip = pytest.mark.skip(reason="long real-time flight: run with --run-long (the short "
+                                   "version runs by default)")
+    for item in items:
+        if "long" in item.keywords:
+            item.add_marker(skip)

@@ -7,10 +7,12 @@ import enum
 from dataclasses import dataclass
 from typing import ClassVar
 
+import numpy as np
 from pydantic import BaseModel, ConfigDict
 
 from autopilot.estimation.target import TargetEstimate
 from drivers.base import Setpoint, VehicleState
+from drivers.geo import GlobalOrigin
 
 
 class Status(enum.Enum):
@@ -38,6 +40,19 @@ class VehicleRequest:
     time_s: float = 0.0
 
 
+@dataclass(frozen=True, slots=True, eq=False)
+class PhotoRequest:
+    """Take a photo now: the step's photo camera's next frame, saved with the pose it was
+    taken at. ``planned_ned_m``: where the plan put it; ``look_at_ned_m``: what it is of (an
+    orbit's centre), if anything."""
+
+    index: int
+    time_s: float
+    camera: str
+    planned_ned_m: tuple[float, float, float]
+    look_at_ned_m: tuple[float, float, float] | None = None
+
+
 @dataclass(frozen=True, slots=True)
 class Percept:
     """What one perception pipeline has made of its camera's frames, for a step that uses it.
@@ -62,6 +77,10 @@ class BehaviorInputs:
     target: TargetEstimate | None = None  # the step's target, extrapolated to now
     percept: Percept | None = None
     percepts: tuple[Percept, ...] = ()
+    #: where the vehicle armed (local NED; None: not told), and the local frame's place on
+    #: Earth (None: not known yet)
+    home_ned_m: np.ndarray | None = None
+    global_origin: GlobalOrigin | None = None
 
     @property
     def detection(self):
@@ -83,6 +102,11 @@ class BehaviorOutput:
     requests: tuple[VehicleRequest, ...] = ()
     phase: str = ""
     reason: str = ""
+    photos: tuple[PhotoRequest, ...] = ()
+    #: how far the step has got (0..1; NaN: it does not say), for status and goal feedback
+    progress: float = float("nan")
+    #: the step's plan, once, when it has made one (logged on /planning/path)
+    plan: dict | None = None
 
 
 class Params(BaseModel):

@@ -33,6 +33,9 @@ MISSION_EVENTS = "/mission/events"
 MISSION_PLAN = "/mission/plan"
 GROUND_TRUTH = "/sim/ground_truth"
 TIME_SYNC = "/vehicle/time_sync"
+PLANNED_PATH = "/planning/path"  # a trajectory step's plan, when it starts
+PHOTOS = "/photos"  # photos taken by the steps (orbit, survey)
+MISSION_STATUS = "/mission/status"  # the status code (autopilot.status), on each change
 
 
 def detection_topic(pipeline: str) -> str:
@@ -93,8 +96,9 @@ SCHEMAS: dict[str, dict] = {
                            velocity_ned_m_s=_vec(3), position_std_m=_vec(3),
                            velocity_std_m_s=_vec(3), position_cov_m2=_vec(9), updates=_INT),
     SETPOINTS: _obj("Setpoint", time_s=_NUM, source_frame_time_s=_NUM, latency_ms=_NUM,
-                    frame=_STR, position_ned_m=_vec(3), velocity_m_s=_vec(3), yaw_rad=_NUM,
-                    yaw_rate_rad_s=_NUM, expires_s=_NUM, step=_STR, phase=_STR),
+                    frame=_STR, position_ned_m=_vec(3), velocity_m_s=_vec(3),
+                    acceleration_m_s2=_vec(3), yaw_rad=_NUM, yaw_rate_rad_s=_NUM,
+                    expires_s=_NUM, step=_STR, phase=_STR),
     MISSION_EVENTS: _obj("MissionEvent", time_s=_NUM, kind=_STR, step_index=_INT, step=_STR,
                          text=_STR),
     MISSION_PLAN: _obj("MissionPlan", mission=_STR, source=_STR, steps={"type": "array"},
@@ -105,6 +109,19 @@ SCHEMAS: dict[str, dict] = {
                          velocity_ned_m_s=_vec(3), position_std_m=_vec(3), age_s=_NUM,
                          stale=_BOOL, confirmed=_BOOL),
     TIME_SYNC: _obj("TimeSync", time_s=_NUM, vehicle_to_local_s=_NUM, round_trip_s=_NUM),
+    PLANNED_PATH: _obj("PlannedPath", time_s=_NUM, step_index=_INT, step=_STR,
+                       points_ned_m={"type": "array"}, photo_points_ned_m={"type": "array"},
+                       look_at_ned_m={"type": ["array", "null"]}, lines={"type": "array"},
+                       polygon={"type": ["array", "null"]}, angle_deg=_NUM, speed_m_s=_NUM,
+                       duration_s=_NUM, length_m=_NUM, spacing_m=_NUM, altitude_m=_NUM,
+                       radius_m=_NUM, reference={"type": "object"}),
+    PHOTOS: _obj("Photo", time_s=_NUM, index=_INT, step_index=_INT, step=_STR, camera=_STR,
+                 file={"type": ["string", "null"]}, requested_s=_NUM, lat_deg=_NUM,
+                 lon_deg=_NUM, alt_amsl_m=_NUM, position_ned_m=_vec(3), attitude_q=_vec(4),
+                 yaw_deg=_NUM, planned_ned_m=_vec(3), look_at_ned_m={"type": ["array", "null"]},
+                 height_above_home_m=_NUM),
+    MISSION_STATUS: _obj("MissionStatus", time_s=_NUM, code=_INT, status=_STR, step=_STR,
+                         step_index=_INT, goal_id={"type": ["string", "null"]}),
     GROUND_TRUTH: _obj("GroundTruth", time_s=_NUM, vehicle_position_ned_m=_vec(3),
                        vehicle_velocity_ned_m_s=_vec(3), vehicle_attitude_q=_vec(4),
                        wind_ned_m_s=_vec(3), bodies={"type": "object"}),

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from autopilot.flightlog import records as ch
 from autopilot.flightlog.log import ChannelInfo, channel_counts, read_log_checked
 from autopilot.report import data
 
@@ -240,6 +241,89 @@ def _latency(fig, records, phases, target) -> None:
     ax.legend(fontsize=8)
 
 
+def _path(fig, records, phases, target) -> None:
+    """Top-down: the polygon, the planned path, the flown track (truth), the photo points and
+    the photos' footprints (true poses); beside it, the cross-track error over time."""
+    from shapely.geometry import Polygon
+
+    from autopilot.flightlog.metrics import _intrinsics
+    from autopilot.planning.footprint import ground_footprint
+    from autopilot.planning.trajectory import cross_track_m, resample
+
+    plans = records.get(ch.PLANNED_PATH, [])
+    if not plans:
+        raise _NoData("no planned path in this log")
+    truth = records.get(ch.GROUND_TRUTH, [])
+    top, err = fig.subplots(1, 2, gridspec_kw={"width_ratios": [1, 1.4]})
+    cams = {c["name"]: c for c in records.get(ch.CAMERA_INFO, [])}
+    end_times = [e["time_s"] for e in records.get(ch.MISSION_EVENTS, [])
+                 if e.get("kind") in ("step_succeeded", "step_failed", "aborted")]
+    t_truth = np.array([s["time_s"] for s in truth])
+    p_truth = np.array([s["vehicle_position_ned_m"] for s in truth]).reshape(-1, 3)
+    q_truth = np.array([s["vehicle_attitude_q"] for s in truth]).reshape(-1, 4)
+    for k, plan in enumerate(plans):
+        pts = np.array(plan["points_ned_m"], dtype=float)
+        if plan.get("polygon"):
+            rings = plan["polygon"]
+            poly = Polygon(rings[0], rings[1:])
+            for ring in [poly.exterior, *poly.interiors]:
+                xy = np.array(ring.coords)
+                top.fill(xy[:, 1], xy[:, 0], color="#cde", alpha=0.5, lw=0)
+                top.plot(xy[:, 1], xy[:, 0], color="#58a", lw=1)
+        start = plan["time_s"]
+        stop = min([t for t in end_times if t > start] or [math.inf])
+        on = (t_truth >= start) & (t_truth <= stop)
+        label = f"{plan.get('step', 'step')} {plan.get('step_index', k)}"
+        top.plot(pts[:, 1], pts[:, 0], "--", color="#333", lw=0.8,
+                 label="planned" if k == 0 else None)
+        if on.any():
+            top.plot(p_truth[on, 1], p_truth[on, 0], "-", color="#d62728", lw=0.8,
+                     label="flown (truth)" if k == 0 else None)
+            e = cross_track_m(resample(pts, 0.02), p_truth[on])
+            err.plot(t_truth[on], 100 * e, lw=0.8, label=label)
+        photo_pts = np.array(plan.get("photo_points_ned_m") or []).reshape(-1, 3)
+        if len(photo_pts):
+            top.plot(photo_pts[:, 1], photo_pts[:, 0], "k.", ms=3,
+                     label="photo points" if k == 0 else None)
+        look = plan.get("look_at_ned_m")
+        if look is not None:
+            top.plot(look[1], look[0], "r+", ms=10)
+    for photo in records.get(ch.PHOTOS, []):
+        cam = cams.get(photo["camera"])
+        if cam is None or not len(t_truth):
+            continue
+        i = min(int(np.searchsorted(t_truth, photo["time_s"])), len(t_truth) - 1)
+        outline = ground_footprint(_intrinsics(cam), np.array(cam["rotation_body_cam"]),
+                                   np.array(cam["position_body_m"]), p_truth[i], q_truth[i])
+        if outline is not None:
+            ring = np.vstack([outline, outline[:1]])
+            top.plot(ring[:, 1], ring[:, 0], color="#2ca02c", lw=0.4, alpha=0.6)
+    top.set(xlabel="east (m)", ylabel="north (m)", aspect="equal",
+            title="top-down: plan, flight, photo footprints (green)")
+    top.legend(fontsize=7)
+    err.set(xlabel="time (s)", ylabel="cross-track error (cm)",
+            title="distance from the planned path (truth)")
+    _shade(err, phases)
+    err.legend(fontsize=7)
+
+
+def _status(fig, records, phases, target) -> None:
+    """The mission status code over time (seed 004's codes; autopilot.status)."""
+    rows = records.get(ch.MISSION_STATUS, [])
+    if not rows:
+        raise _NoData("no mission status in this log")
+    ax = fig.subplots()
+    t = [r["time_s"] for r in rows]
+    codes = [r["code"] for r in rows]
+    end = max([t[-1], *[s["time_s"] for s in records.get(ch.VEHICLE_STATE, [])[-1:]]])
+    ax.step([*t, end], [*codes, codes[-1]], where="post", color="#333")
+    for ti, code, r in zip(t, codes, rows, strict=True):
+        ax.text(ti, code + 0.3, f"{code} {r.get('status', '')}", fontsize=7, rotation=20)
+    ax.set(xlabel="time (s)", ylabel="status code", title="mission status",
+           ylim=(-0.5, max(codes) + 2.5))
+    _shade(ax, phases)
+
+
 #: panel name (as step kinds list them in their ``report``) → title, drawing, per target?
 PLOTS = {
     "trajectory": ("Trajectories", _trajectories, False),
@@ -249,8 +333,10 @@ PLOTS = {
     "estimate": ("Target estimate the controller flew on, against truth", _estimate, True),
     "velocity": ("Commanded and actual velocity", _velocity, False),
     "latency": ("Latency", _latency, False),
+    "path": ("Planned path and flown track", _path, False),
+    "status": ("Mission status", _status, False),
 }
-ALWAYS = ("trajectory", "velocity")
+ALWAYS = ("trajectory", "velocity", "status")
 
 
 def _panels(records, targets: list) -> list[tuple[str, Callable, object]]:

@@ -11,6 +11,7 @@ from autopilot.steps import (  # noqa: F401 (registers them)
     follow_marker,
     hover_image,
     land_pad,
+    trajectory,
 )
 from autopilot.steps.registry import STEP_KINDS, StepContext, StepKind, register, step_kind
 

@@ -6,8 +6,8 @@ from autopilot.behaviors.flight import Hold, HoldParams, Land, LandParams, Takeo
 from autopilot.steps.registry import StepKind, register
 
 register(StepKind("takeoff", TakeoffParams, lambda params, ctx: Takeoff(params),
-                  description="arm, take off to altitude_m and hold"))
+                  description="arm, take off to altitude_m and hold", status=(1, 2)))
 register(StepKind("hold", HoldParams, lambda params, ctx: Hold(params),
-                  description="hold position for duration_s"))
+                  description="hold position for duration_s", status=(3, 3)))
 register(StepKind("land", LandParams, lambda params, ctx: Land(params),
-                  description="land and wait for the disarm"))
+                  description="land and wait for the disarm", status=(8, 9)))

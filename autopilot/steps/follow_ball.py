@@ -69,4 +69,5 @@ register(StepKind(
     metrics=follow_step_metrics,
     report=("trajectory", "standoff", "detections", "estimate", "velocity", "latency"),
     plan_info=_plan_info,
-    description="follow a coloured ball with a camera for duration_s"))
+    description="follow a coloured ball with a camera for duration_s",
+    status=(13, 14)))

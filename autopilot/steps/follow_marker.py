@@ -27,4 +27,5 @@ register(StepKind(
     metrics=follow_step_metrics,
     report=("trajectory", "standoff", "detections", "estimate", "velocity", "latency"),
     plan_info=lambda params, config: {"standoff_m": params.standoff_m},
-    description="follow a fiducial marker (ArUco/AprilTag) at standoff_m for duration_s"))
+    description="follow a fiducial marker (ArUco/AprilTag) at standoff_m for duration_s",
+    status=(15, 16)))

@@ -128,4 +128,5 @@ register(StepKind(
     pipelines=lambda params, config: (image_spec(config, params.image, params.size_m),),
     metrics=hover_metrics,
     report=("trajectory", "over_target", "detections", "estimate", "latency"),
-    description="hover over a known image on the ground (down camera) for duration_s"))
+    description="hover over a known image on the ground (down camera) for duration_s",
+    status=(17, 18)))

@@ -112,4 +112,5 @@ def landing_metrics(log: Mapping[str, Sequence[Mapping]], intervals: list[tuple[
 register(StepKind(
     "land_pad", LandPadParams, _behavior, pipelines=_spec, metrics=landing_metrics,
     report=("trajectory", "over_target", "detections", "estimate", "latency"),
-    description="search for a landing pad with the down camera, descend onto it, disarm"))
+    description="search for a landing pad with the down camera, descend onto it, disarm",
+    status=(19, 20)))

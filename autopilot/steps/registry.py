@@ -38,6 +38,14 @@ def _no_info(params: Params, config: AppConfig) -> dict:
     return {}
 
 
+def _no_check(params: Params, config: AppConfig) -> None:
+    return None
+
+
+def _no_camera(params: Params, config: AppConfig) -> str | None:
+    return None
+
+
 @dataclass(frozen=True)
 class StepKind:
     name: str
@@ -52,6 +60,13 @@ class StepKind:
     #: what the plan record keeps about it beyond its parameters (e.g. the standoff flown)
     plan_info: Callable[[Params, AppConfig], dict] = _no_info
     description: str = ""
+    #: what the step needs of the configuration, beyond its own parameters (raises ValueError
+    #: naming what is wrong; checked when the mission loads, before anything flies)
+    check: Callable[[Params, AppConfig], None] = _no_check
+    #: its mission status codes (autopilot.status): while it runs, once it has succeeded
+    status: tuple[int, int] = (3, 3)
+    #: the camera it takes photos with (its frames are kept while it runs), or None
+    photo_camera: Callable[[Params, AppConfig], str | None] = _no_camera
 
 
 STEP_KINDS: dict[str, StepKind] = {}

@@ -23,6 +23,7 @@ from drivers.base import (
     VehicleState,
 )
 from drivers.clock import MonotonicClock
+from drivers.geo import GlobalOrigin
 from drivers.mavlink.link import BootTimeMapper
 from drivers.slots import Broadcast
 
@@ -58,6 +59,33 @@ class MavlinkVehicle(Vehicle):
         self._failsafe = False
         #: The newest telemetry sample (None before the first).
         self.latest_state: VehicleState | None = None
+        self._origin: GlobalOrigin | None = None
+        self._home_ned: np.ndarray | None = None
+        self._origin_from_ekf = False  # GPS_GLOBAL_ORIGIN heard (HOME_POSITION then ignored)
+
+    @property
+    def global_origin(self) -> GlobalOrigin | None:
+        return self._origin
+
+    @property
+    def home_ned_m(self) -> np.ndarray | None:
+        return None if self._home_ned is None else self._home_ned.copy()
+
+    def _on_gps_global_origin(self, msg) -> None:
+        """GPS_GLOBAL_ORIGIN: the EKF origin itself."""
+        self._origin = GlobalOrigin(msg.latitude / 1e7, msg.longitude / 1e7, msg.altitude / 1e3)
+        self._origin_from_ekf = True
+
+    def _on_home_position(self, msg) -> None:
+        """HOME_POSITION: home's global and local positions, which place the origin (until
+        GPS_GLOBAL_ORIGIN says it directly)."""
+        if not all(map(math.isfinite, (msg.x, msg.y, msg.z))):
+            return
+        self._home_ned = np.array([msg.x, msg.y, msg.z], dtype=float)
+        if self._origin_from_ekf:
+            return
+        home = GlobalOrigin(msg.latitude / 1e7, msg.longitude / 1e7, msg.altitude / 1e3)
+        self._origin = GlobalOrigin(*home.to_global(-msg.x, -msg.y, -msg.z))
 
     def telemetry(self, buffer: int = 1) -> AsyncIterator[VehicleState]:
         return self._telemetry.subscribe(buffer)

@@ -442,7 +442,8 @@ class MavlinkFace:
             else:
                 setpoint = px4.setpoint_from_mavlink(
                     msg.coordinate_frame, msg.type_mask, (msg.x, msg.y, msg.z),
-                    (msg.vx, msg.vy, msg.vz), msg.yaw, msg.yaw_rate)
+                    (msg.vx, msg.vy, msg.vz), msg.yaw, msg.yaw_rate,
+                    (msg.afx, msg.afy, msg.afz))
         except px4.SetpointNotSupported as exc:
             self.stats.rejected_setpoints += 1
             log.debug("setpoint ignored: %s", exc)
@@ -463,7 +464,8 @@ class MavlinkFace:
         else:
             raise px4.SetpointNotSupported(f"coordinate frame {msg.coordinate_frame}")
         return px4.setpoint_from_mavlink(px4.MAV_FRAME_LOCAL_NED, msg.type_mask, (n, e, d),
-                                         (msg.vx, msg.vy, msg.vz), msg.yaw, msg.yaw_rate)
+                                         (msg.vx, msg.vy, msg.vz), msg.yaw, msg.yaw_rate,
+                    (msg.afx, msg.afy, msg.afz))
 
     def _on_landing_target(self, link: _Link, msg) -> None:
         """LANDING_TARGET, as PX4's receiver takes it: a position in MAV_FRAME_LOCAL_NED is the

@@ -189,12 +189,12 @@ class MavsdkDriver(MavlinkVehicle):
     async def send_setpoint(self, setpoint: Setpoint) -> None:
         self._check_alive()
         system, component = self._target
-        frame, mask, pos, vel, yaw, rate = px4.setpoint_to_mavlink(setpoint)
+        frame, mask, pos, vel, yaw, rate, acc = px4.setpoint_to_mavlink(setpoint)
         fields = {"time_boot_ms": int(self._clock.now() * 1000) & 0xFFFFFFFF,
                   "target_system": system, "target_component": component,
                   "coordinate_frame": frame, "type_mask": mask, "x": pos[0], "y": pos[1],
-                  "z": pos[2], "vx": vel[0], "vy": vel[1], "vz": vel[2], "afx": 0.0,
-                  "afy": 0.0, "afz": 0.0, "yaw": yaw, "yaw_rate": rate}
+                  "z": pos[2], "vx": vel[0], "vy": vel[1], "vz": vel[2], "afx": acc[0],
+                  "afy": acc[1], "afz": acc[2], "yaw": yaw, "yaw_rate": rate}
         await self._send_message("SET_POSITION_TARGET_LOCAL_NED", fields)
 
     async def _send_message(self, name: str, fields: dict) -> None:
@@ -280,6 +280,10 @@ class MavsdkDriver(MavlinkVehicle):
             self._precland = px4.px4_flight_mode(msg.custom_mode) is FlightMode.PRECLAND
             if self._precland:
                 self._mode = FlightMode.PRECLAND
+        elif kind == "HOME_POSITION" and src == self._target:
+            self._on_home_position(msg)
+        elif kind == "GPS_GLOBAL_ORIGIN" and src == self._target:
+            self._on_gps_global_origin(msg)
         elif kind == "TIMESYNC" and msg.tc1 != 0:
             sent = self._timesync_sent.answer(msg.ts1)
             if sent is not None:

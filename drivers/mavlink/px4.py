@@ -104,26 +104,32 @@ SENSOR_PREARM_CHECK = 0x10000000
 # POSITION_TARGET_TYPEMASK bits (set = ignore)
 IGNORE_PX, IGNORE_PY, IGNORE_PZ = 0x1, 0x2, 0x4
 IGNORE_VX, IGNORE_VY, IGNORE_VZ = 0x8, 0x10, 0x20
-IGNORE_ACCEL = 0x40 | 0x80 | 0x100
+IGNORE_AX, IGNORE_AY, IGNORE_AZ = 0x40, 0x80, 0x100
+IGNORE_ACCEL = IGNORE_AX | IGNORE_AY | IGNORE_AZ
 FORCE_SET = 0x200
 IGNORE_YAW = 0x400
 IGNORE_YAW_RATE = 0x800
 _IGNORE_POS = (IGNORE_PX, IGNORE_PY, IGNORE_PZ)
 _IGNORE_VEL = (IGNORE_VX, IGNORE_VY, IGNORE_VZ)
+_IGNORE_ACC = (IGNORE_AX, IGNORE_AY, IGNORE_AZ)
 
 
 class SetpointNotSupported(ValueError):
     """A SET_POSITION_TARGET_LOCAL_NED our vehicle cannot fly (acceleration-only, bad frame)."""
 
 
-def setpoint_to_mavlink(sp: Setpoint) -> tuple[int, int, list[float], list[float], float, float]:
-    """(frame, type_mask, position, velocity, yaw, yaw_rate) for SET_POSITION_TARGET_LOCAL_NED."""
-    mask = IGNORE_ACCEL
+def setpoint_to_mavlink(sp: Setpoint) -> tuple[int, int, list[float], list[float], float, float,
+                                               list[float]]:
+    """(frame, type_mask, position, velocity, yaw, yaw_rate, acceleration) for
+    SET_POSITION_TARGET_LOCAL_NED (acceleration as feed-forward: FORCE_SET is never set)."""
+    mask = 0
     for i in range(3):
         if not math.isfinite(sp.position_ned_m[i]):
             mask |= _IGNORE_POS[i]
         if not math.isfinite(sp.velocity_m_s[i]):
             mask |= _IGNORE_VEL[i]
+        if not math.isfinite(sp.acceleration_m_s2[i]):
+            mask |= _IGNORE_ACC[i]
     if not math.isfinite(sp.yaw_rad):
         mask |= IGNORE_YAW
     if not math.isfinite(sp.yaw_rate_rad_s):
@@ -131,19 +137,24 @@ def setpoint_to_mavlink(sp: Setpoint) -> tuple[int, int, list[float], list[float
     frame = MAV_FRAME_BODY_NED if sp.frame is SetpointFrame.BODY_FRD else MAV_FRAME_LOCAL_NED
     pos = [0.0 if not math.isfinite(v) else float(v) for v in sp.position_ned_m]
     vel = [0.0 if not math.isfinite(v) else float(v) for v in sp.velocity_m_s]
+    acc = [0.0 if not math.isfinite(v) else float(v) for v in sp.acceleration_m_s2]
     yaw = float(sp.yaw_rad) if math.isfinite(sp.yaw_rad) else 0.0
     rate = float(sp.yaw_rate_rad_s) if math.isfinite(sp.yaw_rate_rad_s) else 0.0
-    return frame, mask, pos, vel, yaw, rate
+    return frame, mask, pos, vel, yaw, rate, acc
 
 
 def setpoint_from_mavlink(frame: int, type_mask: int, position, velocity, yaw: float,
-                          yaw_rate: float, time_s: float = NAN) -> Setpoint:
+                          yaw_rate: float, acceleration=(0.0, 0.0, 0.0),
+                          time_s: float = NAN) -> Setpoint:
     """The :class:`Setpoint` a SET_POSITION_TARGET_LOCAL_NED asks for (as PX4 reads it)."""
     if frame not in (MAV_FRAME_LOCAL_NED, MAV_FRAME_BODY_NED):
         raise SetpointNotSupported(f"coordinate frame {frame} (supported: LOCAL_NED 1, "
                                    "BODY_NED 8)")
     pos = np.array([NAN if type_mask & _IGNORE_POS[i] else position[i] for i in range(3)])
     vel = np.array([NAN if type_mask & _IGNORE_VEL[i] else velocity[i] for i in range(3)])
+    # acceleration is a feed-forward here; as a force setpoint (FORCE_SET) it is not flown
+    acc = np.array([NAN if type_mask & (_IGNORE_ACC[i] | FORCE_SET) else acceleration[i]
+                    for i in range(3)])
     yaw_sp = NAN if type_mask & IGNORE_YAW else float(yaw)
     rate_sp = NAN if type_mask & IGNORE_YAW_RATE else float(yaw_rate)
     try:
@@ -153,7 +164,9 @@ def setpoint_from_mavlink(frame: int, type_mask: int, position, velocity, yaw: f
             return Setpoint(velocity_m_s=vel, yaw_rate_rad_s=0.0 if math.isnan(rate_sp)
                             else rate_sp, frame=SetpointFrame.BODY_FRD, time_s=time_s)
         return Setpoint(position_ned_m=pos, velocity_m_s=vel, yaw_rad=yaw_sp,
-                        yaw_rate_rad_s=rate_sp, time_s=time_s)
+                        yaw_rate_rad_s=rate_sp, time_s=time_s,
+                        acceleration_m_s2=np.where(np.isfinite(pos) | np.isfinite(vel), acc,
+                                                   NAN))
     except ValueError as exc:
         if isinstance(exc, SetpointNotSupported):
             raise

@@ -186,10 +186,10 @@ class PymavlinkDriver(MavlinkVehicle):
 
     async def send_setpoint(self, setpoint: Setpoint) -> None:
         self._check_alive()
-        frame, mask, pos, vel, yaw, rate = px4.setpoint_to_mavlink(setpoint)
+        frame, mask, pos, vel, yaw, rate, acc = px4.setpoint_to_mavlink(setpoint)
         system, component = self._require_target()
         self._send(self._link.mav.set_position_target_local_ned_encode(
-            self._boot_ms(), system, component, frame, mask, *pos, *vel, 0.0, 0.0, 0.0, yaw,
+            self._boot_ms(), system, component, frame, mask, *pos, *vel, *acc, yaw,
             rate))
 
     async def close(self) -> None:
@@ -456,4 +456,6 @@ _HANDLERS = {
     "SYS_STATUS": PymavlinkDriver._on_sys_status,
     "DISTANCE_SENSOR": PymavlinkDriver._on_distance_sensor,
     "LOCAL_POSITION_NED": PymavlinkDriver._on_local_position,
+    "HOME_POSITION": PymavlinkDriver._on_home_position,
+    "GPS_GLOBAL_ORIGIN": PymavlinkDriver._on_gps_global_origin,
 }

@@ -276,6 +276,11 @@ class SimDriver(Vehicle):
         return self._require_sim().origin
 
     @property
+    def home_ned_m(self) -> np.ndarray | None:
+        home = self._require_sim().flight.home_ned_m
+        return None if home is None else np.array(home, dtype=float)
+
+    @property
     def geofence_breach(self) -> str | None:
         """Why the vehicle is outside its geofence (None: inside, or no fence)."""
         return self._require_sim().flight.geofence_breach

@@ -192,7 +192,7 @@ def test_setpoints_stop_and_the_vehicle_lands_per_com_obl_rc_act(no_camera_confi
                 await client.receive("HEARTBEAT",
                                      lambda m: px4.px4_flight_mode(m.custom_mode)
                                      is FlightMode.HOLD, timeout_s=30.0)
-                frame, mask, pos, vel, yaw, rate = px4.setpoint_to_mavlink(
+                frame, mask, pos, vel, yaw, rate, _acc = px4.setpoint_to_mavlink(
                     px4.setpoint_from_mavlink(1, 0xDC7, (0, 0, 0), (0.5, 0, 0), 0, 0))
                 for _ in range(15):
                     client.send(client.mav.set_position_target_local_ned_encode(

@@ -39,6 +39,16 @@ MISSION = """QGC WPL 110
 6\t0\t3\t206\t0\t0\t0\t0\t0\t0\t0\t1
 """
 
+#: the short version: home, a takeoff to 4 m, one waypoint 12 m north at 4 m with a camera
+#: trigger distance on the way, and the trigger off
+SHORT_MISSION = """QGC WPL 110
+0\t1\t0\t16\t0\t0\t0\t0\t47.397742\t8.545594\t488.000000\t1
+1\t0\t3\t22\t0\t0\t0\t0\t0\t0\t4.000000\t1
+2\t0\t3\t206\t5\t0\t1\t0\t0\t0\t0\t1
+3\t0\t3\t16\t0\t2\t0\t0\t47.397850\t8.545594\t4.000000\t1
+4\t0\t3\t206\t0\t0\t0\t0\t0\t0\t0\t1
+"""
+
 
 async def _wait(predicate, timeout_s: float, what: str) -> None:
     try:
@@ -50,10 +60,17 @@ async def _wait(predicate, timeout_s: float, what: str) -> None:
 
 
 @pytest.mark.skipif(MAVPROXY is None, reason="MAVProxy is not installed (pip install -e .[test])")
-def test_mavproxy_loads_a_wpl_mission_flies_it_and_returns_home(sim_config, tmp_path):
-    mission_file = tmp_path / "square.waypoints"
-    mission_file.write_text(MISSION)
-    config = sim_with(sim_config, **{"params": {"RTL_RETURN_ALT": 15.0}})
+@pytest.mark.parametrize(("mission", "commands", "last", "altitude_m", "rtl_alt_m"), [
+    pytest.param(SHORT_MISSION, [16, 22, 206, 16, 206], (47.397850, 8.545594), 4.0, 6.0,
+                 id="one-waypoint"),
+    pytest.param(MISSION, [16, 22, 16, 206, 16, 16, 206], (47.397742, 8.545860), 10.0, 15.0,
+                 id="square", marks=pytest.mark.long),
+])
+def test_mavproxy_loads_a_wpl_mission_flies_it_and_returns_home(
+        sim_config, tmp_path, mission, commands, last, altitude_m, rtl_alt_m):
+    mission_file = tmp_path / "mission.waypoints"
+    mission_file.write_text(mission)
+    config = sim_with(sim_config, **{"params": {"RTL_RETURN_ALT": rtl_alt_m}})
 
     async def main():
         async with served(config) as (vehicle, face):
@@ -79,11 +96,11 @@ def test_mavproxy_loads_a_wpl_mission_flies_it_and_returns_home(sim_config, tmp_
                 await _wait(lambda: any("Received" in line and "parameters" in line
                                         for line in output), 30.0, "parameters fetched")
                 command(f"wp load {mission_file}")
-                await _wait(lambda: vehicle.mission_status.total == 7, 20.0, "mission uploaded")
+                await _wait(lambda: vehicle.mission_status.total == len(commands), 20.0,
+                            "mission uploaded")
                 await _wait(lambda: any("MISSION_ACK" in line and "ACCEPTED" in line
                                         for line in output), 10.0, "MISSION_ACK")
-                assert [i.command for i in vehicle.mission_items()] == [16, 22, 16, 206, 16, 16,
-                                                                         206]
+                assert [i.command for i in vehicle.mission_items()] == commands
                 command("long DO_SET_MODE 1 4 4")  # AUTO.MISSION
                 await wait_for_state(vehicle, lambda s: s.mode is FlightMode.MISSION, 10.0,
                                      "MISSION")
@@ -93,9 +110,9 @@ def test_mavproxy_loads_a_wpl_mission_flies_it_and_returns_home(sim_config, tmp_
                             120.0, "the mission flown")
                 corner = vehicle.latest_state.position_ned_m
                 origin = vehicle.global_origin
-                last = origin.to_ned(47.397742, 8.545860, origin.alt_amsl_m)
-                assert math.hypot(corner[0] - last[0], corner[1] - last[1]) < 2.5
-                assert -corner[2] == pytest.approx(10.0, abs=1.0)
+                end = origin.to_ned(*last, origin.alt_amsl_m)
+                assert math.hypot(corner[0] - end[0], corner[1] - end[1]) < 2.5
+                assert -corner[2] == pytest.approx(altitude_m, abs=1.0)
                 command("long DO_SET_MODE 1 4 5")  # AUTO.RTL
                 await wait_for_state(vehicle, lambda s: s.mode is FlightMode.RETURN, 10.0, "RTL")
                 await wait_for_state(vehicle, lambda s: not s.armed, 90.0, "home and disarmed")

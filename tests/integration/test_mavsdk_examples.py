@@ -104,6 +104,7 @@ def test_telemetry(no_camera_config):
     asyncio.run(main())
 
 
+@pytest.mark.long
 def test_fly_mission_with_camera_pause_continue_and_rtl(sim_config):
     # the published waypoints are 40-60 m out at 10 m: a 20 m return altitude keeps the RTL
     # short (RTL_RETURN_ALT is the vehicle's parameter, not the example's business)
@@ -150,6 +151,7 @@ def test_fly_mission_with_camera_pause_continue_and_rtl(sim_config):
     asyncio.run(main())
 
 
+@pytest.mark.long
 def test_offboard_velocity_ned(no_camera_config):
     async def main():
         async with served(no_camera_config) as (vehicle, _face):
@@ -174,6 +176,7 @@ def test_offboard_velocity_ned(no_camera_config):
     asyncio.run(main())
 
 
+@pytest.mark.long
 def test_offboard_position_ned(no_camera_config):
     async def main():
         async with served(no_camera_config) as (vehicle, _face):

@@ -38,10 +38,10 @@ def test_mavsdk_velocity_yaw_mask_reads_as_velocity_with_yaw():
 
 def test_position_yaw_mask_and_round_trip():
     original = Setpoint.position(1.0, -2.0, -3.0, yaw_rad=0.25)
-    frame, mask, pos, vel, yaw, rate = px4.setpoint_to_mavlink(original)
+    frame, mask, pos, vel, yaw, rate, acc = px4.setpoint_to_mavlink(original)
     assert mask == 2552
     assert frame == px4.MAV_FRAME_LOCAL_NED
-    back = px4.setpoint_from_mavlink(frame, mask, pos, vel, yaw, rate)
+    back = px4.setpoint_from_mavlink(frame, mask, pos, vel, yaw, rate, acc)
     assert back.position_ned_m.tolist() == [1.0, -2.0, -3.0]
     assert back.yaw_rad == 0.25
     assert np.isnan(back.velocity_m_s).all()
@@ -63,3 +63,19 @@ def test_body_velocity_round_trip():
 def test_setpoints_we_cannot_fly_are_rejected_clearly(frame, mask, match):
     with pytest.raises(px4.SetpointNotSupported, match=match):
         px4.setpoint_from_mavlink(frame, mask, (0, 0, -2), (0, 0, 0), 0.0, 0.0)
+
+
+def test_acceleration_feed_forward_round_trip():
+    original = Setpoint.position_velocity((1.0, 2.0, -3.0), (0.5, 0.0, 0.0), yaw_rad=0.1,
+                                          yaw_rate_rad_s=0.4,
+                                          acceleration_ned_m_s2=(0.0, 0.8, 0.0))
+    frame, mask, pos, vel, yaw, rate, acc = px4.setpoint_to_mavlink(original)
+    assert mask & px4.IGNORE_ACCEL == 0
+    back = px4.setpoint_from_mavlink(frame, mask, pos, vel, yaw, rate, acc)
+    assert back.acceleration_m_s2.tolist() == [0.0, 0.8, 0.0]
+    assert (back.yaw_rad, back.yaw_rate_rad_s) == (0.1, 0.4)
+    # without one, the acceleration fields are ignored; as a force (FORCE_SET) it is not flown
+    assert px4.setpoint_to_mavlink(Setpoint.position(1, 2, -3))[1] & px4.IGNORE_ACCEL == \
+        px4.IGNORE_ACCEL
+    forced = px4.setpoint_from_mavlink(frame, mask | px4.FORCE_SET, pos, vel, yaw, rate, acc)
+    assert np.isnan(forced.acceleration_m_s2).all()

@@ -124,7 +124,7 @@ class FlightStack:
         self.geofence_breach: str | None = None
 
         # offboard
-        self._offboard_sp: tuple[np.ndarray, np.ndarray, float, float] | None = None
+        self._offboard_sp: tuple[np.ndarray, np.ndarray, float, float, np.ndarray] | None = None
         self._offboard_sp_s = -math.inf
         self._offboard_yaw = 0.0
 
@@ -320,7 +320,8 @@ class FlightStack:
             # PX4 rotates body-frame velocity by the heading at reception
             yaw = yaw_from_quat(self._est.q_ned_frd) if self._est is not None else 0.0
             vel = rot_z(yaw) @ vel
-        self._offboard_sp = (np.array(sp.position_ned_m), vel, sp.yaw_rad, sp.yaw_rate_rad_s)
+        self._offboard_sp = (np.array(sp.position_ned_m), vel, sp.yaw_rad, sp.yaw_rate_rad_s,
+                             np.array(sp.acceleration_m_s2))
         self._offboard_sp_s = now_s
 
     # ------------------------------------------------------------------------------------
@@ -480,16 +481,17 @@ class FlightStack:
             self._event("landed")
 
     def _offboard_setpoint(self, dt: float) -> ControlSetpoint:
-        pos, vel, yaw, yaw_rate = self._offboard_sp
-        if math.isfinite(yaw):
+        pos, vel, yaw, yaw_rate, acc = self._offboard_sp
+        if math.isfinite(yaw):  # held, with the yaw rate (if any) as feed-forward, as PX4
             self._offboard_yaw = yaw
-            yaw_rate_ff = NAN
+            yaw_rate_ff = yaw_rate
         elif math.isfinite(yaw_rate):
             self._offboard_yaw = wrap_pi(self._offboard_yaw + yaw_rate * dt)
             yaw_rate_ff = yaw_rate
         else:
             yaw_rate_ff = NAN
-        return ControlSetpoint(pos.tolist(), vel.tolist(), self._offboard_yaw, yaw_rate_ff)
+        return ControlSetpoint(pos.tolist(), vel.tolist(), self._offboard_yaw, yaw_rate_ff,
+                               acc.tolist())
 
     @staticmethod
     def _offboard_takeoff(csp: ControlSetpoint, est: EstimatedState) -> bool:

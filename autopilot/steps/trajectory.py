@@ -1,0 +1,401 @@
+"""The ``goto``, ``orbit`` and ``survey`` step kinds (seed 004's offboard missions).
+
+Their behaviours are in :mod:`autopilot.behaviors.trajectory`. They need no perception; orbit
+and survey keep a camera's frames for their photos. Their metrics score the flight against the
+plan it logged (``/planning/path``) with the simulator's ground truth:
+
+* ``metrics.path`` (every one): cross-track error — the true position's distance from the
+  planned path — RMS, 95th percentile and maximum (3D, and horizontal), the speed along the
+  path where the plan cruises, the time flown against the time planned;
+* ``metrics.orbit``: the radius flown, the photos (how many of ``images``), and where the orbit's
+  centre lies in each photo (pixels from the image centre, from the true pose and the camera's
+  calibration);
+* ``metrics.survey``: ``coverage`` — the share of the polygon's area inside at least one photo's
+  footprint (the true poses, the camera's intrinsics and lens, laid on the ground) — the overlap
+  between neighbouring photos along a line and between neighbouring lines, the photos.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+from scipy.spatial import cKDTree
+from shapely.geometry import Polygon
+from shapely.ops import unary_union
+
+from autopilot.behaviors.trajectory import (
+    Goto,
+    GotoParams,
+    Orbit,
+    OrbitParams,
+    Survey,
+    SurveyParams,
+    TrajectorySettings,
+    footprint_m,
+)
+from autopilot.config import AppConfig
+from autopilot.estimation.pose_history import slerp
+from autopilot.flightlog import records as ch
+from autopilot.flightlog.metrics import _intrinsics, pixel_of
+from autopilot.planning.footprint import ground_footprint
+from autopilot.planning.trajectory import Limits, cross_track_m, resample
+from autopilot.steps.registry import StepContext, StepKind, register
+from drivers.camera_model import pinhole
+from drivers.geometry import quat_to_matrix
+
+Records = Mapping[str, Sequence[Mapping]]
+
+
+def trajectory_settings(config: AppConfig) -> TrajectorySettings:
+    t = config.control.trajectory
+    return TrajectorySettings(
+        limits=Limits(t.max_speed_m_s, t.accel_m_s2, t.lateral_accel_m_s2, t.jerk_m_s3,
+                      t.climb_speed_m_s, t.descent_speed_m_s),
+        yaw_rate_rad_s=math.radians(t.yaw_rate_deg_s), rounding_m=t.rounding_m,
+        lag_slowdown_m=t.lag_slowdown_m, arrival_tolerance_m=t.arrival_tolerance_m,
+        settle_timeout_s=t.settle_timeout_s)
+
+
+def _photo_camera(params, config: AppConfig) -> str:
+    return params.camera or config.photos.camera
+
+
+def _camera_geometry(config: AppConfig, name: str):
+    """A configured camera's nominal intrinsics (for planning a survey's line spacing)."""
+    cam = config.vehicle.cameras[name]
+    return pinhole(cam.width_px, cam.height_px, cam.hfov_deg)
+
+
+def survey_spacing_m(params: SurveyParams, config: AppConfig) -> float:
+    """The survey's line spacing: as given, or the camera's footprint across the lines at the
+    survey's height × (1 − side_overlap)."""
+    if params.spacing_m is not None:
+        return params.spacing_m
+    intr = _camera_geometry(config, _photo_camera(params, config))
+    across = params.altitude_m * intr.width_px / intr.fx
+    return across * (1.0 - params.side_overlap)
+
+
+def _check_speed(speed: float, config: AppConfig) -> None:
+    top = config.control.trajectory.max_speed_m_s
+    if speed > top:
+        raise ValueError(f"speed_m_s {speed:g} is above control.trajectory.max_speed_m_s "
+                         f"({top:g})")
+
+
+def _check_frame(frame: str) -> None:
+    if frame == "rover":
+        raise ValueError("frame: rover needs a rover position source, and none exists yet "
+                         "(it comes with the rover-landing work): use frame world or home")
+
+
+def _check_camera(params, config: AppConfig) -> None:
+    name = _photo_camera(params, config)
+    cam = config.vehicle.cameras.get(name)
+    if cam is None or not cam.enabled:
+        known = ", ".join(n for n, c in config.vehicle.cameras.items() if c.enabled) or "none"
+        raise ValueError(f"camera {name!r} for the photos is not an enabled camera of "
+                         f"vehicle.cameras (enabled: {known})")
+
+
+def _check_goto(params: GotoParams, config: AppConfig) -> None:
+    _check_speed(params.speed_m_s, config)
+    _check_frame(params.frame)
+
+
+def _check_orbit(params: OrbitParams, config: AppConfig) -> None:
+    _check_speed(params.speed_m_s, config)
+    _check_frame(params.frame)
+    if params.images:
+        _check_camera(params, config)
+    lateral = config.control.trajectory.lateral_accel_m_s2
+    need = params.speed_m_s ** 2 / params.radius_m
+    if need > lateral * 1.001:
+        raise ValueError(
+            f"speed_m_s {params.speed_m_s:g} on a {params.radius_m:g} m radius needs "
+            f"{need:.2f} m/s² towards the centre, more than control.trajectory."
+            f"lateral_accel_m_s2 ({lateral:g}): at most "
+            f"{math.sqrt(lateral * params.radius_m):.2f} m/s on this radius")
+
+
+def _check_survey(params: SurveyParams, config: AppConfig) -> None:
+    _check_speed(params.speed_m_s, config)
+    _check_frame(params.frame)
+    _check_camera(params, config)
+    spacing = survey_spacing_m(params, config)
+    intr = _camera_geometry(config, _photo_camera(params, config))
+    across = params.altitude_m * intr.width_px / intr.fx
+    along = params.altitude_m * intr.height_px / intr.fy
+    if spacing > across:
+        raise ValueError(f"spacing_m {spacing:g} is wider than the camera sees across the lines "
+                         f"from {params.altitude_m:g} m ({across:.1f} m): the photos would "
+                         "leave strips uncovered; lower spacing_m or fly higher")
+    photo = params.photo_spacing_m or spacing
+    if photo > along:
+        raise ValueError(f"photo_spacing_m {photo:g} is longer than the camera sees along the "
+                         f"lines from {params.altitude_m:g} m ({along:.1f} m): the photos "
+                         "would leave gaps; lower photo_spacing_m (or spacing_m) or fly higher")
+
+
+# ------------------------------------------------------------------------------------------
+# Metrics
+# ------------------------------------------------------------------------------------------
+
+
+def _plan_record(log: Records, step: Mapping) -> Mapping | None:
+    return next((r for r in log.get(ch.PLANNED_PATH, [])
+                 if r.get("step_index") == step["index"]), None)
+
+
+class _Truth:
+    def __init__(self, log: Records, start: float, end: float) -> None:
+        rows = [s for s in log.get(ch.GROUND_TRUTH, []) if start <= s["time_s"] <= end]
+        self.t = np.array([s["time_s"] for s in rows])
+        self.p = np.array([s["vehicle_position_ned_m"] for s in rows]).reshape(-1, 3)
+        self.v = np.array([s["vehicle_velocity_ned_m_s"] for s in rows]).reshape(-1, 3)
+        self.q = np.array([s["vehicle_attitude_q"] for s in rows]).reshape(-1, 4)
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+    def pose(self, time_s: float) -> tuple[np.ndarray, np.ndarray] | None:
+        t = self.t
+        if len(t) < 2 or time_s < t[0] or time_s > t[-1]:
+            return None
+        i = min(int(np.searchsorted(t, time_s, side="right")) - 1, len(t) - 2)
+        f = (time_s - t[i]) / (t[i + 1] - t[i]) if t[i + 1] > t[i] else 0.0
+        return self.p[i] + f * (self.p[i + 1] - self.p[i]), slerp(self.q[i], self.q[i + 1], f)
+
+
+def _rms(x) -> float | None:
+    return float(np.sqrt(np.mean(np.square(x)))) if len(x) else None
+
+
+def path_metrics(log: Records, intervals: list[tuple[float, float]], step: Mapping
+                 ) -> tuple[dict, Mapping | None, _Truth | None]:
+    plan = _plan_record(log, step)
+    if plan is None or not intervals:
+        return {}, None, None
+    start, end = float(plan["time_s"]), intervals[-1][1]
+    truth = _Truth(log, start, end)
+    if len(truth) < 2:
+        return {}, plan, None
+    path = resample(np.array(plan["points_ned_m"], dtype=float), 0.02)
+    err3 = cross_track_m(path, truth.p)
+    err2 = cross_track_m(path[:, :2], truth.p[:, :2])
+    # speed along the path where the plan cruises (the nearest path point's tangent)
+    tangents = np.gradient(path, axis=0)
+    tangents /= np.maximum(np.linalg.norm(tangents, axis=1, keepdims=True), 1e-9)
+    _, nearest = cKDTree(path).query(truth.p)
+    along = np.einsum("ij,ij->i", truth.v, tangents[nearest])
+    ref = plan.get("reference") or {}
+    speed = float(plan.get("speed_m_s") or 0.0)
+    cruise = np.zeros(len(truth), dtype=bool)
+    if ref.get("s_m") and speed > 0:
+        s_ref = np.asarray(ref["s_m"], dtype=float)
+        v_ref = np.asarray(ref["speed_m_s"], dtype=float)
+        seg = np.linalg.norm(np.diff(path, axis=0), axis=1)
+        s_path = np.concatenate(([0.0], np.cumsum(seg)))
+        v_at = np.interp(s_path[nearest], s_ref, v_ref)
+        cruise = v_at >= 0.95 * speed
+    out = {
+        "rms_cross_track_m": _rms(err3),
+        "p95_cross_track_m": float(np.percentile(err3, 95)),
+        "max_cross_track_m": float(err3.max()),
+        "rms_horizontal_cross_track_m": _rms(err2),
+        "max_horizontal_cross_track_m": float(err2.max()),
+        "planned_speed_m_s": speed,
+        "along_track_speed_mean_m_s": float(along[cruise].mean()) if cruise.any() else None,
+        "along_track_speed_std_m_s": float(along[cruise].std()) if cruise.any() else None,
+        "flight_time_s": end - start,
+        "planned_time_s": plan.get("duration_s"),
+        "path_length_m": plan.get("length_m"),
+    }
+    return out, plan, truth
+
+
+def _photos_of(log: Records, step: Mapping) -> list[Mapping]:
+    return [r for r in log.get(ch.PHOTOS, []) if r.get("step_index") == step["index"]]
+
+
+def _camera(log: Records, name: str) -> Mapping | None:
+    return next((c for c in log.get(ch.CAMERA_INFO, []) if c["name"] == name), None)
+
+
+def _camera_frame(cam: Mapping, vehicle_p, vehicle_q, point) -> np.ndarray:
+    r_wb = quat_to_matrix(np.asarray(vehicle_q))
+    r_bc = np.array(cam["rotation_body_cam"]).reshape(3, 3)
+    return r_bc.T @ (r_wb.T @ (np.asarray(point, dtype=float) - vehicle_p)
+                     - np.array(cam["position_body_m"]))
+
+
+def orbit_metrics(log: Records, intervals: list[tuple[float, float]], step: Mapping) -> dict:
+    path, plan, truth = path_metrics(log, intervals, step)
+    if plan is None or truth is None:
+        return {}
+    params = step["params"]
+    photos = _photos_of(log, step)
+    look = plan.get("look_at_ned_m")
+    offsets, in_frame = [], 0
+    for photo in photos:
+        cam = _camera(log, photo["camera"])
+        pose = truth.pose(photo["time_s"])
+        if cam is None or pose is None or look is None:
+            continue
+        p_cam = _camera_frame(cam, pose[0], pose[1], look)
+        if p_cam[2] <= 0:
+            offsets.append(math.inf)
+            continue
+        u, v = pixel_of(cam, p_cam)
+        offsets.append(math.hypot(u - cam["cx"], v - cam["cy"]))
+        in_frame += 0 <= u <= cam["width_px"] - 1 and 0 <= v <= cam["height_px"] - 1
+    radius = None
+    if look is not None and photos:
+        t0, t1 = photos[0]["time_s"], photos[-1]["time_s"]
+        on = (truth.t >= t0) & (truth.t <= t1)
+        if on.any():
+            r = np.hypot(truth.p[on, 0] - look[0], truth.p[on, 1] - look[1])
+            radius = {"radius_mean_m": float(r.mean()),
+                      "radius_rms_error_m": _rms(r - params["radius_m"])}
+    finite = [o for o in offsets if math.isfinite(o)]
+    orbit = {
+        **path,
+        "photos": len(photos),
+        "images_planned": int(params.get("images", 0)),
+        "photos_with_gps": sum(1 for p in photos if p.get("lat_deg") is not None),
+        "centre_in_frame": in_frame,
+        "centre_offset_px_mean": float(np.mean(finite)) if finite else None,
+        "centre_offset_px_max": max(offsets) if offsets else None,
+        **(radius or {}),
+    }
+    return {"orbit": orbit}
+
+
+def _footprints(log: Records, photos: Sequence[Mapping], truth: _Truth, ground_down_m: float
+                ) -> list[Polygon | None]:
+    out = []
+    for photo in photos:
+        cam = _camera(log, photo["camera"])
+        pose = truth.pose(photo["time_s"])
+        if cam is None or pose is None:
+            out.append(None)
+            continue
+        outline = ground_footprint(_intrinsics(cam), np.array(cam["rotation_body_cam"]),
+                                   np.array(cam["position_body_m"]), pose[0], pose[1],
+                                   ground_down_m)
+        out.append(Polygon(outline).buffer(0) if outline is not None else None)
+    return out
+
+
+def survey_metrics(log: Records, intervals: list[tuple[float, float]], step: Mapping) -> dict:
+    path, plan, truth = path_metrics(log, intervals, step)
+    if plan is None or truth is None or not plan.get("polygon"):
+        return {}
+    rings = plan["polygon"]
+    area = Polygon(rings[0], rings[1:]).buffer(0)
+    photos = _photos_of(log, step)
+    feet = _footprints(log, photos, truth, 0.0)
+    valid = [f for f in feet if f is not None and not f.is_empty]
+    covered = unary_union(valid).intersection(area).area if valid else 0.0
+    # which line each photo was planned on: the nearest of the plan's lines
+    lines = [np.array(line, dtype=float)[:, :2] for line in plan.get("lines", [])]
+
+    def line_of(photo) -> int:
+        p = np.asarray(photo["planned_ned_m"][:2], dtype=float)
+        dist = []
+        for a, b in lines:
+            ab = b - a
+            f = float(np.clip(np.dot(p - a, ab) / max(np.dot(ab, ab), 1e-12), 0.0, 1.0))
+            dist.append(float(np.linalg.norm(a + f * ab - p)))
+        return int(np.argmin(dist)) if dist else 0
+
+    by_line: dict[int, list[Polygon]] = {}
+    forward = []
+    for photo, foot in zip(photos, feet, strict=True):
+        if foot is None:
+            continue
+        k = line_of(photo)
+        group = by_line.setdefault(k, [])
+        if group and group[-1].area > 0:
+            forward.append(group[-1].intersection(foot).area / group[-1].area)
+        group.append(foot)
+    side = []
+    if len(lines) > 1 and by_line:
+        angle = math.radians(plan.get("angle_deg") or 0.0)
+        normal = np.array([-math.sin(angle), math.cos(angle)])
+        offset = {k: float(np.dot(lines[k].mean(axis=0), normal)) for k in by_line}
+        ordered = sorted(by_line, key=offset.get)
+        for a, b in itertools.pairwise(ordered):
+            ua, ub = unary_union(by_line[a]), unary_union(by_line[b])
+            if ua.area > 0:
+                side.append(ua.intersection(ub).area / ua.area)
+    survey = {
+        **path,
+        "coverage": covered / area.area if area.area > 0 else None,
+        "area_m2": area.area,
+        "photos": len(photos),
+        "photos_planned": len(plan.get("photo_points_ned_m") or []),
+        "photos_with_gps": sum(1 for p in photos if p.get("lat_deg") is not None),
+        "lines": len(lines),
+        "spacing_m": plan.get("spacing_m"),
+        "forward_overlap_mean": float(np.mean(forward)) if forward else None,
+        "forward_overlap_min": float(np.min(forward)) if forward else None,
+        "side_overlap_mean": float(np.mean(side)) if side else None,
+        "side_overlap_min": float(np.min(side)) if side else None,
+    }
+    return {"survey": survey}
+
+
+def goto_metrics(log: Records, intervals: list[tuple[float, float]], step: Mapping) -> dict:
+    path, plan, truth = path_metrics(log, intervals, step)
+    if plan is None or truth is None:
+        return {}
+    end = np.array(plan["points_ned_m"][-1], dtype=float)
+    return {"goto": {**path, "final_error_m": float(np.linalg.norm(truth.p[-1] - end))}}
+
+
+# ------------------------------------------------------------------------------------------
+# Registration
+# ------------------------------------------------------------------------------------------
+
+
+def _goto(params: GotoParams, ctx: StepContext) -> Goto:
+    return Goto(params, trajectory_settings(ctx.config))
+
+
+def _orbit(params: OrbitParams, ctx: StepContext) -> Orbit:
+    return Orbit(params, trajectory_settings(ctx.config), _photo_camera(params, ctx.config))
+
+
+def _survey(params: SurveyParams, ctx: StepContext) -> Survey:
+    return Survey(params, trajectory_settings(ctx.config), _photo_camera(params, ctx.config),
+                  survey_spacing_m(params, ctx.config))
+
+
+def _survey_info(params: SurveyParams, config: AppConfig) -> dict:
+    intr = _camera_geometry(config, _photo_camera(params, config))
+    across = params.altitude_m * intr.width_px / intr.fx
+    along = params.altitude_m * intr.height_px / intr.fy
+    return {"spacing_m": survey_spacing_m(params, config), "footprint_m": [across, along]}
+
+
+register(StepKind(
+    "goto", GotoParams, _goto, check=_check_goto, metrics=goto_metrics,
+    report=("trajectory", "path"), status=(4, 5),
+    description="fly a straight line to position_m (or latlon) at speed_m_s"))
+register(StepKind(
+    "orbit", OrbitParams, _orbit, check=_check_orbit, metrics=orbit_metrics,
+    report=("trajectory", "path", "photos"), status=(6, 7),
+    photo_camera=lambda params, config: _photo_camera(params, config) if params.images
+    else None,
+    description="circle center_m at radius_m facing it, taking `images` photos"))
+register(StepKind(
+    "survey", SurveyParams, _survey, check=_check_survey, metrics=survey_metrics,
+    report=("trajectory", "path", "photos"), status=(10, 11), photo_camera=_photo_camera,
+    plan_info=_survey_info,
+    description="lawnmower over polygon_m at altitude_m, photos every photo_spacing_m"))
+
+__all__ = ["footprint_m", "survey_spacing_m", "trajectory_settings"]

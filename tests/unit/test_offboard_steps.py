@@ -1,0 +1,58 @@
+"""The offboard step kinds' parameters are refused before anything flies, with the key named;
+the mission status codes follow the steps."""
+
+import pytest
+
+from autopilot.config import ConfigError
+from autopilot.mission import load_mission
+from autopilot.status import MissionStatus, StatusTracker
+
+
+def _problems(tmp_path, steps: str) -> str:
+    path = tmp_path / "m.yaml"
+    path.write_text(f"name: m\nsteps:\n  - takeoff: {{}}\n{steps}\n")
+    with pytest.raises(ConfigError) as err:
+        load_mission(str(path))
+    return str(err.value)
+
+
+@pytest.mark.parametrize(("step", "expected"), [
+    ("  - goto: {position_m: [1, 2, 3], latlon: [47.3, 8.5, 3]}", "exactly one of position_m"),
+    ("  - goto: {position_m: [1, 2]}", "steps[1].goto.position_m"),
+    ("  - goto: {position_m: [1, 2, 3], frame: rover}", "frame: rover needs a rover"),
+    ("  - goto: {position_m: [1, 2, 3], frame: moon}", "steps[1].goto.frame"),
+    ("  - goto: {position_m: [1, 2, 3], speed_m_s: 15}", "max_speed_m_s"),
+    ("  - orbit: {center_m: [1, 2], radius_m: 2, speed_m_s: 4}", "at most 1.73 m/s"),
+    ("  - orbit: {center_m: [1, 2], camera: belly}", "camera 'belly'"),
+    ("  - orbit: {radius_m: 3}", "exactly one of center_m"),
+    ("  - survey: {polygon_m: [[0, 0], [10, 10], [10, 0], [0, 10]]}", "not a simple polygon"),
+    ("  - survey: {polygon_m: [[0, 0], [10, 0]]}", "at least 3 corners"),
+    ("  - survey: {polygon_m: [[0, 0], [10, 0], [0, 10]], spacing_m: 30}",
+     "wider than the camera sees"),
+    ("  - survey: {polygon_m: [[0, 0], [10, 0], [0, 10]], photo_spacing_m: 20}",
+     "longer than the camera sees"),
+    ("  - survey: {polygon_m: [[0, 0], [10, 0], [0, 10]], smoothing: spline}",
+     "steps[1].survey.smoothing"),
+])
+def test_bad_offboard_steps_are_refused_naming_the_key(tmp_path, step, expected):
+    assert expected in _problems(tmp_path, step)
+
+
+def test_shipped_offboard_missions_load():
+    for name in ("orbit", "survey"):
+        plan = load_mission(name)
+        assert [s.name for s in plan.steps] == ["takeoff", name, "land"]
+
+
+def test_status_follows_the_steps_and_an_abort_sticks():
+    t = StatusTracker()
+    assert t.code is MissionStatus.IDLE
+    assert t.step_started((1, 2)) == 1
+    assert t.step_succeeded((1, 2)) == 2
+    assert t.step_started((10, 11)) == 10
+    assert t.idle(in_air=True) is MissionStatus.HOVER
+    assert t.abort() == 12
+    assert t.step_started((8, 9)) == 12  # the fallback's landing is still the abort
+    assert t.idle(in_air=False) == 12
+    t.resume()
+    assert t.step_started((4, 5)) == 4
