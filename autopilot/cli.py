@@ -44,7 +44,16 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--out", metavar="DIR", help="where flight.mcap and summary.json go "
                      "(default: a new folder under runs/)")
     run.add_argument("--realtime", action="store_true",
-                     help="run against the wall clock instead of lockstep")
+                     help="run against the wall clock instead of lockstep (implied by --api)")
+    run.add_argument("--lockstep", action="store_true",
+                     help="with --api: keep the lockstep clock (simulated time then runs as "
+                     "fast as the CPU allows while it waits for goals)")
+    run.add_argument("--api", metavar="HOST:PORT",
+                     help="serve the goal API (HTTP + WebSocket; docs at /docs) on HOST:PORT, "
+                     "e.g. 127.0.0.1:8080; an address other than loopback needs a token")
+    run.add_argument("--api-token-file", metavar="FILE",
+                     help="the goal API's bearer token (else the AUTOPILOT_API_TOKEN "
+                     "environment variable); required off loopback")
     run.add_argument("--report", action="store_true",
                      help="write DIR/report.html (plots of the flight) at the end")
     run.add_argument("--record-video", nargs="?", const="", metavar="CAMERA",
@@ -272,6 +281,28 @@ def build_parser() -> argparse.ArgumentParser:
                                metavar="KEY=VALUE", help="override a mission or configuration "
                                "key")
 
+    for name, text in (("goal", "send a goal (one mission step) to a run's goal API"),
+                       ("status", "show a run's status (goal API)"),
+                       ("cancel", "cancel a goal (default: the running one); the vehicle "
+                                  "hovers"),
+                       ("abort", "abort the mission: hold, land, disarm")):
+        client = commands.add_parser(name, help=text)
+        if name == "goal":
+            client.add_argument("goal", metavar="JSON|FILE",
+                                help="the step as JSON, e.g. '{\"goto\": {\"position_m\": "
+                                "[5, 0, 3]}}', or a YAML/JSON file holding it")
+            client.add_argument("--wait", action="store_true",
+                                help="follow the goal until it ends (feedback on stderr)")
+        if name == "cancel":
+            client.add_argument("goal_id", nargs="?", help="default: the running goal")
+        if name == "status":
+            client.add_argument("--watch", action="store_true",
+                                help="print the status every second until interrupted")
+        client.add_argument("--api", default="127.0.0.1:8080", metavar="HOST:PORT",
+                            help="where the run serves its goal API (default 127.0.0.1:8080)")
+        client.add_argument("--api-token-file", metavar="FILE",
+                            help="bearer token (else AUTOPILOT_API_TOKEN)")
+
     validate = commands.add_parser("validate", help="check a mission or configuration file")
     validate.add_argument("file")
     return parser
@@ -303,8 +334,108 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _dispatch(args: argparse.Namespace) -> int:
     handlers = {"run": _run, "sim": _sim, "doctor": _doctor, "report": _report, "video": _video,
                 "replay": _replay, "score": _score, "bench": _bench, "calibrate": _calibrate,
-                "missions": lambda _args: _missions(), "validate": lambda a: _validate(a.file)}
+                "missions": lambda _args: _missions(), "validate": lambda a: _validate(a.file),
+                "goal": _api_client, "status": _api_client, "cancel": _api_client,
+                "abort": _api_client}
     return handlers[args.command](args)
+
+
+def _api_client(args: argparse.Namespace) -> int:
+    """``autopilot goal | status | cancel | abort``: thin clients of a run's goal API."""
+    import json
+    import time
+    import urllib.error
+    import urllib.request
+
+    from autopilot.api import ApiSetupError, parse_address, read_token
+
+    try:
+        host, port = parse_address(args.api)
+        token = read_token(args.api_token_file)
+    except ApiSetupError as exc:
+        raise InputError(str(exc)) from None
+    base = f"http://{host}:{port}"
+
+    def call(method: str, path: str, body=None) -> tuple[int, object]:
+        data = None if body is None else json.dumps(body).encode()
+        req = urllib.request.Request(base + path, data=data, method=method)
+        if data is not None:
+            req.add_header("Content-Type", "application/json")
+        if token:
+            req.add_header("Authorization", f"Bearer {token}")
+        try:
+            with urllib.request.urlopen(req, timeout=10) as resp:
+                return resp.status, json.loads(resp.read() or b"null")
+        except urllib.error.HTTPError as err:
+            try:
+                return err.code, json.loads(err.read() or b"null")
+            except ValueError:
+                return err.code, {"error": err.reason}
+        except (urllib.error.URLError, OSError) as exc:
+            raise InputError(f"no goal API at {base} ({getattr(exc, 'reason', exc)}): is "
+                             "'autopilot run --api' running there?") from None
+
+    def show(code: int, body) -> int:
+        print(json.dumps(body, indent=2))
+        return 0 if code < 400 else EXIT_USAGE
+
+    if args.command == "status":
+        while True:
+            code, body = call("GET", "/api/status")
+            if not args.watch:
+                return show(code, body)
+            b = body if isinstance(body, dict) else {}
+            pos = b.get("position_ned_m") or [float("nan")] * 3
+            print(f"status {b.get('status_code')} {b.get('status')}  step={b.get('step')}  "
+                  f"phase={b.get('phase')}  goal={b.get('goal_id')}  mode={b.get('mode')}  "
+                  f"ned=({pos[0]:.1f}, {pos[1]:.1f}, {pos[2]:.1f})", flush=True)
+            time.sleep(1.0)
+    if args.command == "abort":
+        return show(*call("POST", "/api/abort"))
+    if args.command == "cancel":
+        goal_id = args.goal_id
+        if goal_id is None:
+            goal_id = call("GET", "/api/status")[1].get("goal_id")
+            if goal_id is None:
+                print("no goal is running", file=sys.stderr)
+                return EXIT_USAGE
+        return show(*call("POST", f"/api/goals/{goal_id}/cancel"))
+    text = args.goal
+    from pathlib import Path
+
+    if not text.lstrip().startswith("{") and Path(text).is_file():
+        import yaml
+
+        body = yaml.safe_load(Path(text).read_text())
+    else:
+        try:
+            body = json.loads(text)
+        except ValueError as exc:
+            raise InputError(f"the goal is not JSON ({exc}); e.g. "
+                             "'{\"goto\": {\"position_m\": [5, 0, 3]}}'") from None
+    code, answer = call("POST", "/api/goals", body)
+    if code >= 400 or not args.wait:
+        return show(code, answer)
+    goal_id = answer["goal_id"]
+    print(f"goal {goal_id} accepted", file=sys.stderr)
+    last = None
+    while True:
+        try:
+            code, goal = call("GET", f"/api/goals/{goal_id}")
+        except InputError:
+            print("the run has ended (its goal API is gone)", file=sys.stderr)
+            return 0 if last is not None and last.startswith("succeeded") else 1
+        feedback = goal.get("feedback", {})
+        line = (f"{goal.get('state')} {feedback.get('phase') or ''} "
+                f"{round(100 * feedback['progress']) if feedback.get('progress') else ''}"
+                f"{'%' if feedback.get('progress') else ''} photos={feedback.get('photos', 0)}")
+        if line != last:
+            print(line, file=sys.stderr, flush=True)
+            last = line
+        if goal.get("state") not in ("queued", "running"):
+            print(json.dumps(goal, indent=2))
+            return 0 if goal.get("state") == "succeeded" else 1
+        time.sleep(0.5)
 
 
 def _failure_exit_code(exc: BaseException) -> int | None:
@@ -340,12 +471,26 @@ def _is_link_error(exc: BaseException) -> bool:
 def _run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
+    from autopilot.api import ApiSetupError, parse_address, read_token
     from autopilot.logs import setup_logging
     from autopilot.mission import load_mission
     from autopilot.run import default_out_dir, fly
 
     overrides = [*args.overrides, *([f"driver={args.driver}"] if args.driver else [])]
     plan = load_mission(args.mission, overrides, args.config)
+    token = None
+    if args.api:
+        from autopilot.api import check_listen, is_loopback
+
+        try:
+            host, port = parse_address(args.api)
+            token = read_token(args.api_token_file)
+            if not is_loopback(host) and not token:
+                raise ApiSetupError(f"--api {args.api} is reachable from other machines: give "
+                                    "a token (--api-token-file FILE, or AUTOPILOT_API_TOKEN)")
+            check_listen(host, port)
+        except ApiSetupError as exc:
+            raise InputError(str(exc)) from None
     out = Path(args.out) if args.out else default_out_dir(plan)
     if plan.config.driver != "sim":
         _check_network_exposure("--connect", args.connect or plan.config.link.connect,
@@ -358,11 +503,13 @@ def _run(args: argparse.Namespace) -> int:
         print(line, file=sys.stderr, flush=True)
 
     print(f"mission {plan.mission.name} ({plan.source}); log in {out}", file=sys.stderr)
-    summary = asyncio.run(fly(plan, out, realtime=args.realtime, progress=progress,
+    realtime = args.realtime or (bool(args.api) and not args.lockstep)
+    summary = asyncio.run(fly(plan, out, realtime=realtime, progress=progress,
                               handle_signals=True, connect=args.connect, video=args.video,
                               calibration=args.calibration,
                               record_video=args.record_video,
-                              signing_key=Path(args.signing_key) if args.signing_key else None))
+                              signing_key=Path(args.signing_key) if args.signing_key else None,
+                              api=args.api, api_token=token))
     if sys.stderr.isatty():
         sys.stderr.write("\n")
     follow = summary["metrics"].get("follow") or {}

@@ -370,9 +370,11 @@ class MissionEvent:
     """Something the mission did, as the flight log keeps it (``/mission/events``).
 
     ``kind``: ``step_started``, ``step_succeeded``, ``step_failed``, ``fallback_started``,
-    ``fallback_ended``, ``mission_completed``, ``aborted``, ``request_refused`` (the mission),
-    ``request`` and ``runtime`` (the runtime's own); ``step_index`` is the step's place in the
-    plan (−1 for the fallback and the mission as a whole); ``text`` is for people."""
+    ``fallback_ended``, ``mission_completed``, ``aborted``, ``request_refused``,
+    ``goal_cancelled``, ``standby`` (back to waiting for goals) (the mission), ``request``,
+    ``runtime`` and ``goal_refused`` (the runtime's own); ``step_index`` is the step's place
+    in the plan, or a goal's index after the plan's steps (−1 for the fallback and the
+    mission as a whole); ``text`` is for people."""
 
     kind: str
     step_index: int
@@ -401,7 +403,13 @@ class MissionOutput:
 @dataclass
 class MissionExecutor:
     """Runs behaviours in order. A failed step hands over to the fallback (a safe stop:
-    hold, land, disarm); :meth:`abort` does the same on request (Ctrl-C)."""
+    hold, land, disarm); :meth:`abort` does the same on request (Ctrl-C).
+
+    Goals (the goal API): while a step that takes goals runs (``accepts_goals``: standby),
+    :meth:`start_goal` runs a goal's behaviour in its place, under the goal's own index; when
+    the goal ends — succeeded, failed or cancelled (:meth:`cancel_goal`) — the waiting step is
+    activated again (it hovers where the vehicle is). A goal that fails does not end the
+    mission; only an abort does (the fallback)."""
 
     behaviors: list[Behavior]
     fallback: Callable[[], Behavior] = SafeStop
@@ -411,10 +419,36 @@ class MissionExecutor:
     _in_fallback: bool = field(default=False, init=False)
     _failure: str = field(default="", init=False)
     _extras: tuple = field(default=((), float("nan"), None), init=False)
+    _waiting: tuple[int, Behavior] | None = field(default=None, init=False)  # under a goal
 
     @property
     def status(self) -> str:
         return self._status
+
+    @property
+    def accepts_goals(self) -> bool:
+        """A goal may start now: a step that takes goals is running, and no goal is."""
+        return (not self._in_fallback and self._waiting is None and self._current is not None
+                and getattr(self._current, "accepts_goals", False))
+
+    @property
+    def goal_running(self) -> bool:
+        return self._waiting is not None
+
+    def start_goal(self, behavior: Behavior, index: int, inputs: BehaviorInputs
+                   ) -> MissionOutput:
+        if not self.accepts_goals:
+            raise RuntimeError("no step is waiting for goals")
+        self._waiting = (self._index, self._current)
+        self._index, self._current = index, behavior
+        return self._handle(behavior.activate(inputs), inputs, [
+            self._event("step_started", f"goal {behavior.name} started")])
+
+    def cancel_goal(self, inputs: BehaviorInputs, reason: str = "cancelled") -> MissionOutput:
+        if self._waiting is None:
+            return self._output(None, (), [], "")
+        return self._resume(inputs, [self._event("goal_cancelled",
+                                                 f"goal {self.step_name} {reason}")])
 
     @property
     def step_name(self) -> str:
@@ -473,6 +507,12 @@ class MissionExecutor:
                 self._status = "failed"
             self._current = None
             return self._output(out.setpoint, out.requests, events, out.phase, finished=True)
+        if self._waiting is not None:  # a goal ended: back to the step that waits for goals
+            if out.status is Status.SUCCEEDED:
+                events.append(self._event("step_succeeded", f"goal {name} succeeded"))
+            else:
+                events.append(self._event("step_failed", f"goal {name} failed: {out.reason}"))
+            return self._resume(inputs, events)
         if out.status is Status.SUCCEEDED:
             events.append(self._event("step_succeeded", f"step {name} succeeded"))
             return self._advance(inputs, events, out.setpoint)
@@ -494,8 +534,15 @@ class MissionExecutor:
         events.append(self._event("step_started", f"step {self._current.name} started"))
         return self._handle(self._current.activate(inputs), inputs, events)
 
+    def _resume(self, inputs: BehaviorInputs, events: list) -> MissionOutput:
+        self._index, self._current = self._waiting
+        self._waiting = None
+        events.append(self._event("standby", f"{self._current.name}: waiting for goals"))
+        return self._handle(self._current.activate(inputs), inputs, events)
+
     def _enter_fallback(self, inputs: BehaviorInputs, events: list) -> MissionOutput:
         self._in_fallback = True
+        self._waiting = None
         self._current = self.fallback()
         events.append(self._event("fallback_started", f"fallback {self._current.name} started"))
         return self._handle(self._current.activate(inputs), inputs, events)

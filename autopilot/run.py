@@ -13,12 +13,14 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
+from autopilot.api import ApiServer, parse_address
 from autopilot.cameras import camera_setups, parse_camera_options
 from autopilot.config import ConfigError, Problem
 from autopilot.flightlog import records as ch
 from autopilot.flightlog.log import FlightLog
 from autopilot.flightlog.metrics import latency_metrics
 from autopilot.flightlog.records import clean
+from autopilot.goals import GoalManager
 from autopilot.mission import MissionPlan
 from autopilot.process import StealMeter
 from autopilot.runtime import Runtime
@@ -150,12 +152,15 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
               handle_signals: bool = False, connect: str | None = None,
               video: str | Sequence[str] | None = None,
               calibration: str | Path | Sequence[str] | None = None,
-              record_video: str | None = None, signing_key: Path | None = None) -> dict:
+              record_video: str | None = None, signing_key: Path | None = None,
+              api: str | None = None, api_token: str | None = None,
+              on_api: Callable[[object], None] | None = None) -> dict:
     """Fly ``plan`` and return its summary (also written to ``out_dir/summary.json``).
 
     ``record_video`` names a camera whose every frame is logged (for ``onboard.mp4``; "" is
-    the followed camera). Warnings (an uncalibrated camera) go to ``progress`` and into the
-    summary."""
+    the followed camera). ``api`` (``HOST:PORT``) serves the goal API for the flight
+    (:mod:`autopilot.api`; ``on_api`` is called with the server once it is created). Warnings
+    (an uncalibrated camera) go to ``progress`` and into the summary."""
     warnings: list[str] = []
 
     def warn(text: str) -> None:
@@ -193,8 +198,18 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
         for camera, setup in setups.items():  # the cameras the mission needs must be
             await first_frame(vehicle, camera,  # streaming before anything takes off
                               plan.config.link.connect_timeout_s, setup.url)
+        goals = GoalManager(plan.config) if api is not None else None
         runtime = Runtime(vehicle, plan, log, progress=progress, log_cameras=log_cameras,
-                          photos_dir=out_dir / "photos" if out_dir is not None else None)
+                          photos_dir=out_dir / "photos" if out_dir is not None else None,
+                          goals=goals)
+        if api is not None:
+            host, port = parse_address(api)
+            server = ApiServer(runtime, host, port, api_token)
+            runtime.add_service(server)
+            if on_api is not None:
+                on_api(server)
+            if progress is not None:
+                progress(f"goal API on http://{host}:{port}/api (documented at /docs)")
         if handle_signals:
             for sig in signals:
                 loop.add_signal_handler(sig, on_signal, sig.name)
@@ -236,6 +251,8 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
         },
         "stats": vars(runtime.stats) if runtime is not None else {},
         "mission_status": int(runtime.status_code) if runtime is not None else None,
+        "goals": [g.as_dict() for g in runtime.goals.goals.values()]
+        if runtime is not None and runtime.goals is not None else None,
         "photos": ({"taken": runtime.photos.taken, "folder": "photos" if out_dir else None,
                     "errors": runtime.photos.errors}
                    if runtime is not None and (runtime.photos.taken or runtime.photos.errors)

@@ -35,10 +35,11 @@ import asyncio
 import contextlib
 import math
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 
@@ -52,11 +53,13 @@ from autopilot.estimation.target import TargetEstimate
 from autopilot.flightlog import records as ch
 from autopilot.flightlog.log import FlightLog
 from autopilot.framelog import FrameLogger
+from autopilot.goals import Goal, GoalError, GoalManager
 from autopilot.mission import (
     MissionEvent,
     MissionExecutor,
     MissionOutput,
     MissionPlan,
+    Step,
     build_behavior,
 )
 from autopilot.photo_lane import PhotoLane
@@ -64,8 +67,27 @@ from autopilot.pipeline import Pipeline, make_pipeline
 from autopilot.progress import report_progress
 from autopilot.status import MissionStatus, StatusTracker
 from autopilot.steps import step_kind
-from drivers.base import Frame, LandingTarget, Setpoint, Vehicle, VehicleError, VehicleState
+from drivers.base import (
+    FlightMode,
+    Frame,
+    LandingTarget,
+    Setpoint,
+    Vehicle,
+    VehicleError,
+    VehicleState,
+)
 from drivers.slots import LatestSlot
+
+
+class Service(Protocol):
+    """Something the runtime runs for the whole flight beside the mission (the goal API's
+    web server): ``run`` until ``stop`` is awaited."""
+
+    name: str
+
+    async def run(self) -> None: ...
+
+    async def stop(self) -> None: ...
 
 
 @dataclass(slots=True)
@@ -134,7 +156,8 @@ class Runtime:
     def __init__(self, vehicle: Vehicle, plan: MissionPlan, log: FlightLog, *,
                  progress: Callable[[str], None] | None = None,
                  log_cameras: Mapping[str, float] | None = None,
-                 photos_dir: Path | None = None) -> None:
+                 photos_dir: Path | None = None, goals: GoalManager | None = None,
+                 services: Sequence[Service] = ()) -> None:
         self.vehicle = vehicle
         self.plan = plan
         self.config = plan.config
@@ -169,6 +192,11 @@ class Runtime:
         self._detect_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="detect")
         self._step_photo_camera = [step_kind(step.name).photo_camera(step.params, cfg)
                                    for step in plan.steps]
+        #: the mission's steps, then the goals run so far (a goal's index is its place here)
+        self._steps: list[Step] = list(plan.steps)
+        self.goals = goals
+        self._services = list(services)
+        self._aborting = False
         self.photos = PhotoLane(vehicle, log, cfg, photos_dir)
         self.status_tracker = StatusTracker()
         self._status_logged: MissionStatus | None = None
@@ -213,6 +241,8 @@ class Runtime:
                     *self.frame_logger.tasks(tasks),
                 ]
                 self.photos.group = tasks
+                for service in self._services:
+                    background.append(tasks.create_task(service.run(), name=service.name))
                 if self._progress is not None:
                     background.append(tasks.create_task(report_progress(
                         self.progress_line, self._progress,
@@ -222,6 +252,8 @@ class Runtime:
                 finally:
                     self._use_pipelines(())
                     await self.photos.use(None)
+                    for service in self._services:
+                        await service.stop()
                     for task in background:
                         task.cancel()
         except* Exception as group:  # the link broke, or a bug: never leave the motors running
@@ -269,7 +301,7 @@ class Runtime:
                 await self._last_resort()
                 return
             else:
-                out = executor.update(inputs)
+                out = self._serve_goals(inputs) or executor.update(inputs)
             await self._apply(out, source)
         self.status = executor.status
         self.reason = executor.failure
@@ -283,7 +315,14 @@ class Runtime:
         if out.plan is not None:
             self.log.write(ch.PLANNED_PATH, now, ch.clean(dict(out.plan, time_s=now)))
         for index, photo in out.photos:
-            self.photos.request(index, self.plan.steps[index].name, photo)
+            self.photos.request(index, self._steps[index].name, photo)
+            goal = self._goal_at(index)
+            if goal is not None:
+                goal.photos += 1
+        goal = self._goal_at(out.step_index)
+        if goal is not None and goal.active:
+            goal.phase = out.phase
+            goal.progress = out.progress
         if out.step_index != self._step_index:
             self._step_index = out.step_index
             self._use_pipelines(self._step_keys[out.step_index] if out.step_index >= 0 else ())
@@ -304,11 +343,114 @@ class Runtime:
                 await self._apply(failed)
                 return
 
+    # ------------------------------------------------------------------------------------
+    # Goals (the goal API)
+    # ------------------------------------------------------------------------------------
+
+    def add_service(self, service: Service) -> None:
+        """Run ``service`` beside the mission (before :meth:`run`)."""
+        self._services.append(service)
+
+    def _serve_goals(self, inputs: BehaviorInputs) -> MissionOutput | None:
+        """Serve what the goal API asked since the last tick: an abort, a cancel, a queued
+        goal (when the mission waits for one). None: nothing to do."""
+        goals, executor = self.goals, self._executor
+        if goals is None:
+            return None
+        if goals.abort_requested is not None and not self._aborting:
+            self._aborting = True
+            return executor.abort(goals.abort_requested, inputs)
+        goal = goals.running()
+        if goal is None:
+            return None
+        now = self.clock.now()
+        if goal.cancel_requested:
+            if goal.state == "queued":
+                goal.state, goal.ended_s, goal.reason = "cancelled", now, "cancelled"
+                return None
+            if executor.goal_running:
+                return executor.cancel_goal(inputs)
+        if goal.state == "queued" and executor.accepts_goals:
+            kind = step_kind(goal.step.name)
+            specs = kind.pipelines(goal.step.params, self.config)
+            for spec in specs:
+                if spec.key not in self.pipelines:
+                    self.pipelines[spec.key] = make_pipeline(self.config, spec)
+                    self.tracks[spec.key] = Track(self.pipelines[spec.key])
+            goal.index = len(self._steps)
+            self._steps.append(goal.step)
+            self._step_keys.append(tuple(spec.key for spec in specs))
+            self._step_photo_camera.append(kind.photo_camera(goal.step.params, self.config))
+            self.log.write(ch.MISSION_GOALS, now, ch.clean({
+                **self._step_record(goal.index, goal.step), "goal_id": goal.id,
+                "time_s": now}))
+            goal.state, goal.started_s = "running", now
+            behavior = build_behavior(goal.step, self.config, self.vehicle.cameras)
+            return executor.start_goal(behavior, goal.index, inputs)
+        return None
+
+    def _goal_at(self, index: int):
+        if self.goals is None or index < len(self.plan.steps):
+            return None
+        return next((g for g in self.goals.goals.values() if g.index == index), None)
+
+    def _goal_event(self, event: MissionEvent) -> None:
+        goal = self._goal_at(event.step_index)
+        now = self.clock.now()
+        if goal is not None:
+            if event.kind == "step_succeeded":
+                goal.state, goal.ended_s = "succeeded", now
+            elif event.kind == "step_failed":
+                goal.state, goal.ended_s, goal.reason = "failed", now, event.text
+            elif event.kind == "goal_cancelled":
+                goal.state, goal.ended_s, goal.reason = "cancelled", now, "cancelled"
+        if event.kind in ("aborted", "fallback_started") and self.goals is not None:
+            for g in self.goals.goals.values():
+                if g.active:
+                    g.state, g.ended_s, g.reason = "aborted", now, event.text
+
+    def api_status(self) -> dict:
+        """The goal API's ``/api/status``: the mission status, the step (or goal) running,
+        and the vehicle's state as telemetry says it."""
+        s = self._state
+        code = self.status_tracker.code
+        goal = self.goals.running() if self.goals is not None else None
+        out = {"status_code": int(code), "status": code.label, "step": self._step,
+               "phase": self._phase, "goal_id": goal.id if goal is not None else None,
+               "time_s": self.clock.now(),
+               "progress": self.step_progress if math.isfinite(self.step_progress) else None,
+               "waiting_for_goals": self.waiting_for_goals,
+               "photos": self.photos.taken}
+        if s is None:
+            return {**out, "position_ned_m": None, "velocity_ned_m_s": None, "yaw_deg": None,
+                    "armed": None, "mode": None, "battery_fraction": None, "in_air": None}
+        battery = s.battery.remaining_fraction
+        return {**out, "position_ned_m": [float(v) for v in s.position_ned_m],
+                "velocity_ned_m_s": [float(v) for v in s.velocity_ned_m_s],
+                "yaw_deg": math.degrees(s.yaw_rad), "armed": s.armed, "mode": s.mode.value,
+                "battery_fraction": battery if math.isfinite(battery) else None,
+                "in_air": s.in_air}
+
+    @property
+    def waiting_for_goals(self) -> bool:
+        return self._executor is not None and self._executor.accepts_goals
+
+    def submit_goal(self, body) -> Goal:
+        """A goal from the API (validated and queued, or GoalError)."""
+        if self.goals is None:
+            raise GoalError(409, "this run takes no goals")
+        s = self._state
+        return self.goals.submit(body, self.clock.now(), self.status_tracker.code,
+                                 self.waiting_for_goals, bool(s is not None and s.in_air))
+
     async def _perform(self, request: VehicleRequest) -> None:
         v = self.vehicle
         if request.kind is RequestKind.LANDING_TARGET:  # a stream, as setpoints: not an event
             await v.send_landing_target(LandingTarget(request.time_s, request.position_ned_m))
             return
+        if request.kind is RequestKind.START_OFFBOARD and self._state is not None and \
+                self._state.mode is FlightMode.OFFBOARD:
+            return  # already there (one offboard step after another): nothing to ask
         self._event(self.clock.now(), "request", f"request {request.kind.value}")
         if request.kind is RequestKind.ARM:
             await v.arm()
@@ -405,12 +547,11 @@ class Runtime:
     # ------------------------------------------------------------------------------------
 
     async def _telemetry(self) -> None:
-        pipelines = list(self.pipelines.values())
         async with contextlib.aclosing(self.vehicle.telemetry(buffer=64)) as samples:
             async for state in samples:
                 self._state = state
                 self.photos.add_state(state)
-                for pipeline in pipelines:
+                for pipeline in self.pipelines.values():
                     pipeline.add_state(state)
                 record = ch.vehicle_state_record(state)
                 record["received_s"] = self.clock.now()
@@ -536,14 +677,19 @@ class Runtime:
     def _mission_event(self, time_s: float, event: MissionEvent) -> None:
         self._write_event(time_s, event.kind, event.step_index, event.step, event.text)
         tracker = self.status_tracker
+        self._goal_event(event)
+        codes = step_kind(self._steps[event.step_index].name).status \
+            if event.step_index >= 0 else None
+        in_air = self._state is not None and self._state.in_air
         if event.kind == "step_started" and event.step_index >= 0:
-            kind = step_kind(self.plan.steps[event.step_index].name)
-            self._set_status(tracker.step_started(kind.status), event.step_index)
-        elif event.kind == "step_succeeded" and event.step_index >= 0:
-            kind = step_kind(self.plan.steps[event.step_index].name)
-            self._set_status(tracker.step_succeeded(kind.status), event.step_index)
+            self._set_status(tracker.step_started(codes) if codes is not None
+                             else tracker.idle(in_air), event.step_index)
+        elif event.kind == "step_succeeded" and codes is not None:
+            self._set_status(tracker.step_succeeded(codes), event.step_index)
         elif event.kind in ("fallback_started", "aborted"):
             self._set_status(tracker.abort())
+        elif event.kind in ("standby", "goal_cancelled"):
+            self._set_status(tracker.idle(in_air), event.step_index)
 
     @property
     def status_code(self) -> MissionStatus:
@@ -555,10 +701,11 @@ class Runtime:
         self._status_logged = code
         now = self.clock.now()
         index = self._step_index if step_index is None else step_index
-        step = self.plan.steps[index].name if 0 <= index < len(self.plan.steps) else ""
+        step = self._steps[index].name if 0 <= index < len(self._steps) else ""
+        goal = self._goal_at(index)
         self.log.write(ch.MISSION_STATUS, now, {
             "time_s": now, "code": int(code), "status": code.label, "step": step,
-            "step_index": index, "goal_id": None})
+            "step_index": index, "goal_id": goal.id if goal is not None else None})
 
     def _event(self, time_s: float, kind: str, text: str) -> None:
         """The runtime's own events (``request``, ``runtime``), in the running step."""
@@ -571,19 +718,21 @@ class Runtime:
         if self._progress is not None and kind != "request":
             self._progress(f"[{time_s:7.2f} s] {text}")
 
+    def _step_record(self, index: int, step: Step) -> dict:
+        """What the flight log keeps about a step (or a goal), for scoring and replay."""
+        kind = step_kind(step.name)
+        specs = kind.pipelines(step.params, self.config)
+        return ch.clean({
+            "name": step.name, "index": index, "params": step.params.model_dump(),
+            "pipelines": [{"name": spec.key, "kind": spec.kind, "camera": spec.camera,
+                           "truth_body": spec.truth_body, "size_m": spec.target_size_m,
+                           "target": spec.target}
+                          for spec in specs],
+            **kind.plan_info(step.params, self.config)})
+
     def _log_plan(self) -> None:
         plan = self.plan
-        steps = []
-        for index, step in enumerate(plan.steps):
-            kind = step_kind(step.name)
-            specs = plan.pipelines(index)
-            steps.append(ch.clean({
-                "name": step.name, "index": index, "params": step.params.model_dump(),
-                "pipelines": [{"name": spec.key, "kind": spec.kind, "camera": spec.camera,
-                               "truth_body": spec.truth_body, "size_m": spec.target_size_m,
-                               "target": spec.target}
-                              for spec in specs],
-                **kind.plan_info(step.params, plan.config)}))
+        steps = [self._step_record(index, step) for index, step in enumerate(plan.steps)]
         self.log.write(ch.MISSION_PLAN, self.clock.now(), ch.clean({
             "mission": plan.mission.name, "source": str(plan.source), "steps": steps,
             # (sim.cameras is a copy of vehicle.cameras, not a setting of its own)

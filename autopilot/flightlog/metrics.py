@@ -62,8 +62,9 @@ class FollowedTarget:
 def step_intervals(events: Sequence[Mapping], end_s: float, *, step_index: int | None = None,
                    step: str | None = None) -> list[tuple[float, float]]:
     """When a step ran: by its place in the plan (``step_index``) or by kind (``step``).
-    From a step's ``step_started`` event to its ``step_succeeded``/``step_failed`` or the
-    mission's ``aborted``. (Logs from before events had kinds: by their text.)"""
+    From a step's ``step_started`` event to its ``step_succeeded``/``step_failed`` (a goal's
+    ``goal_cancelled``) or the mission's ``aborted``. (Logs from before events had kinds: by
+    their text.)"""
     intervals, start = [], None
     for e in events:
         kind = e.get("kind")
@@ -74,7 +75,8 @@ def step_intervals(events: Sequence[Mapping], end_s: float, *, step_index: int |
         if kind == "step_started" and ours:
             start = e["time_s"]
         elif start is not None and (kind == "aborted" or
-                                    (kind in ("step_succeeded", "step_failed") and ours)):
+                                    (kind in ("step_succeeded", "step_failed",
+                                              "goal_cancelled") and ours)):
             intervals.append((start, e["time_s"]))
             start = None
     if start is not None:

@@ -36,6 +36,7 @@ TIME_SYNC = "/vehicle/time_sync"
 PLANNED_PATH = "/planning/path"  # a trajectory step's plan, when it starts
 PHOTOS = "/photos"  # photos taken by the steps (orbit, survey)
 MISSION_STATUS = "/mission/status"  # the status code (autopilot.status), on each change
+MISSION_GOALS = "/mission/goals"  # goals run (the goal API), as the plan's step records
 
 
 def detection_topic(pipeline: str) -> str:
@@ -120,6 +121,8 @@ SCHEMAS: dict[str, dict] = {
                  lon_deg=_NUM, alt_amsl_m=_NUM, position_ned_m=_vec(3), attitude_q=_vec(4),
                  yaw_deg=_NUM, planned_ned_m=_vec(3), look_at_ned_m={"type": ["array", "null"]},
                  height_above_home_m=_NUM),
+    MISSION_GOALS: _obj("MissionGoal", time_s=_NUM, goal_id=_STR, name=_STR, index=_INT,
+                        params={"type": "object"}, pipelines={"type": "array"}),
     MISSION_STATUS: _obj("MissionStatus", time_s=_NUM, code=_INT, status=_STR, step=_STR,
                          step_index=_INT, goal_id={"type": ["string", "null"]}),
     GROUND_TRUTH: _obj("GroundTruth", time_s=_NUM, vehicle_position_ned_m=_vec(3),

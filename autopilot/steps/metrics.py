@@ -28,9 +28,13 @@ def log_end_s(records: Records) -> float:
 
 
 def plan_steps(records: Records) -> list[Mapping]:
-    """The logged plan's step records (``name``, ``index``, ``params``, ``pipelines``, …)."""
+    """The logged plan's step records (``name``, ``index``, ``params``, ``pipelines``, …),
+    then the goals' (the goal API's)."""
     plan = (records.get(ch.MISSION_PLAN) or [{}])[0]
-    return [s for s in plan.get("steps", []) if isinstance(s, Mapping) and "name" in s]
+    steps = [s for s in plan.get("steps", []) if isinstance(s, Mapping) and "name" in s]
+    # goals run through the goal API come after the mission's own steps
+    return steps + [g for g in records.get(ch.MISSION_GOALS, [])
+                    if isinstance(g, Mapping) and "name" in g]
 
 
 def steps_metrics(records: Records) -> list[dict]:

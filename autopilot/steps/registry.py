@@ -63,8 +63,9 @@ class StepKind:
     #: what the step needs of the configuration, beyond its own parameters (raises ValueError
     #: naming what is wrong; checked when the mission loads, before anything flies)
     check: Callable[[Params, AppConfig], None] = _no_check
-    #: its mission status codes (autopilot.status): while it runs, once it has succeeded
-    status: tuple[int, int] = (3, 3)
+    #: its mission status codes (autopilot.status): while it runs, once it has succeeded;
+    #: None: what the vehicle is doing says (3 hover in the air, 0 idle on the ground)
+    status: tuple[int, int] | None = (3, 3)
     #: the camera it takes photos with (its frames are kept while it runs), or None
     photo_camera: Callable[[Params, AppConfig], str | None] = _no_camera
 

@@ -1,0 +1,291 @@
+"""The goal API: a local HTTP + WebSocket server for a companion computer's programs (seed 004's
+action servers), on FastAPI, served by uvicorn inside the autopilot's own event loop.
+
+======================================  =====================================================
+``GET /api/status``                     status code and name, step, goal, position, velocity,
+                                        yaw, armed, mode, battery
+``WS /api/status/stream``               the same, pushed ``api.stream_rate_hz`` times a second
+``POST /api/goals``                     one step as in a mission file, e.g. ``{"orbit": {…}}``
+                                        → 202 ``{"goal_id"}``; 409 (busy, with the reason);
+                                        422 naming the bad key
+``GET /api/goals``                      every goal so far
+``GET /api/goals/{id}``                 its state, feedback (phase, progress, photos), result
+``POST /api/goals/{id}/cancel``         → the vehicle hovers (status 3)
+``POST /api/abort``                     → status 12 and the safe stop (hold, land, disarm)
+``GET /docs``                           the OpenAPI page: every goal kind and its parameters
+======================================  =====================================================
+
+Security: it binds 127.0.0.1 unless told otherwise; on any other address every request needs
+``Authorization: Bearer TOKEN`` (the token from a file or ``AUTOPILOT_API_TOKEN``; without one
+the server refuses to start). Requests that change anything must be ``application/json`` and
+carry no foreign ``Origin`` (a web page elsewhere cannot drive the vehicle); no CORS headers are
+ever sent. Handlers only read the runtime's state and queue requests: they never wait on the
+vehicle, so the control loop is never held up by a client.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import hmac
+import ipaddress
+import json
+import logging
+from typing import TYPE_CHECKING, Any
+
+from fastapi import FastAPI, Request, WebSocket, WebSocketDisconnect
+from fastapi.openapi.utils import get_openapi
+from fastapi.responses import JSONResponse
+from pydantic import ConfigDict, TypeAdapter, create_model
+
+from autopilot.goals import GoalError, goal_kinds
+from autopilot.steps import STEP_KINDS
+
+if TYPE_CHECKING:
+    from autopilot.runtime import Runtime
+
+log = logging.getLogger(__name__)
+
+TOKEN_ENV = "AUTOPILOT_API_TOKEN"
+
+
+class ApiSetupError(ValueError):
+    """The API cannot be served as asked (an address without a token, a bad address)."""
+
+
+def parse_address(text: str) -> tuple[str, int]:
+    """``HOST:PORT`` (or ``:PORT``, or ``PORT``: on 127.0.0.1)."""
+    host, sep, port = text.rpartition(":")
+    if not sep:
+        host, port = "", text
+    host = host.strip("[]") or "127.0.0.1"
+    try:
+        number = int(port)
+    except ValueError:
+        raise ApiSetupError(f"--api {text!r}: expected HOST:PORT, e.g. 127.0.0.1:8080") from None
+    if not 0 <= number <= 65535:
+        raise ApiSetupError(f"--api {text!r}: port {number} is out of range")
+    return host, number
+
+
+def is_loopback(host: str) -> bool:
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+def check_listen(host: str, port: int) -> None:
+    """Can the API listen there? (Asked before anything flies.)"""
+    import socket
+
+    if not port:
+        return
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    with socket.socket(family, socket.SOCK_STREAM) as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            probe.bind((host, port))
+        except OSError as exc:
+            raise ApiSetupError(f"--api {host}:{port}: cannot listen there "
+                                f"({exc.strerror or exc})") from None
+
+
+def goal_schema() -> dict:
+    """JSON Schema of a goal: one of the step kinds, each ``{KIND: {its parameters}}``."""
+    members = [create_model(f"{name.title().replace('_', '')}Goal",
+                            __config__=ConfigDict(extra="forbid"),
+                            **{name: (STEP_KINDS[name].params, ...)})
+               for name in goal_kinds()]
+    from typing import Union
+
+    return TypeAdapter(Union[tuple(members)]).json_schema(  # noqa: UP007
+        ref_template="#/components/schemas/{model}")
+
+
+def build_app(runtime: Runtime, token: str | None, stream_rate_hz: float = 5.0) -> FastAPI:
+    app = FastAPI(title="autopilot goal API", version="1",
+                  description="Goals (mission steps) at runtime, status, cancel and abort. "
+                  "Local by default; any other address needs a bearer token.")
+
+    def refuse(status: int, error: str) -> JSONResponse:
+        return JSONResponse({"error": error}, status_code=status)
+
+    def authorised(headers) -> bool:
+        if token is None:
+            return True
+        given = headers.get("authorization", "")
+        return hmac.compare_digest(given.encode(), f"Bearer {token}".encode())
+
+    @app.middleware("http")
+    async def guard(request: Request, call_next):
+        if not authorised(request.headers):
+            return refuse(401, "a bearer token is needed (Authorization: Bearer TOKEN)")
+        if request.method not in ("GET", "HEAD", "OPTIONS"):
+            origin = request.headers.get("origin")
+            host = request.headers.get("host", "")
+            if origin is not None and origin.split("://", 1)[-1] != host:
+                return refuse(403, f"cross-origin request from {origin} refused")
+            if request.method == "POST" and request.url.path == "/api/goals":
+                kind = request.headers.get("content-type", "").split(";")[0].strip()
+                if kind != "application/json":
+                    return refuse(415, "send the goal as application/json")
+        return await call_next(request)
+
+    @app.get("/api/status", summary="The mission status and the vehicle's state")
+    async def status() -> dict:
+        return runtime.api_status()
+
+    @app.websocket("/api/status/stream")
+    async def stream(ws: WebSocket) -> None:
+        if not authorised(ws.headers):
+            await ws.close(code=4401)
+            return
+        origin = ws.headers.get("origin")
+        if origin is not None and origin.split("://", 1)[-1] != ws.headers.get("host", ""):
+            await ws.close(code=4403)
+            return
+        await ws.accept()
+        period = 1.0 / stream_rate_hz
+        try:
+            while True:
+                await ws.send_text(json.dumps(runtime.api_status()))
+                await asyncio.sleep(period)  # (wall clock: it is for people and programs)
+        except (WebSocketDisconnect, RuntimeError):
+            return
+
+    @app.post("/api/goals", status_code=202, summary="Start a goal: one mission step",
+              openapi_extra={"requestBody": {"required": True, "content": {
+                  "application/json": {"schema": {"$ref": "#/components/schemas/Goal"},
+                                       "example": {"orbit": {"center_m": [6, 0],
+                                                             "radius_m": 3, "images": 8}}}}}},
+              responses={409: {"description": "another goal runs, or the mission is busy"},
+                         422: {"description": "invalid goal: the bad key is named"}})
+    async def submit(request: Request):
+        try:
+            body: Any = await request.json()
+        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+            return JSONResponse({"error": f"the body is not JSON: {exc}"}, status_code=422)
+        try:
+            goal = runtime.submit_goal(body)
+        except GoalError as exc:
+            return JSONResponse(exc.as_dict(), status_code=exc.status)
+        return {"goal_id": goal.id, "state": goal.state}
+
+    @app.get("/api/goals", summary="Every goal so far")
+    async def goals() -> list[dict]:
+        return [g.as_dict() for g in (runtime.goals.goals.values() if runtime.goals else [])]
+
+    @app.get("/api/goals/{goal_id}", summary="A goal's state, feedback and result")
+    async def goal(goal_id: str):
+        try:
+            return runtime.goals.get(goal_id).as_dict()
+        except GoalError as exc:
+            return JSONResponse(exc.as_dict(), status_code=exc.status)
+
+    @app.post("/api/goals/{goal_id}/cancel", summary="Cancel a goal: the vehicle hovers")
+    async def cancel(goal_id: str):
+        try:
+            return runtime.goals.cancel(goal_id).as_dict()
+        except GoalError as exc:
+            return JSONResponse(exc.as_dict(), status_code=exc.status)
+
+    @app.post("/api/abort", summary="Abort: hold, land, disarm (status 12)")
+    async def abort() -> dict:
+        if runtime.goals is not None:
+            runtime.goals.abort("abort requested through the goal API")
+        else:
+            runtime.request_stop("abort requested through the goal API")
+        return {"status": "aborting"}
+
+    def openapi() -> dict:
+        if app.openapi_schema is None:
+            schema = get_openapi(title=app.title, version=app.version,
+                                 description=app.description, routes=app.routes)
+            goal = goal_schema()
+            components = schema.setdefault("components", {}).setdefault("schemas", {})
+            components.update(goal.pop("$defs", {}))
+            components["Goal"] = goal
+            app.openapi_schema = schema
+        return app.openapi_schema
+
+    app.openapi = openapi
+    return app
+
+
+class ApiServer:
+    """The goal API as a runtime service: uvicorn on the runtime's event loop."""
+
+    name = "goal-api"
+
+    def __init__(self, runtime: Runtime, host: str, port: int, token: str | None,
+                 stream_rate_hz: float = 5.0) -> None:
+        import uvicorn
+
+        if not is_loopback(host) and not token:
+            raise ApiSetupError(
+                f"--api {host}:{port} is reachable from other machines: give a token "
+                f"(--api-token-file FILE, or the {TOKEN_ENV} environment variable)")
+        self.host, self.port = host, port
+        check_listen(host, port)
+        self.app = build_app(runtime, token if token else None, stream_rate_hz)
+        config = uvicorn.Config(self.app, host=host, port=port, log_level="warning",
+                                lifespan="off", ws="websockets-sansio", access_log=False)
+        self._server = uvicorn.Server(config)
+        self._server.install_signal_handlers = lambda: None  # the runtime owns the signals
+        self.started = asyncio.Event()
+
+    @property
+    def bound_port(self) -> int:
+        servers = getattr(self._server, "servers", None) or []
+        for server in servers:
+            for sock in server.sockets:
+                return sock.getsockname()[1]
+        return self.port
+
+    async def run(self) -> None:
+        serve = asyncio.ensure_future(self._serve())
+        # (uvicorn says it has started with a flag only)
+        while not self._server.started and not serve.done():  # noqa: ASYNC110
+            await asyncio.sleep(0.01)
+        if serve.done():  # it could not start (the port was taken meanwhile, …)
+            serve.result()
+            raise OSError(f"the goal API could not listen on {self.host}:{self.port}")
+        self.started.set()
+        log.info("goal API on http://%s:%d/ (docs at /docs)", self.host, self.bound_port)
+        await serve
+
+    async def _serve(self) -> None:
+        try:
+            await self._server.serve()
+        except SystemExit:  # uvicorn exits when it cannot start; we are not the process
+            raise OSError(f"the goal API could not listen on {self.host}:{self.port}") from None
+
+    async def stop(self, linger_s: float = 1.0) -> None:
+        """Stop serving — after ``linger_s`` (wall clock), so that clients following a goal
+        that ended the run (a land goal) can read how it ended."""
+        if self.started.is_set():
+            await asyncio.sleep(linger_s)
+        self._server.should_exit = True
+        with contextlib.suppress(Exception):
+            await asyncio.sleep(0)
+
+
+def read_token(path: str | None) -> str | None:
+    """The API token from a file (first line), else from the environment; None: none."""
+    import os
+    from pathlib import Path
+
+    if path:
+        try:
+            text = Path(path).read_text().strip()
+        except OSError as exc:
+            raise ApiSetupError(f"--api-token-file {path}: {exc.strerror or exc}") from None
+        if len(text) < 16:
+            raise ApiSetupError(f"--api-token-file {path}: the token is too short (at least 16 "
+                                "characters)")
+        return text.splitlines()[0]
+    value = os.environ.get(TOKEN_ENV, "").strip()
+    return value or None
