@@ -178,19 +178,21 @@ def build_app(runtime: Runtime, token: str | None, stream_rate_hz: float = 5.0) 
     async def goals() -> list[dict]:
         return [g.as_dict() for g in (runtime.goals.goals.values() if runtime.goals else [])]
 
-    @app.get("/api/goals/{goal_id}", summary="A goal's state, feedback and result")
-    async def goal(goal_id: str):
+    def goal_answer(action, goal_id: str):
+        if runtime.goals is None:
+            return JSONResponse({"error": "this run takes no goals"}, status_code=404)
         try:
-            return runtime.goals.get(goal_id).as_dict()
+            return action(goal_id).as_dict()
         except GoalError as exc:
             return JSONResponse(exc.as_dict(), status_code=exc.status)
 
+    @app.get("/api/goals/{goal_id}", summary="A goal's state, feedback and result")
+    async def goal(goal_id: str):
+        return goal_answer(runtime.goals.get if runtime.goals else None, goal_id)
+
     @app.post("/api/goals/{goal_id}/cancel", summary="Cancel a goal: the vehicle hovers")
     async def cancel(goal_id: str):
-        try:
-            return runtime.goals.cancel(goal_id).as_dict()
-        except GoalError as exc:
-            return JSONResponse(exc.as_dict(), status_code=exc.status)
+        return goal_answer(runtime.goals.cancel if runtime.goals else None, goal_id)
 
     @app.post("/api/abort", summary="Abort: hold, land, disarm (status 12)")
     async def abort() -> dict:

@@ -240,6 +240,27 @@ def build_parser() -> argparse.ArgumentParser:
         down.add_argument("--set", dest="overrides", action="append", default=[],
                           metavar="KEY=VALUE", help="override a mission or configuration key")
 
+    offboard = benches.add_parser(
+        "offboard", help="orbit and survey (seed 004): our trajectory tracking against seed "
+        "004's PID, over the shipped, concave and gusty scenarios: cross-track error, "
+        "coverage, photos, real-time factor (about 8 min)")
+    offboard.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    offboard.add_argument("--seeds", type=int, default=2, metavar="N",
+                          help="seeds per scenario and tracker (default 2)")
+    offboard.add_argument("--scenario", dest="scenarios", action="append", default=None,
+                          metavar="NAME", help="only this scenario (repeatable)")
+    offboard.add_argument("--set", dest="overrides", action="append", default=[],
+                          metavar="KEY=VALUE", help="override a mission or configuration key")
+
+    api_bench = benches.add_parser(
+        "api", help="what the goal API costs the process: a real-time standby hover with the "
+        "API idle, then busy (status polled, the status stream followed) (about 1 min)")
+    api_bench.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    api_bench.add_argument("--seconds", type=float, default=20.0, metavar="S",
+                           help="hover this long in each flight (default 20)")
+    api_bench.add_argument("--poll-hz", type=float, default=10.0, metavar="HZ",
+                           help="GET /api/status rate while busy (default 10)")
+
     perception = benches.add_parser(
         "perception", help="each detector on frames rendered from known poses, against truth: "
         "ball (centre, range) and marker at 1, 3, 5 m and 0-60 degrees obliquity (position, "
@@ -781,6 +802,28 @@ def _bench(args: argparse.Namespace) -> int:
             raise InputError(f"--seeds {args.seeds}: at least 1")
         result = down.run_bench(args.bench, args.seeds, args.overrides, log, args.scenarios)
         print(json.dumps(result) if args.json else down.format_table(result))
+        return EXIT_OK
+
+    if args.bench == "api":
+        from autopilot.bench import api as api_bench
+
+        if args.seconds <= 0 or args.poll_hz <= 0:
+            raise InputError("--seconds and --poll-hz must be positive")
+        result = api_bench.run_bench(args.seconds, args.poll_hz, log)
+        print(json.dumps(result) if args.json else api_bench.format_table(result))
+        return EXIT_OK
+
+    if args.bench == "offboard":
+        from autopilot.bench import offboard
+
+        unknown = [s for s in args.scenarios or () if s not in offboard.SCENARIOS]
+        if unknown:
+            raise InputError(f"--scenario {unknown[0]}: no such scenario (known: "
+                             f"{', '.join(offboard.SCENARIOS)})")
+        if args.seeds < 1:
+            raise InputError(f"--seeds {args.seeds}: at least 1")
+        result = offboard.run_bench(args.seeds, args.overrides, log, args.scenarios)
+        print(json.dumps(result) if args.json else offboard.format_table(result))
         return EXIT_OK
 
     if args.bench == "perception":

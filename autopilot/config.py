@@ -245,6 +245,9 @@ class TrajectoryControlConfig(_Model):
     arrival_tolerance_m: Annotated[float, Field(gt=0, le=5)]  # done: the end reached within this
     #: ... or this long after the reference ended
     settle_timeout_s: Annotated[float, Field(gt=0, le=120)]
+    #: ours, or seed004: seed 004's PID on the position error (a baseline for the benchmark)
+    tracker: Literal["ours", "seed004"]
+    seed004_pid: tuple[NonNegative, NonNegative, NonNegative]  # its Kp, Ki, Kd
 
 
 class PhotoConfig(_Model):

@@ -398,6 +398,7 @@ class MissionOutput:
     photos: tuple = ()  # (step index, PhotoRequest) of what ran this tick
     progress: float = float("nan")  # of the running step (0..1; NaN: not said)
     plan: dict | None = None  # the running step's plan, the tick it made it
+    photo_soon: bool = False  # the running step will ask for a photo within a moment
 
 
 @dataclass
@@ -418,7 +419,7 @@ class MissionExecutor:
     _status: str = field(default="running", init=False)
     _in_fallback: bool = field(default=False, init=False)
     _failure: str = field(default="", init=False)
-    _extras: tuple = field(default=((), float("nan"), None), init=False)
+    _extras: tuple = field(default=((), float("nan"), None, False), init=False)
     _waiting: tuple[int, Behavior] | None = field(default=None, init=False)  # under a goal
 
     @property
@@ -493,10 +494,11 @@ class MissionExecutor:
 
     def _handle(self, out: BehaviorOutput, inputs: BehaviorInputs,
                 events: list[str]) -> MissionOutput:
-        photos, _, plan = self._extras  # (a step's last tick and the next one's first add up)
+        photos, _, plan, _ = self._extras  # (a step's last tick and the next one's add up)
         self._extras = (photos + tuple((self._index, ph) for ph in out.photos), out.progress,
                         plan if out.plan is None else
-                        dict(out.plan, step_index=self._index, step=self._current.name))
+                        dict(out.plan, step_index=self._index, step=self._current.name),
+                        out.photo_soon)
         if out.status is Status.RUNNING:
             return self._output(out.setpoint, out.requests, events, out.phase)
         name = self._current.name
@@ -548,7 +550,8 @@ class MissionExecutor:
         return self._handle(self._current.activate(inputs), inputs, events)
 
     def _output(self, setpoint, requests, events, phase, finished=False) -> MissionOutput:
-        photos, progress, plan = self._extras
-        self._extras = ((), float("nan"), None)
+        photos, progress, plan, soon = self._extras
+        self._extras = ((), float("nan"), None, False)
         return MissionOutput(setpoint, tuple(requests), tuple(events), finished, self._status,
-                             self.step_name, phase, self.step_index, photos, progress, plan)
+                             self.step_name, phase, self.step_index, photos, progress, plan,
+                             soon)

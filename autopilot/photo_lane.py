@@ -59,6 +59,9 @@ class PhotoLane:
         self._pending: list[tuple[int, str, PhotoRequest]] = []
         self._writer: ThreadPoolExecutor | None = None
         self._writes: list = []
+        #: a camera rendered on demand (the simulator's) is kept running only while a photo
+        #: is near; a video stream (its decoder needs every frame) for as long as the step runs
+        self._on_demand = bool(getattr(vehicle, "renders_on_demand", False))
         # the clock's epoch on UTC: photo times in EXIF are wall-clock times
         self._utc_offset_s = time.time() - vehicle.clock.now()
 
@@ -80,14 +83,31 @@ class PhotoLane:
             self._task = None
         self._camera = camera
         self._frames.clear()
-        if camera is not None and self.group is not None:
-            if camera not in self.vehicle.cameras:
-                self.errors.append(f"no camera {camera!r} for photos")
-                return
-            self._task = self.group.create_task(self._run(camera), name=f"photos-{camera}")
+        if camera is not None and camera not in self.vehicle.cameras:
+            self.errors.append(f"no camera {camera!r} for photos")
+            self._camera = None
+            return
+        if not self._on_demand:
+            self._subscribe()
+
+    def want(self, soon: bool) -> None:
+        """Whether a photo is near (a camera rendered on demand runs only then)."""
+        if not self._on_demand:
+            return
+        if soon or self._pending:
+            self._subscribe()
+        elif self._task is not None:
+            self._task.cancel()
+            self._task = None
+
+    def _subscribe(self) -> None:
+        if self._task is None and self._camera is not None and self.group is not None:
+            self._task = self.group.create_task(self._run(self._camera),
+                                                name=f"photos-{self._camera}")
 
     def request(self, step_index: int, step: str, photo: PhotoRequest) -> None:
         self._pending.append((step_index, step, photo))
+        self._subscribe()
         self._resolve()
 
     def close(self) -> None:

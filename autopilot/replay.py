@@ -32,11 +32,13 @@ from autopilot.config import (
     Located,
     Problem,
     apply_overrides,
+    load_yaml,
     validate,
 )
 from autopilot.flightlog import records as ch
 from autopilot.flightlog.log import read_images, read_log_checked
 from autopilot.pipeline import Pipeline, PipelineSpec, make_pipeline
+from autopilot.resources import default_config_path
 from autopilot.steps import STEP_KINDS
 from autopilot.steps.metrics import mission_metrics, plan_steps
 
@@ -52,6 +54,13 @@ REPLAY_KEYS = {"follow": DETECTION_KEYS,
 
 class ReplayError(InputError):
     pass
+
+
+def _with_defaults(defaults, logged):
+    """``logged`` with every key it lacks taken from ``defaults`` (recursively)."""
+    if not isinstance(defaults, dict) or not isinstance(logged, dict):
+        return logged
+    return {**defaults, **{k: _with_defaults(defaults.get(k), v) for k, v in logged.items()}}
 
 
 def replay(run_dir: Path, overrides: Sequence[str] = ()) -> dict:
@@ -75,6 +84,8 @@ def replay(run_dir: Path, overrides: Sequence[str] = ()) -> dict:
         logged["sim"] = sim
         if not (logged.get("vehicle") or {}).get("cameras"):
             logged["vehicle"] = {**(logged.get("vehicle") or {}), "cameras": cameras}
+    # settings the flight's autopilot did not have yet take today's defaults
+    logged = _with_defaults(load_yaml(default_config_path()).data, logged)
     cfg: AppConfig = validate(AppConfig, apply_overrides(Located(logged, source, {}),
                                                          overrides))
     specs = _flown_pipelines(records, cfg)

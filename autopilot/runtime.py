@@ -314,6 +314,7 @@ class Runtime:
         self.step_progress = out.progress
         if out.plan is not None:
             self.log.write(ch.PLANNED_PATH, now, ch.clean(dict(out.plan, time_s=now)))
+        self.photos.want(out.photo_soon)
         for index, photo in out.photos:
             self.photos.request(index, self._steps[index].name, photo)
             goal = self._goal_at(index)

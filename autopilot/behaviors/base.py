@@ -107,6 +107,9 @@ class BehaviorOutput:
     progress: float = float("nan")
     #: the step's plan, once, when it has made one (logged on /planning/path)
     plan: dict | None = None
+    #: a photo will be asked for within a moment (a camera that renders on demand — the
+    #: simulator's — is kept running only then)
+    photo_soon: bool = False
 
 
 class Params(BaseModel):

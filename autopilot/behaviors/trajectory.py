@@ -115,6 +115,9 @@ class SurveyParams(Params):
     speed_m_s: Speed = 3.0
     angle_deg: Annotated[float, Field(ge=-360, le=360)] | None = None  # None: fewest lines
     smoothing: Literal["bspline", "none"] = "bspline"
+    #: each line flown this far beyond its ends, to be level and at speed at its first and last
+    #: photo (None: what braking from speed_m_s takes at control.trajectory.accel_m_s2)
+    turnaround_m: Annotated[float, Field(ge=0, le=100)] | None = None
     camera: str | None = None  # None: photos.camera
 
     @model_validator(mode="after")
@@ -145,6 +148,11 @@ class TrajectorySettings:
     lag_slowdown_m: float
     arrival_tolerance_m: float
     settle_timeout_s: float
+    #: "ours" (reference + feed-forward, waiting for the vehicle) or "seed004" (seed 004's
+    #: tracker, a baseline: a PID on the position error to the time-indexed reference,
+    #: commanding velocity, no feed-forward)
+    tracker: str = "ours"
+    pid: tuple[float, float, float] = (1.5, 0.0, 0.1)
 
 
 # ------------------------------------------------------------------------------------------
@@ -242,6 +250,8 @@ class FollowTrajectory(Behavior):
         self._taken = 0
         self._progress_s = 0.0
         self._progress_time = 0.0
+        self._pid_int = np.zeros(3)
+        self._pid_prev: np.ndarray | None = None
 
     # -- what a kind says ---------------------------------------------------------------------
 
@@ -319,26 +329,30 @@ class FollowTrajectory(Behavior):
         progress = float(np.interp(t_near, traj.times_s, traj.s_m))
         lag = ref_s - progress
         rate = float(np.clip(1.0 - (lag - st.lag_slowdown_m) / st.lag_slowdown_m, 0.2, 1.0))
+        if st.tracker == "seed004":
+            rate = 1.0  # (its reference runs on the clock, whatever the vehicle does)
         self._tau = min(self._tau + dt * rate, traj.duration_s)
         photos = self._photos(progress, inputs)
         ref = traj.at(self._tau)
         frac = ref.s_m / traj.length_m if traj.length_m > 0 else 1.0
-        setpoint = self._setpoint(now, rate)
+        setpoint = self._setpoint(now, rate) if st.tracker != "seed004" \
+            else self._pid_setpoint(now, dt, pos)
+        soon = self._photo_soon(progress, inputs)
         if self._tau >= traj.duration_s:
             if self._ended_s is None:
                 self._ended_s = now
             miss = float(np.linalg.norm(pos - traj.end))
             if miss <= st.arrival_tolerance_m:
                 return BehaviorOutput(Status.SUCCEEDED, setpoint=setpoint, phase="arrived",
-                                      photos=photos, progress=1.0)
+                                      photos=photos, progress=1.0, photo_soon=soon)
             if now - self._ended_s > st.settle_timeout_s:
                 return BehaviorOutput(Status.FAILED, setpoint=setpoint, photos=photos,
                                       reason=f"end not reached: {miss:.2f} m off after "
                                              f"{st.settle_timeout_s:g} s")
             return BehaviorOutput(Status.RUNNING, setpoint=setpoint, phase="arriving",
-                                  photos=photos, progress=frac)
+                                  photos=photos, progress=frac, photo_soon=soon)
         return BehaviorOutput(Status.RUNNING, setpoint=setpoint, phase=self.phase_at(ref.s_m),
-                              photos=photos, progress=frac)
+                              photos=photos, progress=frac, photo_soon=soon)
 
     def _setpoint(self, now: float, rate: float) -> Setpoint:
         ref = self.trajectory.at(self._tau)
@@ -346,6 +360,28 @@ class FollowTrajectory(Behavior):
             ref.position_ned_m, ref.velocity_ned_m_s * rate,
             acceleration_ned_m_s2=ref.acceleration_ned_m_s2 * rate * rate,
             yaw_rad=wrap_pi(ref.yaw_rad), yaw_rate_rad_s=ref.yaw_rate_rad_s * rate, time_s=now)
+
+    def _pid_setpoint(self, now: float, dt: float, pos: np.ndarray) -> Setpoint:
+        """Seed 004's tracking: velocity = Kp·e + Ki·∫e + Kd·ė, e = reference − position."""
+        kp, ki, kd = self.settings.pid
+        ref = self.trajectory.at(self._tau)
+        err = ref.position_ned_m - pos
+        self._pid_int += err * dt
+        de = (err - self._pid_prev) / dt if self._pid_prev is not None and dt > 0 \
+            else np.zeros(3)
+        self._pid_prev = err
+        v = kp * err + ki * self._pid_int + kd * de
+        return Setpoint.velocity_ned(*v, yaw_rad=wrap_pi(ref.yaw_rad), time_s=now)
+
+    def _photo_soon(self, progress: float, inputs: BehaviorInputs, lead_s: float = 0.6
+                    ) -> bool:
+        """The next photo point is less than ``lead_s`` away at the present speed (or the
+        vehicle is nearly still within a metre of it)."""
+        if not self.photo_camera or self._taken >= len(self._photo_s):
+            return False
+        ahead = float(self._photo_s[self._taken]) - progress
+        speed = float(np.linalg.norm(inputs.state.velocity_ned_m_s))
+        return ahead <= max(speed * lead_s, 1.0)
 
     def _photos(self, progress: float, inputs: BehaviorInputs) -> tuple[PhotoRequest, ...]:
         """Photo points the vehicle has passed since the last tick, at the moment it did."""
@@ -479,9 +515,11 @@ class Survey(FollowTrajectory):
         self._area = area
         down = resolve_down(inputs, p.frame, p.altitude_m, p.polygon_latlon is not None)
         start = np.asarray(inputs.state.position_ned_m, dtype=float)
+        turnaround = p.turnaround_m if p.turnaround_m is not None else \
+            p.speed_m_s ** 2 / (2.0 * self.settings.limits.accel_m_s2)
         plan = survey_plan(start, area, down, self.spacing_m,
                            p.photo_spacing_m or self.spacing_m, angle_deg=p.angle_deg,
-                           smoothing=p.smoothing)
+                           smoothing=p.smoothing, turnaround_m=turnaround)
         # one heading for the whole survey (the footprints stay aligned with the lines): the
         # line direction nearer the present heading
         line_yaw = math.radians(plan.angle_deg)

@@ -193,8 +193,11 @@ def quintic_turn(p0: np.ndarray, d0: np.ndarray, p1: np.ndarray, d1: np.ndarray,
 
 def survey_plan(start_ned: np.ndarray, area: Polygon, down_m: float, spacing_m: float,
                 photo_spacing_m: float, *, angle_deg: float | None = None,
-                smoothing: str = "bspline", run_in_m: float = 2.0) -> PathPlan:
-    """The survey of ``area`` at height ``down_m`` (NED) from ``start_ned``."""
+                smoothing: str = "bspline", turnaround_m: float = 2.0) -> PathPlan:
+    """The survey of ``area`` at height ``down_m`` (NED) from ``start_ned``. Each line is
+    flown ``turnaround_m`` beyond its ends (QGroundControl's turnaround distance), so that the
+    vehicle is level and at speed at the first and last photo of a line, not tilted into a
+    turn."""
     if not area.is_valid or area.area <= 0:
         raise ValueError("the survey polygon is not a valid area")
     angle = best_angle_deg(area) if angle_deg is None else float(angle_deg)
@@ -216,9 +219,9 @@ def survey_plan(start_ned: np.ndarray, area: Polygon, down_m: float, spacing_m: 
     photos: list[np.ndarray] = []
     reach = max(spacing_m * 0.75, 1.0)
     here, here_dir = p0, None
-    for i, (a, b) in enumerate(lines):
+    for a, b in lines:
         d = heading(a, b)
-        start = at_height(a) - d * (run_in_m if i == 0 else 0.0)
+        start = at_height(a) - d * turnaround_m
         # the way to this line: a smooth turn (B-spline) or straight (smoothing: none)
         if smoothing == "bspline":
             if here_dir is None:  # from the start: head for the line, then turn onto it
@@ -231,7 +234,7 @@ def survey_plan(start_ned: np.ndarray, area: Polygon, down_m: float, spacing_m: 
                 pieces.append(quintic_turn(here, here_dir, start, d, reach))
         else:
             pieces.append(resample(np.vstack([here, start]), _STEP_M))
-        end = at_height(b) + d * (run_in_m if i == len(lines) - 1 else 0.0)
+        end = at_height(b) + d * turnaround_m
         pieces.append(resample(np.vstack([start, at_height(a), at_height(b), end]), _STEP_M))
         length = float(np.linalg.norm(at_height(b) - at_height(a)))
         n = max(math.ceil(length / photo_spacing_m - 1e-9), 0) + 1

@@ -56,7 +56,7 @@ def trajectory_settings(config: AppConfig) -> TrajectorySettings:
                       t.climb_speed_m_s, t.descent_speed_m_s),
         yaw_rate_rad_s=math.radians(t.yaw_rate_deg_s), rounding_m=t.rounding_m,
         lag_slowdown_m=t.lag_slowdown_m, arrival_tolerance_m=t.arrival_tolerance_m,
-        settle_timeout_s=t.settle_timeout_s)
+        settle_timeout_s=t.settle_timeout_s, tracker=t.tracker, pid=tuple(t.seed004_pid))
 
 
 def _photo_camera(params, config: AppConfig) -> str:
@@ -119,6 +119,14 @@ def _check_orbit(params: OrbitParams, config: AppConfig) -> None:
             f"{need:.2f} m/s² towards the centre, more than control.trajectory."
             f"lateral_accel_m_s2 ({lateral:g}): at most "
             f"{math.sqrt(lateral * params.radius_m):.2f} m/s on this radius")
+    yaw_rate = config.control.trajectory.yaw_rate_deg_s
+    turning = math.degrees(params.speed_m_s / params.radius_m)
+    if turning > yaw_rate * 1.001:
+        raise ValueError(
+            f"speed_m_s {params.speed_m_s:g} on a {params.radius_m:g} m radius turns the "
+            f"heading (facing the centre) at {turning:.0f}°/s, more than control.trajectory."
+            f"yaw_rate_deg_s ({yaw_rate:g}): at most "
+            f"{math.radians(yaw_rate) * params.radius_m:.2f} m/s on this radius")
 
 
 def _check_survey(params: SurveyParams, config: AppConfig) -> None:
@@ -324,12 +332,20 @@ def survey_metrics(log: Records, intervals: list[tuple[float, float]], step: Map
         group.append(foot)
     side = []
     if len(lines) > 1 and by_line:
+        # neighbouring strips (a strip over a concave polygon holds several lines): the share
+        # of one strip's photo footprints that the next strip's photos also cover
         angle = math.radians(plan.get("angle_deg") or 0.0)
         normal = np.array([-math.sin(angle), math.cos(angle)])
-        offset = {k: float(np.dot(lines[k].mean(axis=0), normal)) for k in by_line}
-        ordered = sorted(by_line, key=offset.get)
+        step = float(plan.get("spacing_m") or 1.0)
+        strips: dict[int, list[Polygon]] = {}
+        for k, feet in by_line.items():
+            key = math.floor(float(np.dot(lines[k].mean(axis=0), normal)) / step + 0.5)
+            strips.setdefault(key, []).extend(feet)
+        ordered = sorted(strips)
         for a, b in itertools.pairwise(ordered):
-            ua, ub = unary_union(by_line[a]), unary_union(by_line[b])
+            if b - a != 1:
+                continue
+            ua, ub = unary_union(strips[a]), unary_union(strips[b])
             if ua.area > 0:
                 side.append(ua.intersection(ub).area / ua.area)
     survey = {

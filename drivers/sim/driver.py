@@ -57,6 +57,9 @@ from drivers.slots import Broadcast
 
 
 class SimDriver(Vehicle):
+    #: cameras are rendered only while something subscribes to their frames
+    renders_on_demand = True
+
     def __init__(self, config: SimConfig, *, scenario: Sequence[ScenarioObject] = (),
                  seed: int | None = None, lockstep: bool = True) -> None:
         self.config = config

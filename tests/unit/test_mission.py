@@ -257,3 +257,51 @@ def test_refused_request_fails_the_step():
         (e.kind, e.text) for e in out.events]
     assert ex.status == "failed"
     assert np.all([r.kind is RequestKind.LAND for r in out.requests])
+
+
+# -- goals (the goal API) in the executor ------------------------------------------------
+
+
+def test_goals_run_in_place_of_standby_and_return_to_it():
+    from autopilot.behaviors.standby import Standby, StandbyParams
+
+    standby = Standby(StandbyParams())
+    ex = MissionExecutor([standby])
+    out = ex.start(_inputs(0.0))
+    assert ex.accepts_goals
+    assert out.setpoint is not None  # hovering where it can stop
+    # a goal that fails does not end the mission: back to the hover
+    out = ex.start_goal(_Scripted(Status.FAILED), 1, _inputs(0.1))
+    assert not ex.accepts_goals
+    assert ex.goal_running
+    out = ex.update(_inputs(0.2))
+    kinds = [e.kind for e in out.events]
+    assert kinds == ["step_failed", "standby"]
+    assert out.events[0].step_index == 1
+    assert ex.status == "running"
+    assert ex.accepts_goals
+    # a cancelled goal: the same
+    ex.start_goal(_Scripted(Status.SUCCEEDED, after=100), 2, _inputs(0.3))
+    out = ex.cancel_goal(_inputs(0.4))
+    assert [e.kind for e in out.events] == ["goal_cancelled", "standby"]
+    assert out.step_index == 0
+    # landed (disarmed on the ground after flying): standby ends the mission
+    ex.start_goal(_Scripted(Status.SUCCEEDED), 3, _inputs(0.5))
+    out = ex.update(_inputs(0.6, armed=False, in_air=False))
+    assert [e.kind for e in out.events][-2:] == ["step_succeeded", "mission_completed"]
+    assert out.finished
+    assert ex.status == "completed"
+
+
+def test_an_abort_during_a_goal_goes_to_the_fallback():
+    from autopilot.behaviors.standby import Standby, StandbyParams
+
+    ex = MissionExecutor([Standby(StandbyParams())])
+    ex.start(_inputs(0.0))
+    ex.start_goal(_Scripted(Status.SUCCEEDED, after=100), 1, _inputs(0.1))
+    out = ex.abort("abort requested", _inputs(0.2))
+    assert [e.kind for e in out.events][:2] == ["aborted", "fallback_started"]
+    assert not ex.goal_running
+    assert not ex.accepts_goals
+    with pytest.raises(RuntimeError):
+        ex.start_goal(_Scripted(Status.SUCCEEDED), 2, _inputs(0.3))

@@ -23,6 +23,7 @@ def _problems(tmp_path, steps: str) -> str:
     ("  - goto: {position_m: [1, 2, 3], frame: moon}", "steps[1].goto.frame"),
     ("  - goto: {position_m: [1, 2, 3], speed_m_s: 15}", "max_speed_m_s"),
     ("  - orbit: {center_m: [1, 2], radius_m: 2, speed_m_s: 4}", "at most 1.73 m/s"),
+    ("  - orbit: {center_m: [1, 2], radius_m: 1.5, speed_m_s: 1.5}", "at most 1.18 m/s"),
     ("  - orbit: {center_m: [1, 2], camera: belly}", "camera 'belly'"),
     ("  - orbit: {radius_m: 3}", "exactly one of center_m"),
     ("  - survey: {polygon_m: [[0, 0], [10, 10], [10, 0], [0, 10]]}", "not a simple polygon"),
