@@ -500,6 +500,12 @@ def _run(args: argparse.Namespace) -> int:
     overrides = [*args.overrides, *([f"driver={args.driver}"] if args.driver else [])]
     plan = load_mission(args.mission, overrides, args.config)
     token = None
+    waits = [i for i, step in enumerate(plan.steps)
+             if step.name == "standby" and step.params.timeout_s is None]
+    if waits and not args.api:
+        raise InputError(f"{plan.source}: step {waits[0]} (standby) waits for goals from the "
+                         "goal API: run with --api HOST:PORT (e.g. --api 127.0.0.1:8080), or "
+                         "give the standby a timeout_s")
     if args.api:
         from autopilot.api import check_listen, is_loopback
 

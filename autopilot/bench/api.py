@@ -2,16 +2,18 @@
 
 Two real-time flights of ``missions/standby.yaml`` in the simulator, hovering for the same wall
 time: one with the API served and nobody asking, one with clients busy — one polling
-``GET /api/status`` at ``--poll-hz`` and one following ``WS /api/status/stream`` (5 Hz). The
-process's CPU time over the hover (the simulator included, which is the same in both) and the
-event loop's lag (how late a 10 ms timer fires, p99) are compared: the difference is the API's
-cost. Requests are timed from the client (round trip on loopback).
+``GET /api/status`` at ``--poll-hz`` and one following ``WS /api/status/stream`` (5 Hz), in a
+process of their own. The autopilot process's CPU time over the hover (the simulator included,
+which is the same in both) and the event loop's lag (how late a 10 ms timer fires, p99) are
+compared: the difference is the API's cost. Requests are timed from the client (round trip on
+loopback).
 """
 
 from __future__ import annotations
 
 import asyncio
 import json
+import multiprocessing
 import threading
 import time
 import urllib.request
@@ -23,9 +25,12 @@ from autopilot.mission import load_mission
 from autopilot.run import fly
 
 
-def _client(port: int, stop: threading.Event, poll_hz: float, times_ms: list[float],
-            stream_count: list[int]) -> None:
+def _client(port: int, stop, poll_hz: float, results) -> None:
+    """The clients, in a process of their own (their CPU is not the API's)."""
     import websockets.sync.client as ws_client
+
+    times_ms: list[float] = []
+    stream_count = [0]
 
     def stream() -> None:
         with ws_client.connect(f"ws://127.0.0.1:{port}/api/status/stream") as ws:
@@ -43,6 +48,7 @@ def _client(port: int, stop: threading.Event, poll_hz: float, times_ms: list[flo
         times_ms.append((time.perf_counter() - started) * 1e3)
         time.sleep(max(period - (time.perf_counter() - started), 0.0))
     follower.join(timeout=6)
+    results.put((times_ms, stream_count[0]))
 
 
 def _flight(hover_s: float, busy: bool, poll_hz: float, log: Callable[[str], None]) -> dict:
@@ -64,11 +70,12 @@ def _flight(hover_s: float, busy: bool, poll_hz: float, log: Callable[[str], Non
         while (await asyncio.to_thread(status))["status_code"] != 3:  # noqa: ASYNC110
             await asyncio.sleep(0.2)
         lags: list[float] = []
-        stop = threading.Event()
+        spawn = multiprocessing.get_context("spawn")
+        stop, results = spawn.Event(), spawn.Queue()
+        client = spawn.Process(target=_client, args=(port, stop, poll_hz, results),
+                               daemon=True)
         times_ms: list[float] = []
-        stream_count = [0]
-        client = threading.Thread(target=_client, args=(port, stop, poll_hz, times_ms,
-                                                        stream_count), daemon=True)
+        stream_count = 0
         cpu0, wall0 = time.process_time(), time.perf_counter()
         if busy:
             client.start()
@@ -80,6 +87,7 @@ def _flight(hover_s: float, busy: bool, poll_hz: float, log: Callable[[str], Non
         cpu, wall = time.process_time() - cpu0, time.perf_counter() - wall0
         stop.set()
         if busy:
+            times_ms, stream_count = await asyncio.to_thread(results.get, True, 15)
             await asyncio.to_thread(client.join, 10)
         req = urllib.request.Request(f"http://127.0.0.1:{port}/api/goals", method="POST",
                                      data=b'{"land": {}}',
@@ -87,7 +95,7 @@ def _flight(hover_s: float, busy: bool, poll_hz: float, log: Callable[[str], Non
         await asyncio.to_thread(urllib.request.urlopen, req)
         summary = await flight
         out.update(cpu_share_of_one_core=cpu / wall, loop_lag_ms_p99=float(
-            np.percentile(lags, 99)), requests=len(times_ms), stream_messages=stream_count[0],
+            np.percentile(lags, 99)), requests=len(times_ms), stream_messages=stream_count,
             request_ms_p50=float(np.percentile(times_ms, 50)) if times_ms else None,
             request_ms_p99=float(np.percentile(times_ms, 99)) if times_ms else None,
             status=summary["status"])

@@ -57,3 +57,13 @@ def test_status_follows_the_steps_and_an_abort_sticks():
     assert t.idle(in_air=False) == 12
     t.resume()
     assert t.step_started((4, 5)) == 4
+
+
+def test_standby_without_the_goal_api_is_refused(capsys, monkeypatch):
+    from autopilot.cli import main
+
+    monkeypatch.delenv("AUTOPILOT_API_TOKEN", raising=False)
+    assert main(["run", "--mission", "standby"]) == 2
+    assert "waits for goals from the goal API: run with --api" in capsys.readouterr().err
+    assert main(["run", "--mission", "standby", "--api", "10.1.2.3:8080"]) == 2
+    assert "give a token" in capsys.readouterr().err
