@@ -205,8 +205,18 @@ class MissionPlan:
         return step_kind(step.name).pipelines(step.params, self.config)
 
     def cameras_used(self) -> list[str]:
-        """The cameras any step's pipelines read, in the order the steps first use them."""
-        return list(dict.fromkeys(spec.camera for spec in self.all_pipelines().values()))
+        """The cameras any step's pipelines read, in the order the steps first use them, then
+        those steps take photos with (and, when the mission waits for goals, the photo camera
+        goals use by default)."""
+        cameras = [spec.camera for spec in self.all_pipelines().values()]
+        for step in self.steps:
+            kind = step_kind(step.name)
+            photo = kind.photo_camera(step.params, self.config)
+            if photo is not None:
+                cameras.append(photo)
+            if step.name == "standby":
+                cameras.append(self.config.photos.camera)
+        return list(dict.fromkeys(cameras))
 
     def all_pipelines(self) -> dict[str, PipelineSpec]:
         """Every pipeline any step needs, by key (steps that share one share its state)."""

@@ -67,3 +67,11 @@ def test_standby_without_the_goal_api_is_refused(capsys, monkeypatch):
     assert "waits for goals from the goal API: run with --api" in capsys.readouterr().err
     assert main(["run", "--mission", "standby", "--api", "10.1.2.3:8080"]) == 2
     assert "give a token" in capsys.readouterr().err
+
+
+def test_photo_cameras_are_cameras_the_mission_uses():
+    # (a MAVLink driver attaches, and waits for the video of, exactly these)
+    assert load_mission("survey").cameras_used() == ["down"]
+    assert load_mission("orbit", ["steps.1.orbit.camera=front"]).cameras_used() == ["front"]
+    assert load_mission("orbit", ["steps.1.orbit.images=0"]).cameras_used() == []
+    assert load_mission("standby").cameras_used() == ["down"]  # what goals take photos with
