@@ -555,6 +555,18 @@ def _run(args: argparse.Namespace) -> int:
             f"{k}={_fmt(estimation.get(k))}" for k in (
                 "rms_position_error_m", "rms_velocity_error_m_s", "within_2sigma",
                 "coasting_share", "lost_share")))
+    for group, keys in (
+            ("orbit", ("rms_cross_track_m", "max_cross_track_m", "photos", "images_planned",
+                       "centre_in_frame")),
+            ("survey", ("rms_cross_track_m", "max_cross_track_m", "coverage", "photos",
+                        "photos_planned")),
+            ("goto", ("rms_cross_track_m", "final_error_m"))):
+        values = summary["metrics"].get(group) or {}
+        if values:
+            lines.append(f"{group}: " + ", ".join(f"{k}={_fmt(values.get(k))}" for k in keys))
+    if summary.get("photos") and summary["photos"].get("taken"):
+        lines.append(f"photos: {summary['photos']['taken']} in {out / 'photos'} "
+                     "(JPEG + EXIF GPS, photos.geojson)")
     lat = summary["metrics"]["latency_ms"]
     if lat["samples"]:
         lines.append(f"latency: p50 {lat['p50']:.1f} ms, p95 {lat['p95']:.1f} ms")

@@ -247,7 +247,7 @@ def orbit_metrics(log: Records, intervals: list[tuple[float, float]], step: Mapp
     params = step["params"]
     photos = _photos_of(log, step)
     look = plan.get("look_at_ned_m")
-    offsets, in_frame = [], 0
+    offsets, in_frame = [], 0  # per photo: pixels from the image centre (inf: behind)
     for photo in photos:
         cam = _camera(log, photo["camera"])
         pose = truth.pose(photo["time_s"])
@@ -277,6 +277,7 @@ def orbit_metrics(log: Records, intervals: list[tuple[float, float]], step: Mapp
         "centre_in_frame": in_frame,
         "centre_offset_px_mean": float(np.mean(finite)) if finite else None,
         "centre_offset_px_max": max(offsets) if offsets else None,
+        "centre_offset_px": [round(o, 1) if math.isfinite(o) else None for o in offsets],
         **(radius or {}),
     }
     return {"orbit": orbit}
@@ -404,13 +405,13 @@ register(StepKind(
     description="fly a straight line to position_m (or latlon) at speed_m_s"))
 register(StepKind(
     "orbit", OrbitParams, _orbit, check=_check_orbit, metrics=orbit_metrics,
-    report=("trajectory", "path", "photos"), status=(6, 7),
+    report=("trajectory", "path"), status=(6, 7),
     photo_camera=lambda params, config: _photo_camera(params, config) if params.images
     else None,
     description="circle center_m at radius_m facing it, taking `images` photos"))
 register(StepKind(
     "survey", SurveyParams, _survey, check=_check_survey, metrics=survey_metrics,
-    report=("trajectory", "path", "photos"), status=(10, 11), photo_camera=_photo_camera,
+    report=("trajectory", "path"), status=(10, 11), photo_camera=_photo_camera,
     plan_info=_survey_info,
     description="lawnmower over polygon_m at altitude_m, photos every photo_spacing_m"))
 
