@@ -4,7 +4,7 @@ action servers), on FastAPI, served by uvicorn inside the autopilot's own event 
 ======================================  =====================================================
 ``GET /api/status``                     status code and name, step, goal, position, velocity,
                                         yaw, armed, mode, battery
-``WS /api/status/stream``               the same, pushed ``api.stream_rate_hz`` times a second
+``WS /api/status/stream``               the same, pushed 5 times a second
 ``POST /api/goals``                     one step as in a mission file, e.g. ``{"orbit": {…}}``
                                         → 202 ``{"goal_id"}``; 409 (busy, with the reason);
                                         422 naming the bad key
@@ -17,10 +17,12 @@ action servers), on FastAPI, served by uvicorn inside the autopilot's own event 
 
 Security: it binds 127.0.0.1 unless told otherwise; on any other address every request needs
 ``Authorization: Bearer TOKEN`` (the token from a file or ``AUTOPILOT_API_TOKEN``; without one
-the server refuses to start). Requests that change anything must be ``application/json`` and
-carry no foreign ``Origin`` (a web page elsewhere cannot drive the vehicle); no CORS headers are
-ever sent. Handlers only read the runtime's state and queue requests: they never wait on the
-vehicle, so the control loop is never held up by a client.
+the server refuses to start). On loopback, requests must be addressed to a loopback name (a web
+page elsewhere whose name resolves to 127.0.0.1 — DNS rebinding — is refused). Requests that
+change anything carry JSON or no body, and no foreign ``Origin`` (a web page elsewhere cannot
+drive the vehicle); no CORS headers are ever sent. Handlers only read the runtime's state and
+queue requests (a goal's validation, which may read a file, runs in a thread): they never wait
+on the vehicle, so the control loop is never held up by a client.
 """
 
 from __future__ import annotations
@@ -33,12 +35,12 @@ import json
 import logging
 from typing import TYPE_CHECKING, Any
 
-from fastapi import FastAPI, Request, WebSocket, WebSocketDisconnect
+from fastapi import FastAPI, Request, WebSocket
 from fastapi.openapi.utils import get_openapi
 from fastapi.responses import JSONResponse
 from pydantic import ConfigDict, TypeAdapter, create_model
 
-from autopilot.goals import GoalError, goal_kinds
+from autopilot.goals import GoalError, goal_kinds, validate_goal
 from autopilot.steps import STEP_KINDS
 
 if TYPE_CHECKING:
@@ -105,7 +107,19 @@ def goal_schema() -> dict:
         ref_template="#/components/schemas/{model}")
 
 
-def build_app(runtime: Runtime, token: str | None, stream_rate_hz: float = 5.0) -> FastAPI:
+_LOOPBACK_NAMES = frozenset({"127.0.0.1", "localhost", "::1"})
+
+
+def _hostname(host_port: str) -> str:
+    """The name in ``HOST[:PORT]`` (``[::1]:8080`` → ``::1``)."""
+    host = host_port.strip().lower()
+    if host.startswith("["):
+        return host[1:host.find("]")] if "]" in host else host[1:]
+    return host.rsplit(":", 1)[0] if host.count(":") == 1 else host
+
+
+def build_app(runtime: Runtime, token: str | None, stream_rate_hz: float = 5.0,
+              loopback_only: bool = True) -> FastAPI:
     app = FastAPI(title="autopilot goal API", version="1",
                   description="Goals (mission steps) at runtime, status, cancel and abort. "
                   "Local by default; any other address needs a bearer token.")
@@ -119,19 +133,38 @@ def build_app(runtime: Runtime, token: str | None, stream_rate_hz: float = 5.0) 
         given = headers.get("authorization", "")
         return hmac.compare_digest(given.encode(), f"Bearer {token}".encode())
 
+    def host_ok(headers) -> bool:
+        """On loopback, only requests addressed to a loopback name (a page on another site
+        whose name resolves to 127.0.0.1 — DNS rebinding — carries its own name)."""
+        if not loopback_only:
+            return True
+        return _hostname(headers.get("host", "")) in _LOOPBACK_NAMES
+
+    def origin_ok(headers) -> bool:
+        origin = headers.get("origin")
+        if origin is None:
+            return True  # not a browser's cross-site request
+        name = _hostname(origin.split("://", 1)[-1])
+        if loopback_only:
+            return name in _LOOPBACK_NAMES
+        return origin.split("://", 1)[-1] == headers.get("host", "")
+
     @app.middleware("http")
     async def guard(request: Request, call_next):
+        if not host_ok(request.headers):
+            return refuse(403, "requests must be addressed to 127.0.0.1 or localhost")
         if not authorised(request.headers):
             return refuse(401, "a bearer token is needed (Authorization: Bearer TOKEN)")
         if request.method not in ("GET", "HEAD", "OPTIONS"):
-            origin = request.headers.get("origin")
-            host = request.headers.get("host", "")
-            if origin is not None and origin.split("://", 1)[-1] != host:
-                return refuse(403, f"cross-origin request from {origin} refused")
-            if request.method == "POST" and request.url.path == "/api/goals":
-                kind = request.headers.get("content-type", "").split(";")[0].strip()
-                if kind != "application/json":
-                    return refuse(415, "send the goal as application/json")
+            if not origin_ok(request.headers):
+                return refuse(403, f"cross-origin request from {request.headers['origin']} "
+                              "refused")
+            kind = request.headers.get("content-type", "").split(";")[0].strip()
+            if request.url.path == "/api/goals" and kind != "application/json":
+                return refuse(415, "send the goal as application/json")
+            if kind and kind != "application/json":  # (a form posted by a web page)
+                return refuse(415, f"{kind} is not taken here: send application/json or "
+                              "no body")
         return await call_next(request)
 
     @app.get("/api/status", summary="The mission status and the vehicle's state")
@@ -140,12 +173,11 @@ def build_app(runtime: Runtime, token: str | None, stream_rate_hz: float = 5.0) 
 
     @app.websocket("/api/status/stream")
     async def stream(ws: WebSocket) -> None:
+        if not host_ok(ws.headers) or not origin_ok(ws.headers):
+            await ws.close(code=4403)
+            return
         if not authorised(ws.headers):
             await ws.close(code=4401)
-            return
-        origin = ws.headers.get("origin")
-        if origin is not None and origin.split("://", 1)[-1] != ws.headers.get("host", ""):
-            await ws.close(code=4403)
             return
         await ws.accept()
         period = 1.0 / stream_rate_hz
@@ -153,7 +185,7 @@ def build_app(runtime: Runtime, token: str | None, stream_rate_hz: float = 5.0) 
             while True:
                 await ws.send_text(json.dumps(runtime.api_status()))
                 await asyncio.sleep(period)  # (wall clock: it is for people and programs)
-        except (WebSocketDisconnect, RuntimeError):
+        except Exception:  # the client went away, or the server is closing
             return
 
     @app.post("/api/goals", status_code=202, summary="Start a goal: one mission step",
@@ -169,7 +201,9 @@ def build_app(runtime: Runtime, token: str | None, stream_rate_hz: float = 5.0) 
         except (json.JSONDecodeError, UnicodeDecodeError) as exc:
             return JSONResponse({"error": f"the body is not JSON: {exc}"}, status_code=422)
         try:
-            goal = runtime.submit_goal(body)
+            # (validation may read files, e.g. a hover_image goal's image: off the loop)
+            step = await asyncio.to_thread(validate_goal, body, runtime.config)
+            goal = runtime.submit_goal(step)
         except GoalError as exc:
             return JSONResponse(exc.as_dict(), status_code=exc.status)
         return {"goal_id": goal.id, "state": goal.state}
@@ -196,10 +230,7 @@ def build_app(runtime: Runtime, token: str | None, stream_rate_hz: float = 5.0) 
 
     @app.post("/api/abort", summary="Abort: hold, land, disarm (status 12)")
     async def abort() -> dict:
-        if runtime.goals is not None:
-            runtime.goals.abort("abort requested through the goal API")
-        else:
-            runtime.request_stop("abort requested through the goal API")
+        runtime.abort("abort requested through the goal API")
         return {"status": "aborting"}
 
     def openapi() -> dict:
@@ -217,6 +248,19 @@ def build_app(runtime: Runtime, token: str | None, stream_rate_hz: float = 5.0) 
     return app
 
 
+def _quiet_server_class():
+    import uvicorn
+
+    class QuietServer(uvicorn.Server):
+        """uvicorn without its signal handling: the runtime owns SIGINT and SIGTERM (uvicorn
+        would take them over while it serves, and raise them again when it stops)."""
+
+        def capture_signals(self):
+            return contextlib.nullcontext()
+
+    return QuietServer
+
+
 class ApiServer:
     """The goal API as a runtime service: uvicorn on the runtime's event loop."""
 
@@ -232,12 +276,13 @@ class ApiServer:
                 f"(--api-token-file FILE, or the {TOKEN_ENV} environment variable)")
         self.host, self.port = host, port
         check_listen(host, port)
-        self.app = build_app(runtime, token if token else None, stream_rate_hz)
+        self.app = build_app(runtime, token if token else None, stream_rate_hz,
+                             loopback_only=is_loopback(host))
         config = uvicorn.Config(self.app, host=host, port=port, log_level="warning",
                                 lifespan="off", ws="websockets-sansio", access_log=False)
-        self._server = uvicorn.Server(config)
-        self._server.install_signal_handlers = lambda: None  # the runtime owns the signals
+        self._server = _quiet_server_class()(config)
         self.started = asyncio.Event()
+        self._serve_task: asyncio.Future | None = None
 
     @property
     def bound_port(self) -> int:
@@ -248,7 +293,7 @@ class ApiServer:
         return self.port
 
     async def run(self) -> None:
-        serve = asyncio.ensure_future(self._serve())
+        serve = self._serve_task = asyncio.ensure_future(self._serve())
         # (uvicorn says it has started with a flag only)
         while not self._server.started and not serve.done():  # noqa: ASYNC110
             await asyncio.sleep(0.01)
@@ -265,14 +310,21 @@ class ApiServer:
         except SystemExit:  # uvicorn exits when it cannot start; we are not the process
             raise OSError(f"the goal API could not listen on {self.host}:{self.port}") from None
 
-    async def stop(self, linger_s: float = 1.0) -> None:
-        """Stop serving — after ``linger_s`` (wall clock), so that clients following a goal
-        that ended the run (a land goal) can read how it ended."""
-        if self.started.is_set():
+    async def stop(self, graceful: bool = True, linger_s: float = 1.0) -> None:
+        """Stop serving, closing connections — after ``linger_s`` (wall clock) when the run
+        ended normally, so that clients following a goal that ended it (a land goal) can read
+        how it ended; at once otherwise."""
+        if graceful and self.started.is_set() and linger_s > 0:
             await asyncio.sleep(linger_s)
         self._server.should_exit = True
-        with contextlib.suppress(Exception):
-            await asyncio.sleep(0)
+        task = self._serve_task
+        if task is not None and not task.done() and not graceful:
+            task.cancel()
+        elif task is not None and not task.done():
+            try:
+                await asyncio.wait_for(asyncio.shield(task), 5.0)
+            except (TimeoutError, Exception):  # (it is going away either way)
+                task.cancel()
 
 
 def read_token(path: str | None) -> str | None:
@@ -285,9 +337,12 @@ def read_token(path: str | None) -> str | None:
             text = Path(path).read_text().strip()
         except OSError as exc:
             raise ApiSetupError(f"--api-token-file {path}: {exc.strerror or exc}") from None
-        if len(text) < 16:
-            raise ApiSetupError(f"--api-token-file {path}: the token is too short (at least 16 "
-                                "characters)")
-        return text.splitlines()[0]
+        token = text.splitlines()[0].strip() if text else ""
+        if len(token) < 16:
+            raise ApiSetupError(f"--api-token-file {path}: the token (its first line) is too "
+                                "short (at least 16 characters)")
+        return token
     value = os.environ.get(TOKEN_ENV, "").strip()
+    if value and len(value) < 16:
+        raise ApiSetupError(f"{TOKEN_ENV}: the token is too short (at least 16 characters)")
     return value or None

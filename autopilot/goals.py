@@ -5,8 +5,8 @@ same way (its parameter model, then what it needs of the configuration), before 
 :class:`GoalManager` keeps every goal's record and the requests from outside (submit, cancel,
 abort); the runtime's control loop serves them at its next tick, so nothing here touches the
 vehicle or blocks. Only one goal runs at a time, and only while the mission waits for goals
-(status 0 idle or 3 hover, in a standby step); anything else is refused with the reason, as
-seed 004 refused a goal while another ran.
+(a standby step: status 0 idle on the ground, 3 hovering); anything else is refused with the
+reason, as seed 004 refused a goal while another ran.
 """
 
 from __future__ import annotations
@@ -14,6 +14,7 @@ from __future__ import annotations
 import itertools
 import math
 import secrets
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -128,22 +129,33 @@ class GoalManager:
     abort_requested: str | None = None
     _counter: itertools.count = field(default_factory=lambda: itertools.count(1))
 
-    def submit(self, body: Any, now_s: float, status: MissionStatus,
-               waiting_for_goals: bool, in_air: bool) -> Goal:
-        step = validate_goal(body, self.config)
+    def submit(self, step: Step, now_s: float, status: MissionStatus,
+               waiting_for_goals: bool, in_air: bool,
+               cameras: Sequence[str] | None = None) -> Goal:
+        """Queue a validated goal (:func:`validate_goal`), or :class:`GoalError` (409) saying
+        why not now. ``cameras``: the vehicle's (a goal needing another is refused)."""
         running = self.running()
         if running is not None:
             raise GoalError(409, f"goal {running.id} ({running.step.name}) is {running.state}: "
                             "cancel it first, or wait for it to end")
         if self.abort_requested is not None or status is MissionStatus.ABORT:
             raise GoalError(409, "the mission is aborting (hold, land, disarm): no goals")
-        if status not in (MissionStatus.IDLE, MissionStatus.HOVER) or not waiting_for_goals:
+        if not waiting_for_goals:
             raise GoalError(409, f"the mission is busy (status {int(status)} {status.label}); "
                             "goals are taken while a standby step waits (status 0 or 3)")
         if step.name == "takeoff" and in_air:
             raise GoalError(409, "already flying (hovering): a takeoff goal is for the ground")
         if step.name != "takeoff" and not in_air and step.name not in ("land", "hold"):
             raise GoalError(409, f"on the ground: take off first (a {step.name} goal flies)")
+        if cameras is not None:
+            kind = STEP_KINDS[step.name]
+            needed = [spec.camera for spec in kind.pipelines(step.params, self.config)]
+            photo = kind.photo_camera(step.params, self.config)
+            missing = [c for c in dict.fromkeys([*needed, *([photo] if photo else [])])
+                       if c not in cameras]
+            if missing:
+                raise GoalError(409, f"this vehicle has no camera {missing[0]!r} attached "
+                                f"(attached: {', '.join(cameras) or 'none'})")
         goal = Goal(f"g{next(self._counter)}-{secrets.token_hex(3)}", step, now_s)
         self.goals[goal.id] = goal
         return goal

@@ -450,10 +450,17 @@ class MissionExecutor:
                    ) -> MissionOutput:
         if not self.accepts_goals:
             raise RuntimeError("no step is waiting for goals")
-        self._waiting = (self._index, self._current)
+        saved = (self._index, self._current)
+        self._waiting = saved
         self._index, self._current = index, behavior
-        return self._handle(behavior.activate(inputs), inputs, [
-            self._event("step_started", f"goal {behavior.name} started")])
+        started = self._event("step_started", f"goal {behavior.name} started")
+        try:
+            out = behavior.activate(inputs)
+        except Exception:  # it never started: the waiting step goes on as it was
+            self._index, self._current = saved
+            self._waiting = None
+            raise
+        return self._handle(out, inputs, [started])
 
     def cancel_goal(self, inputs: BehaviorInputs, reason: str = "cancelled") -> MissionOutput:
         if self._waiting is None:

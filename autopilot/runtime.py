@@ -81,13 +81,14 @@ from drivers.slots import LatestSlot
 
 class Service(Protocol):
     """Something the runtime runs for the whole flight beside the mission (the goal API's
-    web server): ``run`` until ``stop`` is awaited."""
+    web server): ``run`` until ``stop`` is awaited (``graceful``: the run ended normally;
+    otherwise stop at once, the vehicle comes first)."""
 
     name: str
 
     async def run(self) -> None: ...
 
-    async def stop(self) -> None: ...
+    async def stop(self, graceful: bool = True) -> None: ...
 
 
 @dataclass(slots=True)
@@ -196,7 +197,6 @@ class Runtime:
         self._steps: list[Step] = list(plan.steps)
         self.goals = goals
         self._services = list(services)
-        self._aborting = False
         self.photos = PhotoLane(vehicle, log, cfg, photos_dir)
         self.status_tracker = StatusTracker()
         self._status_logged: MissionStatus | None = None
@@ -247,13 +247,16 @@ class Runtime:
                     background.append(tasks.create_task(report_progress(
                         self.progress_line, self._progress,
                         self.config.runtime.progress_interval_s), name="progress"))
+                ended = False
                 try:
                     await self._control()
+                    ended = True
                 finally:
                     self._use_pipelines(())
-                    await self.photos.use(None)
-                    for service in self._services:
-                        await service.stop()
+                    for service in self._services:  # (after a failure: at once, no waiting)
+                        await service.stop(graceful=ended)
+                    if ended:
+                        await self.photos.use(None)
                     for task in background:
                         task.cancel()
         except* Exception as group:  # the link broke, or a bug: never leave the motors running
@@ -305,6 +308,14 @@ class Runtime:
             await self._apply(out, source)
         self.status = executor.status
         self.reason = executor.failure
+        s = self._state
+        if s is not None and s.in_air and s.armed and not self._stale:
+            # a mission that ends in the air (its last step a goto, a timed standby, …) leaves
+            # the vehicle in the vehicle's own position hold, not in OFFBOARD without setpoints
+            self._intent = None
+            self._event(self.clock.now(), "runtime", "mission ended in the air: holding")
+            with contextlib.suppress(VehicleError, TimeoutError):
+                await self.clock.wait_for(self.vehicle.hold(), 2.0)
 
     async def _apply(self, out: MissionOutput, source_frame_s: float | None = None) -> None:
         now = self.clock.now()
@@ -356,11 +367,8 @@ class Runtime:
         """Serve what the goal API asked since the last tick: an abort, a cancel, a queued
         goal (when the mission waits for one). None: nothing to do."""
         goals, executor = self.goals, self._executor
-        if goals is None:
+        if goals is None or self._stop_requested.is_set():
             return None
-        if goals.abort_requested is not None and not self._aborting:
-            self._aborting = True
-            return executor.abort(goals.abort_requested, inputs)
         goal = goals.running()
         if goal is None:
             return None
@@ -372,23 +380,33 @@ class Runtime:
             if executor.goal_running:
                 return executor.cancel_goal(inputs)
         if goal.state == "queued" and executor.accepts_goals:
-            kind = step_kind(goal.step.name)
-            specs = kind.pipelines(goal.step.params, self.config)
-            for spec in specs:
-                if spec.key not in self.pipelines:
-                    self.pipelines[spec.key] = make_pipeline(self.config, spec)
-                    self.tracks[spec.key] = Track(self.pipelines[spec.key])
-            goal.index = len(self._steps)
-            self._steps.append(goal.step)
-            self._step_keys.append(tuple(spec.key for spec in specs))
-            self._step_photo_camera.append(kind.photo_camera(goal.step.params, self.config))
-            self.log.write(ch.MISSION_GOALS, now, ch.clean({
-                **self._step_record(goal.index, goal.step), "goal_id": goal.id,
-                "time_s": now}))
-            goal.state, goal.started_s = "running", now
-            behavior = build_behavior(goal.step, self.config, self.vehicle.cameras)
-            return executor.start_goal(behavior, goal.index, inputs)
+            try:
+                return self._start_goal(goal, inputs)
+            except Exception as exc:  # a goal that cannot start fails; the flight goes on
+                goal.state, goal.ended_s = "failed", now
+                goal.reason = f"could not start: {type(exc).__name__}: {exc}"
+                self._event(now, "goal_refused", f"goal {goal.id} {goal.step.name}: "
+                            f"{goal.reason}")
         return None
+
+    def _start_goal(self, goal: Goal, inputs: BehaviorInputs) -> MissionOutput:
+        now = self.clock.now()
+        kind = step_kind(goal.step.name)
+        behavior = build_behavior(goal.step, self.config, self.vehicle.cameras)
+        specs = kind.pipelines(goal.step.params, self.config)
+        for spec in specs:
+            if spec.key not in self.pipelines:
+                self.pipelines[spec.key] = make_pipeline(self.config, spec)
+                self.tracks[spec.key] = Track(self.pipelines[spec.key])
+        goal.index = len(self._steps)
+        self._steps.append(goal.step)
+        self._step_keys.append(tuple(spec.key for spec in specs))
+        self._step_photo_camera.append(kind.photo_camera(goal.step.params, self.config))
+        self.log.write(ch.MISSION_GOALS, now, ch.clean({
+            **self._step_record(goal.index, goal.step), "goal_id": goal.id,
+            "time_s": now}))
+        goal.state, goal.started_s = "running", now
+        return self._executor.start_goal(behavior, goal.index, inputs)
 
     def _goal_at(self, index: int):
         if self.goals is None or index < len(self.plan.steps):
@@ -436,13 +454,21 @@ class Runtime:
     def waiting_for_goals(self) -> bool:
         return self._executor is not None and self._executor.accepts_goals
 
-    def submit_goal(self, body) -> Goal:
-        """A goal from the API (validated and queued, or GoalError)."""
+    def submit_goal(self, step: Step) -> Goal:
+        """A validated goal from the API, queued (or GoalError saying why not now)."""
         if self.goals is None:
             raise GoalError(409, "this run takes no goals")
         s = self._state
-        return self.goals.submit(body, self.clock.now(), self.status_tracker.code,
-                                 self.waiting_for_goals, bool(s is not None and s.in_air))
+        return self.goals.submit(step, self.clock.now(), self.status_tracker.code,
+                                 self.waiting_for_goals, bool(s is not None and s.in_air),
+                                 cameras=list(self.vehicle.cameras))
+
+    def abort(self, reason: str) -> None:
+        """The goal API's abort: no more goals; the safe stop (hold, land, disarm), bounded by
+        ``shutdown_timeout_s`` as after Ctrl-C."""
+        if self.goals is not None:
+            self.goals.abort(reason)
+        self.request_stop(reason)
 
     async def _perform(self, request: VehicleRequest) -> None:
         v = self.vehicle

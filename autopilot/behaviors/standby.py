@@ -6,7 +6,9 @@ stopping point (where braking at ``brake_accel_m_s2`` from the present velocity 
 cancelled goal ends in a hover within about a second, without the overshoot of a setpoint at
 the position it had when told. On the ground it waits (a takeoff goal starts the flight). It
 succeeds — ending the mission, and the process — once the vehicle is on the ground and
-disarmed after having flown (a land goal), or after ``timeout_s`` if one is given.
+disarmed after having flown (a land goal), or after ``timeout_s`` if one is given (counted from
+the standby's start, goals included; a mission that ends in the air leaves the vehicle in its
+own position hold).
 """
 
 from __future__ import annotations

@@ -219,6 +219,30 @@ def resolve_down(inputs: BehaviorInputs, frame: str, altitude_m: float, latlon: 
 # ------------------------------------------------------------------------------------------
 
 
+def photo_arc_lengths(traj: Trajectory, points: np.ndarray, tolerance_m: float = 0.1
+                      ) -> np.ndarray:
+    """Where along the trajectory each photo point is, in order: the first time the path
+    passes it after the previous one (an orbit of several laps passes each angle again)."""
+    from scipy.spatial import cKDTree
+
+    positions = traj.positions
+    tree = cKDTree(positions)
+    out = []
+    start = 0
+    for p in points:
+        near = np.array(sorted(i for i in tree.query_ball_point(p, tolerance_m) if i >= start),
+                        dtype=int)
+        if len(near):  # the first pass by it, at its closest
+            breaks = np.flatnonzero(np.diff(near) > 1)
+            run = near[:breaks[0] + 1] if len(breaks) else near
+            i = int(run[np.argmin(np.linalg.norm(positions[run] - p, axis=1))])
+        else:
+            i = start + int(np.argmin(np.linalg.norm(positions[start:] - p, axis=1)))
+        out.append(float(traj.s_m[i]))
+        start = i
+    return np.array(out)
+
+
 def blended_yaw(law: YawLaw, yaw0: float, start: np.ndarray, blend_m: float) -> YawLaw:
     """``law``, but starting from the heading ``yaw0`` and turning onto the law's heading
     smoothly over the first ``blend_m`` of the path."""
@@ -270,8 +294,8 @@ class FollowTrajectory(Behavior):
             return BehaviorOutput(Status.FAILED, reason="not flying: take off first")
         try:
             plan, yaw_law, speed = self.plan(inputs)
-        except PlanError as exc:
-            return BehaviorOutput(Status.FAILED, reason=str(exc))
+        except ValueError as exc:  # PlanError, or geometry that cannot be flown
+            return BehaviorOutput(Status.FAILED, reason=f"cannot plan: {exc}")
         start = np.asarray(s.position_ned_m, dtype=float)
         st = self.settings
         limits = Limits(speed, st.limits.accel_m_s2, st.limits.lateral_accel_m_s2,
@@ -287,9 +311,7 @@ class FollowTrajectory(Behavior):
         self.trajectory = Trajectory(path, limits, blended_yaw(yaw_law, s.yaw_rad, start,
                                                                blend_m))
         traj = self.trajectory
-        self._photo_s = np.array([
-            float(traj.s_m[int(np.argmin(np.linalg.norm(traj.positions - p, axis=1)))])
-            for p in plan.photo_points])
+        self._photo_s = photo_arc_lengths(traj, plan.photo_points)
         self._tau = 0.0
         self._last_tick = inputs.now_s
         self._progress_s = 0.0

@@ -76,8 +76,8 @@ def orbit_plan(start_ned: np.ndarray, center_ne: tuple[float, float], radius_m: 
     if start_bearing_rad is not None:
         entry = float(start_bearing_rad)
     elif d > r_draw * 1.02:
-        # the tangent point reached going round the right way
-        entry = bearing0 - sign * math.acos(min(r_draw / d, 1.0))
+        # the tangent point from which the line in goes on round the circle the right way
+        entry = bearing0 + sign * math.acos(min(r_draw / d, 1.0))
     else:
         entry = bearing0 if d > 1e-6 else 0.0
     total = 2.0 * math.pi * laps

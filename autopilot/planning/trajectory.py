@@ -71,12 +71,17 @@ class Reference:
 
 
 def dedupe(points: np.ndarray, min_step_m: float = 1e-3) -> np.ndarray:
-    """``points`` without consecutive near-duplicates."""
+    """``points`` without points closer than ``min_step_m`` to the last one kept."""
     points = np.asarray(points, dtype=float)
+    if len(points) < 2:
+        return points
+    step = np.linalg.norm(np.diff(points, axis=0), axis=1)
+    if np.all(step > min_step_m):
+        return points
     keep = [0]
-    for i in range(1, len(points)):
+    for i in np.flatnonzero(step > 0.0) + 1:  # (only runs of tiny steps need a closer look)
         if np.linalg.norm(points[i] - points[keep[-1]]) > min_step_m:
-            keep.append(i)
+            keep.append(int(i))
     return points[keep]
 
 
@@ -104,6 +109,7 @@ def resample_evenly(points: np.ndarray, step_m: float) -> np.ndarray:
 
 
 _STOP_ANGLE_RAD = math.radians(30.0)  # a turn this sharp at one point: stop there, then go on
+_MIN_PIECE_M = 0.1  # stops closer together than this are one
 
 
 class Path:
@@ -125,7 +131,12 @@ class Path:
         s = np.concatenate(([0.0], np.cumsum(lengths)))
         unit = seg / lengths[:, None]
         cos = np.einsum("ij,ij->i", unit[:-1], unit[1:])
-        corners = np.flatnonzero(cos < math.cos(_STOP_ANGLE_RAD)) + 1  # point indices
+        corners = []  # point indices; stops closer than 10 cm (a cusp's two bends) are one
+        for i in (np.flatnonzero(cos < math.cos(_STOP_ANGLE_RAD)) + 1).tolist():
+            if s[i] - s[corners[-1] if corners else 0] >= _MIN_PIECE_M and \
+                    s[-1] - s[i] >= _MIN_PIECE_M:
+                corners.append(i)
+        corners = np.array(corners, dtype=int)
         bounds = [0, *corners.tolist(), len(pts) - 1]
         self._pieces = []
         for a, b in itertools.pairwise(bounds):
@@ -294,11 +305,12 @@ class Trajectory:
             v[i] = min(v[i], math.sqrt(v[i + 1] ** 2 + a2 * ds[i]))
         return v
 
-    @staticmethod
-    def _times(s: np.ndarray, v: np.ndarray) -> np.ndarray:
-        mean = 0.5 * (v[1:] + v[:-1])
-        dt = np.diff(s) / np.maximum(mean, 1e-6)
-        return np.concatenate(([0.0], np.cumsum(dt)))
+    def _times(self, s: np.ndarray, v: np.ndarray) -> np.ndarray:
+        ds = np.diff(s)
+        # (a stretch between two rests shorter than a sample: accelerate and brake over it)
+        floor = 0.5 * np.sqrt(self.limits.accel_m_s2 * np.maximum(ds, 1e-9))
+        mean = np.maximum(0.5 * (v[1:] + v[:-1]), floor)
+        return np.concatenate(([0.0], np.cumsum(ds / mean)))
 
 
 def cross_track_m(path_points: np.ndarray, positions: np.ndarray) -> np.ndarray:

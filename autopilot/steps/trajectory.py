@@ -338,10 +338,11 @@ def survey_metrics(log: Records, intervals: list[tuple[float, float]], step: Map
         angle = math.radians(plan.get("angle_deg") or 0.0)
         normal = np.array([-math.sin(angle), math.cos(angle)])
         step = float(plan.get("spacing_m") or 1.0)
+        offsets = {k: float(np.dot(lines[k].mean(axis=0), normal)) for k in by_line}
+        first = min(offsets.values())
         strips: dict[int, list[Polygon]] = {}
-        for k, feet in by_line.items():
-            key = math.floor(float(np.dot(lines[k].mean(axis=0), normal)) / step + 0.5)
-            strips.setdefault(key, []).extend(feet)
+        for k, feet in by_line.items():  # (strips are spacing_m apart: count them)
+            strips.setdefault(round((offsets[k] - first) / step), []).extend(feet)
         ordered = sorted(strips)
         for a, b in itertools.pairwise(ordered):
             if b - a != 1:

@@ -98,6 +98,13 @@ def test_goal_api_flow(tmp_path):
         code, _ = c.call("POST", "/api/goals", {"orbit": {"center_m": [6, 0]}},
                          headers={"Origin": "http://evil.example"})
         assert code == 403
+        # DNS rebinding: a page at evil.example resolving to 127.0.0.1 names its own host
+        code, _ = c.call("GET", "/api/status", headers={"Host": "evil.example:8080"})
+        assert code == 403
+        # a form a web page posts is not JSON: refused
+        code, _ = c.call("POST", "/api/abort", b"x=1",
+                         content_type="application/x-www-form-urlencoded")
+        assert code == 415
         code, body = c.call("POST", "/api/goals", {"takeoff": {}})
         assert code == 409
         assert "already flying" in body["error"]

@@ -305,3 +305,19 @@ def test_an_abort_during_a_goal_goes_to_the_fallback():
     assert not ex.accepts_goals
     with pytest.raises(RuntimeError):
         ex.start_goal(_Scripted(Status.SUCCEEDED), 2, _inputs(0.3))
+
+
+def test_a_goal_that_cannot_start_leaves_the_standby_as_it_was():
+    from autopilot.behaviors.standby import Standby, StandbyParams
+
+    class Broken(_Scripted):
+        def activate(self, inputs):
+            raise ValueError("cannot")
+
+    ex = MissionExecutor([Standby(StandbyParams())])
+    ex.start(_inputs(0.0))
+    with pytest.raises(ValueError, match="cannot"):
+        ex.start_goal(Broken(Status.SUCCEEDED), 1, _inputs(0.1))
+    assert ex.accepts_goals
+    assert not ex.goal_running
+    assert ex.step_index == 0

@@ -75,3 +75,19 @@ def test_photo_cameras_are_cameras_the_mission_uses():
     assert load_mission("orbit", ["steps.1.orbit.camera=front"]).cameras_used() == ["front"]
     assert load_mission("orbit", ["steps.1.orbit.images=0"]).cameras_used() == []
     assert load_mission("standby").cameras_used() == ["down"]  # what goals take photos with
+
+
+def test_a_goal_needing_a_camera_the_vehicle_lacks_is_refused():
+    from autopilot.goals import GoalError, GoalManager, validate_goal
+
+    plan = load_mission("standby")
+    goals = GoalManager(plan.config)
+    step = validate_goal({"orbit": {"center_m": [5, 0], "images": 4}}, plan.config)
+    with pytest.raises(GoalError, match="no camera 'down'") as err:
+        goals.submit(step, 0.0, MissionStatus.HOVER, True, True, cameras=["front"])
+    assert err.value.status == 409
+    assert goals.submit(step, 0.0, MissionStatus.HOVER, True, True, cameras=["down"]).active
+    # after a landing (status 9) a standby still waiting takes goals again
+    goals.goals.clear()
+    takeoff = validate_goal({"takeoff": {}}, plan.config)
+    assert goals.submit(takeoff, 1.0, MissionStatus.LANDING_COMPLETED, True, False).active

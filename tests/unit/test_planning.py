@@ -158,3 +158,23 @@ def test_concave_strips_are_split_and_the_turns_are_smooth():
     traj = Trajectory(Path(plan.points), Limits(3.0), hold_heading(0.0))
     assert np.linalg.norm(traj.accelerations, axis=1).max() < 2.2
     assert np.linalg.norm(traj.velocities, axis=1).max() <= 3.0 * 1.001
+
+
+@pytest.mark.parametrize("start", [(10.0, 0.0, -6.0), (0.0, 0.0, -3.0), (6.0, -8.0, -6.0),
+                                   (6.5, 0.5, -6.0)])
+def test_orbit_entry_turns_smoothly_onto_the_circle_without_stopping(start):
+    from autopilot.behaviors.trajectory import photo_arc_lengths
+
+    plan = orbit_plan(np.array(start), (6.0, 0.0), 3.0, -6.0, images=8, laps=2)
+    d = np.diff(plan.points[:, :2], axis=0)
+    heading = np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
+    inside = np.hypot(start[0] - 6.0, start[1]) < 3.0
+    # from outside: along the tangent, no corner anywhere (inside: one rounded 90° turn)
+    assert np.degrees(np.abs(np.diff(heading))).max() < (10.0 if inside else 2.0)
+    path = Path(plan.points)
+    traj = Trajectory(path, Limits(2.0), face_point(6.0, 0.0))
+    assert len(path.stops_m) == 0
+    assert traj.duration_s < 2 * (path.length_m / 2.0) + 10
+    # two laps: the photos come one after another, never all at once
+    s = photo_arc_lengths(traj, plan.photo_points)
+    assert np.all(np.diff(s) > 1.0)
