@@ -92,7 +92,9 @@ class Goal:
     id: str
     step: Step
     created_s: float
-    state: str = "queued"  # queued, running, succeeded, failed, cancelled, aborted
+    #: queued, running, succeeded, failed, cancelled, aborted (shown as "cancelling" between
+    #: a cancel and the control loop's next tick)
+    state: str = "queued"
     index: int = -1  # its step index in the run (after the mission's steps)
     started_s: float | None = None
     ended_s: float | None = None
@@ -109,7 +111,8 @@ class Goal:
     def as_dict(self) -> dict:
         return {
             "goal_id": self.id, "kind": self.step.name,
-            "params": self.step.params.model_dump(mode="json"), "state": self.state,
+            "params": self.step.params.model_dump(mode="json"),
+            "state": "cancelling" if self.cancel_requested and self.active else self.state,
             "created_s": self.created_s, "started_s": self.started_s, "ended_s": self.ended_s,
             "feedback": {"phase": self.phase,
                          "progress": self.progress if math.isfinite(self.progress) else None,
