@@ -39,8 +39,15 @@ from autopilot.behaviors.base import (
     VehicleRequest,
 )
 from autopilot.planning.paths import PathPlan, goto_path, orbit_plan, survey_plan, wrap_pi
-from autopilot.planning.trajectory import Limits, Path, Trajectory, YawLaw, face_point
-from drivers.base import CameraInfo, Setpoint
+from autopilot.planning.trajectory import (
+    Limits,
+    Path,
+    Reference,
+    Trajectory,
+    YawLaw,
+    face_point,
+)
+from drivers.base import Setpoint
 
 Frame = Literal["world", "home", "rover"]
 Speed = Annotated[float, Field(gt=0, le=20)]
@@ -316,7 +323,8 @@ class FollowTrajectory(Behavior):
         self._last_tick = inputs.now_s
         self._progress_s = 0.0
         self._progress_time = s.time_s
-        return BehaviorOutput(Status.RUNNING, setpoint=self._setpoint(inputs.now_s, 1.0),
+        return BehaviorOutput(Status.RUNNING,
+                              setpoint=self._setpoint(inputs.now_s, 1.0, self.trajectory.at(0.0)),
                               requests=(VehicleRequest(RequestKind.START_OFFBOARD),),
                               phase=self.phase_at(0.0), progress=0.0,
                               plan=self.plan_record(speed))
@@ -357,8 +365,8 @@ class FollowTrajectory(Behavior):
         photos = self._photos(progress, inputs)
         ref = traj.at(self._tau)
         frac = ref.s_m / traj.length_m if traj.length_m > 0 else 1.0
-        setpoint = self._setpoint(now, rate) if st.tracker != "seed004" \
-            else self._pid_setpoint(now, dt, pos)
+        setpoint = self._setpoint(now, rate, ref) if st.tracker != "seed004" \
+            else self._pid_setpoint(now, dt, pos, ref)
         soon = self._photo_soon(progress, inputs)
         if self._tau >= traj.duration_s:
             if self._ended_s is None:
@@ -376,17 +384,17 @@ class FollowTrajectory(Behavior):
         return BehaviorOutput(Status.RUNNING, setpoint=setpoint, phase=self.phase_at(ref.s_m),
                               photos=photos, progress=frac, photo_soon=soon)
 
-    def _setpoint(self, now: float, rate: float) -> Setpoint:
-        ref = self.trajectory.at(self._tau)
+    @staticmethod
+    def _setpoint(now: float, rate: float, ref: Reference) -> Setpoint:
         return Setpoint.position_velocity(
             ref.position_ned_m, ref.velocity_ned_m_s * rate,
             acceleration_ned_m_s2=ref.acceleration_ned_m_s2 * rate * rate,
             yaw_rad=wrap_pi(ref.yaw_rad), yaw_rate_rad_s=ref.yaw_rate_rad_s * rate, time_s=now)
 
-    def _pid_setpoint(self, now: float, dt: float, pos: np.ndarray) -> Setpoint:
+    def _pid_setpoint(self, now: float, dt: float, pos: np.ndarray, ref: Reference
+                      ) -> Setpoint:
         """Seed 004's tracking: velocity = Kp·e + Ki·∫e + Kd·ė, e = reference − position."""
         kp, ki, kd = self.settings.pid
-        ref = self.trajectory.at(self._tau)
         err = ref.position_ned_m - pos
         self._pid_int += err * dt
         de = (err - self._pid_prev) / dt if self._pid_prev is not None and dt > 0 \
@@ -563,9 +571,3 @@ class Survey(FollowTrajectory):
                 return f"line {i + 1}/{len(self._lines_s)}"
         return "turning" if self._lines_s and s_m > self._lines_s[0][0] else "transit"
 
-
-def footprint_m(camera: CameraInfo, height_m: float) -> tuple[float, float]:
-    """(across, along) the ground a level down-looking camera sees from ``height_m``: its
-    image's width and height on the ground."""
-    intr = camera.intrinsics
-    return (height_m * intr.width_px / intr.fx, height_m * intr.height_px / intr.fy)

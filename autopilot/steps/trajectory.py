@@ -34,17 +34,15 @@ from autopilot.behaviors.trajectory import (
     Survey,
     SurveyParams,
     TrajectorySettings,
-    footprint_m,
 )
 from autopilot.config import AppConfig
 from autopilot.estimation.pose_history import slerp
 from autopilot.flightlog import records as ch
-from autopilot.flightlog.metrics import _intrinsics, pixel_of
+from autopilot.flightlog.metrics import _intrinsics, project_target
 from autopilot.planning.footprint import ground_footprint
 from autopilot.planning.trajectory import Limits, cross_track_m, resample
 from autopilot.steps.registry import StepContext, StepKind, register
 from drivers.camera_model import pinhole
-from drivers.geometry import quat_to_matrix
 
 Records = Mapping[str, Sequence[Mapping]]
 
@@ -63,10 +61,13 @@ def _photo_camera(params, config: AppConfig) -> str:
     return params.camera or config.photos.camera
 
 
-def _camera_geometry(config: AppConfig, name: str):
-    """A configured camera's nominal intrinsics (for planning a survey's line spacing)."""
-    cam = config.vehicle.cameras[name]
-    return pinhole(cam.width_px, cam.height_px, cam.hfov_deg)
+def footprint_m(params, config: AppConfig) -> tuple[float, float]:
+    """(across, along) the ground the step's photo camera (its nominal intrinsics, level,
+    looking down) sees from the step's altitude: its image's width and height on the ground."""
+    cam = config.vehicle.cameras[_photo_camera(params, config)]
+    intr = pinhole(cam.width_px, cam.height_px, cam.hfov_deg)
+    return (params.altitude_m * intr.width_px / intr.fx,
+            params.altitude_m * intr.height_px / intr.fy)
 
 
 def survey_spacing_m(params: SurveyParams, config: AppConfig) -> float:
@@ -74,9 +75,7 @@ def survey_spacing_m(params: SurveyParams, config: AppConfig) -> float:
     survey's height × (1 − side_overlap)."""
     if params.spacing_m is not None:
         return params.spacing_m
-    intr = _camera_geometry(config, _photo_camera(params, config))
-    across = params.altitude_m * intr.width_px / intr.fx
-    return across * (1.0 - params.side_overlap)
+    return footprint_m(params, config)[0] * (1.0 - params.side_overlap)
 
 
 def _check_speed(speed: float, config: AppConfig) -> None:
@@ -134,9 +133,7 @@ def _check_survey(params: SurveyParams, config: AppConfig) -> None:
     _check_frame(params.frame)
     _check_camera(params, config)
     spacing = survey_spacing_m(params, config)
-    intr = _camera_geometry(config, _photo_camera(params, config))
-    across = params.altitude_m * intr.width_px / intr.fx
-    along = params.altitude_m * intr.height_px / intr.fy
+    across, along = footprint_m(params, config)
     if spacing > across:
         raise ValueError(f"spacing_m {spacing:g} is wider than the camera sees across the lines "
                          f"from {params.altitude_m:g} m ({across:.1f} m): the photos would "
@@ -233,13 +230,6 @@ def _camera(log: Records, name: str) -> Mapping | None:
     return next((c for c in log.get(ch.CAMERA_INFO, []) if c["name"] == name), None)
 
 
-def _camera_frame(cam: Mapping, vehicle_p, vehicle_q, point) -> np.ndarray:
-    r_wb = quat_to_matrix(np.asarray(vehicle_q))
-    r_bc = np.array(cam["rotation_body_cam"]).reshape(3, 3)
-    return r_bc.T @ (r_wb.T @ (np.asarray(point, dtype=float) - vehicle_p)
-                     - np.array(cam["position_body_m"]))
-
-
 def orbit_metrics(log: Records, intervals: list[tuple[float, float]], step: Mapping) -> dict:
     path, plan, truth = path_metrics(log, intervals, step)
     if plan is None or truth is None:
@@ -253,11 +243,11 @@ def orbit_metrics(log: Records, intervals: list[tuple[float, float]], step: Mapp
         pose = truth.pose(photo["time_s"])
         if cam is None or pose is None or look is None:
             continue
-        p_cam = _camera_frame(cam, pose[0], pose[1], look)
-        if p_cam[2] <= 0:
+        seen = project_target(cam, pose[0], pose[1], look, 0.0)
+        if seen is None:  # behind the camera
             offsets.append(math.inf)
             continue
-        u, v = pixel_of(cam, p_cam)
+        u, v, _ = seen
         offsets.append(math.hypot(u - cam["cx"], v - cam["cy"]))
         in_frame += 0 <= u <= cam["width_px"] - 1 and 0 <= v <= cam["height_px"] - 1
     radius = None
@@ -394,10 +384,8 @@ def _survey(params: SurveyParams, ctx: StepContext) -> Survey:
 
 
 def _survey_info(params: SurveyParams, config: AppConfig) -> dict:
-    intr = _camera_geometry(config, _photo_camera(params, config))
-    across = params.altitude_m * intr.width_px / intr.fx
-    along = params.altitude_m * intr.height_px / intr.fy
-    return {"spacing_m": survey_spacing_m(params, config), "footprint_m": [across, along]}
+    return {"spacing_m": survey_spacing_m(params, config),
+            "footprint_m": list(footprint_m(params, config))}
 
 
 register(StepKind(
