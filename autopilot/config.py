@@ -200,11 +200,41 @@ class PadEstimationConfig(_Model):
     heading_noise_deg: Positive  # marker pads: of the direction of its top, one detection
 
 
+class RelativeEstimationConfig(_Model):
+    """The relative-state filter of land_on_rover (autopilot/estimation/relative.py): the drone
+    relative to the rover's deck, fused from UWB ranges, the deck's tag, the rangefinder, the
+    rover's own reports and the drone's velocity."""
+
+    accel_noise_m_s2: Positive  # white acceleration beyond the modelled one (process noise)
+    jerk_noise_m_s3: Positive  # how fast the rover's acceleration may change
+    accel_time_constant_s: Positive  # how long its acceleration lasts (Gauss–Markov)
+    yaw_accel_noise_rad_s2: Positive  # how hard its turn rate may change
+    drone_velocity_noise_m_s: NonNegative  # of the drone's velocity changes (the filter's input)
+    uwb_range_noise_m: Positive  # one range (σ)
+    uwb_gate_chi2: Positive  # one range's innovation gate (1 dof)
+    tag_pixel_noise_px: Positive  # the tag centre's bearing noise
+    tag_range_noise_fraction: Positive  # the tag's range noise, a fraction of the range
+    tag_heading_noise_deg: Positive
+    rangefinder_noise_m: Positive
+    rover_velocity_noise_m_s: Positive  # the rover's reported velocity (σ, at least)
+    rover_heading_noise_deg: Positive  # its compass, each reading (σ, at least)
+    compass_bias_std_deg: Positive  # its compass's slowly wandering bias (σ)
+    course_noise_deg: NonNegative  # its course over the ground vs its heading (wheel slip)
+    #: how far apart the rover's reported position and the drone's own may be (their two GNSS
+    #: errors: a slowly wandering bias, σ per axis), and how slowly it wanders
+    rough_position_std_m: tuple[Positive, Positive, Positive]
+    bias_time_constant_s: Positive
+    gate_chi2: Positive  # 3-dof measurements (tag, rough position)
+    history_s: Annotated[float, Field(gt=0, le=5)]  # a measurement this late is still fused
+    max_extrapolation_s: Positive  # the estimate is not predicted further than this
+
+
 class EstimationConfig(_Model):
     target: TargetEstimationConfig
     marker: MarkerEstimationConfig
     image: ImageEstimationConfig
     pad: PadEstimationConfig
+    relative: RelativeEstimationConfig
     navigation: NavigationUncertaintyConfig
 
 
@@ -306,6 +336,52 @@ class VehicleSetup(_Model):
     cameras: dict[str, VehicleCameraConfig]
 
 
+class DeckTagConfig(_Model):
+    """The tag printed on the rover's deck: the nested marker pad (five markers of one
+    dictionary — AprilTag families included — the small one in the centre), its top towards
+    the rover's front."""
+
+    kind: Literal["markers"]
+    size_m: Annotated[float, Field(gt=0.1, le=5)]
+    ids: tuple[int, int, int, int, int]
+    dictionary: str
+
+    @model_validator(mode="after")
+    def _layout(self) -> DeckTagConfig:
+        from autopilot.perception.pad import marker_pad_layout
+
+        marker_pad_layout(self.size_m, self.ids, self.dictionary)  # raises ValueError
+        return self
+
+
+class RoverUwbConfig(_Model):
+    """Where the UWB anchors are on the rover (FRD from its reference point, the ground under
+    the deck's centre) and the tag on the drone (FRD from its body origin)."""
+
+    anchors_frd_m: Annotated[list[tuple[float, float, float]], Field(min_length=1,
+                                                                       max_length=16)]
+    tag_frd_m: tuple[float, float, float]
+
+
+class RoverConfig(_Model):
+    """The rover land_on_rover lands on, as the autopilot knows it (a scenario's rover is built
+    to match unless it says otherwise)."""
+
+    deck_size_m: tuple[Annotated[float, Field(gt=0.2, le=10)],
+                       Annotated[float, Field(gt=0.2, le=10)]]  # along the rover, across
+    deck_height_m: Annotated[float, Field(ge=0, le=5)]  # its top above the reference point
+    camera: str  # the camera that sees the deck's tag (pointing down)
+    tag: DeckTagConfig
+    uwb: RoverUwbConfig
+
+    @model_validator(mode="after")
+    def _fits(self) -> RoverConfig:
+        if self.tag.size_m > min(self.deck_size_m):
+            raise ValueError(f"tag.size_m ({self.tag.size_m}) is larger than the deck "
+                             f"({list(self.deck_size_m)})")
+        return self
+
+
 class AppConfig(_Model):
     """The whole of ``config.yaml``."""
 
@@ -317,6 +393,7 @@ class AppConfig(_Model):
     estimation: EstimationConfig
     control: ControlConfig
     photos: PhotoConfig
+    rover: RoverConfig
     log: LogConfig
     sim: SimConfig  # its cameras are vehicle.cameras
 

@@ -136,6 +136,48 @@ class PadScenario(_Model):
         return self
 
 
+class DeckTagScenario(_Model):
+    """The tag on the rover's deck (the nested marker pad)."""
+
+    kind: Literal["markers"] = "markers"
+    size_m: Annotated[float, Field(gt=0.1, le=5)] = 0.7
+    ids: tuple[int, int, int, int, int] = (0, 1, 2, 3, 4)
+    dictionary: str = "DICT_APRILTAG_36h11"
+
+    @model_validator(mode="after")
+    def _layout(self) -> DeckTagScenario:
+        from autopilot.perception.pad import marker_pad_layout
+
+        marker_pad_layout(self.size_m, self.ids, self.dictionary)  # raises ValueError
+        return self
+
+
+class RoverScenario(_Model):
+    """A rover driving a path (land_on_rover), its deck carrying the tag. Deck, tag and UWB
+    anchors default to the configuration's ``rover`` section (what the autopilot knows)."""
+
+    path: Literal["straight", "circle", "random_turns", "stop_and_go", "static"] = "straight"
+    speed_mps: Annotated[float, Field(ge=0, le=5)] = 1.5
+    start_north_east_m: tuple[float, float] = (6.0, 3.0)  # from the vehicle's start
+    heading_deg: Annotated[float, Field(ge=-360, le=360)] = 0.0  # where it drives first
+    size_m: Annotated[float, Field(gt=2, le=500)] = 24.0  # circle diameter; widest random turn
+    accel_mps2: Annotated[float, Field(gt=0, le=5)] = 1.0  # pulling away and braking
+    deck_size_m: tuple[Annotated[float, Field(gt=0.2, le=10)],
+                       Annotated[float, Field(gt=0.2, le=10)]] | None = None
+    deck_height_m: Annotated[float, Field(ge=0, le=5)] | None = None
+    tag: DeckTagScenario | None = None
+
+
+class UwbScenario(_Model):
+    """The rover's UWB anchors (default: the configuration's ``rover.uwb.anchors_frd_m``) and
+    the ranging's quality (default: ``sim.uwb``)."""
+
+    anchors: list[tuple[float, float, float]] | None = None
+    range_noise_m: Annotated[float, Field(ge=0, le=5)] | None = None
+    dropout: Annotated[float, Field(ge=0, le=1)] | None = None
+    nlos_fraction: Annotated[float, Field(ge=0, le=1)] | None = None
+
+
 class Scenario(_Model):
     seed: Annotated[int, Field(ge=0)] = 0
     ball: BallScenario | None = BallScenario()  # null: no ball
@@ -143,6 +185,8 @@ class Scenario(_Model):
     marker: MarkerScenario | None = None
     image: ImageScenario | None = None
     pad: PadScenario | None = None
+    rover: RoverScenario | None = None
+    uwb: UwbScenario = UwbScenario()
     #: decoy markers beside the marker's path: how many (ids drawn from its dictionary), or
     #: their ids; with a pad, decoy pads around it (other colours, blue first: keep away;
     #: marker pads with other ids): how many

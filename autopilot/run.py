@@ -59,7 +59,8 @@ def make_vehicle(plan: MissionPlan, *, realtime: bool = False, connect: str | No
         from autopilot.scenario import build_world  # MuJoCo loads only when the simulator flies
         from drivers.sim.driver import SimDriver
 
-        sim_config, objects = build_world(plan.mission.scenario, plan.config.sim)
+        sim_config, objects = build_world(plan.mission.scenario, plan.config.sim,
+                                          plan.config.rover)
         return SimDriver(sim_config, scenario=objects, lockstep=not realtime), sim_config.seed
     if driver in ("pymavlink", "mavsdk"):
         from drivers.mavlink.link import Endpoint, UrlError

@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import dataclasses
 import math
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -183,6 +184,8 @@ class Runtime:
         self._stop_reason: str | None = None
         self._stop_requested = asyncio.Event()
         self._stale = False  # the pose went stale: no more motion setpoints this run
+        self._sensors_started = False
+        self._late_tasks: list[asyncio.Task] = []  # started during the run (ended with it)
         self._executor: MissionExecutor | None = None
         self._step = ""
         self._step_index = -1
@@ -205,7 +208,7 @@ class Runtime:
         if log_cameras is None:
             frames = cfg.log.frames
             rate = frames.sim_rate_hz if cfg.driver == "sim" else frames.vehicle_rate_hz
-            log_cameras = {spec.camera: rate for spec in specs.values()}
+            log_cameras = {spec.camera: rate for spec in specs.values() if spec.camera}
         self.frame_logger = FrameLogger(vehicle, log, log_cameras, cfg.log.frames.jpeg_quality)
 
     # ------------------------------------------------------------------------------------
@@ -237,6 +240,7 @@ class Runtime:
                 background = [
                     tasks.create_task(self._telemetry(), name="telemetry"),
                     tasks.create_task(self._streaming(), name="setpoint-streaming"),
+                    *self._sensor_tasks(tasks),
                     *self._simulator_tasks(tasks),
                     *self.frame_logger.tasks(tasks),
                 ]
@@ -257,7 +261,7 @@ class Runtime:
                         await service.stop(graceful=ended)
                     if ended:
                         await self.photos.use(None)
-                    for task in background:
+                    for task in [*background, *self._late_tasks]:
                         task.cancel()
         except* Exception as group:  # the link broke, or a bug: never leave the motors running
             self.status = "failed"
@@ -398,6 +402,8 @@ class Runtime:
             if spec.key not in self.pipelines:
                 self.pipelines[spec.key] = make_pipeline(self.config, spec)
                 self.tracks[spec.key] = Track(self.pipelines[spec.key])
+        if self._group is not None:  # a goal's pipeline may take sensors
+            self._late_tasks += self._sensor_tasks(self._group)
         goal.index = len(self._steps)
         self._steps.append(goal.step)
         self._step_keys.append(tuple(spec.key for spec in specs))
@@ -496,6 +502,8 @@ class Runtime:
             await v.land()
         elif request.kind is RequestKind.PRECISION_LAND:
             await v.precision_land()
+        elif request.kind is RequestKind.DISARM:
+            await v.disarm(force=request.force)
 
     async def _last_resort(self) -> None:
         """The orderly stop failed or the link broke: one bounded attempt to land."""
@@ -513,6 +521,8 @@ class Runtime:
         wanted: dict[str, tuple[str, ...]] = {}
         for key in keys:
             camera = self.pipelines[key].camera
+            if not camera:
+                continue  # it reads no camera (a deck tracked without its tag)
             wanted[camera] = (*wanted.get(camera, ()), key)
         for camera, lane in list(self._lanes.items()):
             if wanted.get(camera) != lane.keys:
@@ -567,6 +577,7 @@ class Runtime:
                     record = track.pipeline.estimate(item.time_s, item.frame.camera, det)
                     if record is not None:
                         self.log.write(ch.TARGET_ESTIMATES, item.time_s, record)
+                    self._log_relative(track.pipeline)
             self._estimated.put(item.time_s)
 
     # ------------------------------------------------------------------------------------
@@ -580,9 +591,41 @@ class Runtime:
                 self.photos.add_state(state)
                 for pipeline in self.pipelines.values():
                     pipeline.add_state(state)
+                    self._log_relative(pipeline)
                 record = ch.vehicle_state_record(state)
                 record["received_s"] = self.clock.now()
                 self.log.write(ch.VEHICLE_STATE, state.time_s, record)
+
+    def _sensor_tasks(self, tasks: asyncio.TaskGroup) -> list[asyncio.Task]:
+        """The vehicle's extra sensor streams (UWB, the rover's reports) while any pipeline
+        takes them: logged, and handed to those pipelines as they arrive."""
+        if self._sensors_started or not any(callable(getattr(p, "add_sensor", None))
+                                            for p in self.pipelines.values()):
+            return []
+        self._sensors_started = True
+        streams = {"uwb": (self.vehicle.uwb_ranges, ch.UWB_RANGES),
+                   "rover": (self.vehicle.rover_states, ch.ROVER_STATES)}
+        return [tasks.create_task(self._sensor(*streams[name]), name=f"sensor-{name}")
+                for name in sorted(self.vehicle.sensors) if name in streams]
+
+    async def _sensor(self, subscribe, topic: str) -> None:
+        async with contextlib.aclosing(subscribe(buffer=64)) as samples:
+            async for sample in samples:
+                record = ch.clean(dataclasses.asdict(sample))
+                record["received_s"] = self.clock.now()
+                self.log.write(topic, sample.time_s, record)
+                for pipeline in self.pipelines.values():
+                    add = getattr(pipeline, "add_sensor", None)
+                    if add is not None:
+                        add(sample)
+                        self._log_relative(pipeline)
+
+    def _log_relative(self, pipeline: Pipeline) -> None:
+        take = getattr(pipeline, "take_records", None)
+        if take is None:
+            return
+        for record in take():
+            self.log.write(ch.RELATIVE_ESTIMATES, record["time_s"], record)
 
     async def _streaming(self) -> None:
         period = 1.0 / self.config.runtime.setpoint_rate_hz

@@ -14,6 +14,7 @@ import math
 
 import numpy as np
 
+from autopilot.config import RoverConfig
 from autopilot.mission import BallScenario, Scenario
 from autopilot.perception.colors import COLORS, ORANGEISH_RGBA
 from drivers.sim.config import SimConfig
@@ -33,13 +34,16 @@ BALL = "ball"
 MARKER = "marker"
 IMAGE = "image"
 PAD = "pad"
+ROVER = "rover"
 #: decoy circle pads' colours, in order (blue first: seed 001's "keep away")
 DECOY_COLORS = ("blue", "yellow", "green", "orange")
 
 
-def build_world(scenario: Scenario | None, sim: SimConfig) -> tuple[SimConfig,
-                                                                     list[ScenarioObject]]:
-    """The simulator configuration (seed and wind from the scenario) and the scenario objects."""
+def build_world(scenario: Scenario | None, sim: SimConfig, rover: RoverConfig | None = None
+                ) -> tuple[SimConfig, list[ScenarioObject]]:
+    """The simulator configuration (seed and wind from the scenario) and the scenario objects.
+    ``rover``: the rover as the autopilot's configuration has it (a scenario's rover is built
+    to match unless it says otherwise)."""
     if scenario is None:
         return sim, []
     wind = sim.wind.model_copy(update={"gust_mps": scenario.wind.gust_mps,
@@ -57,7 +61,43 @@ def build_world(scenario: Scenario | None, sim: SimConfig) -> tuple[SimConfig,
         objects += ground_image(scenario, sim)
     if scenario.pad is not None:
         objects += landing_pads(scenario, sim, with_ground=scenario.image is None)
+    if scenario.rover is not None:
+        if rover is None:
+            raise ValueError("scenario.rover needs the configuration's rover section")
+        sim, built = rover_world(scenario, sim, rover)
+        objects += built
     return sim, objects
+
+
+def rover_world(scenario: Scenario, sim: SimConfig,
+                known: RoverConfig) -> tuple[SimConfig, list[ScenarioObject]]:
+    """The rover (body ``rover``: its truth is the deck's top centre) on its path, the UWB
+    ranging's quality, and gravel around (the down camera needs a ground with texture)."""
+    from autopilot.perception.pad import pad_texture
+    from drivers.sim.rover import Rover, rover_path
+
+    r, u = scenario.rover, scenario.uwb
+    tag = r.tag if r.tag is not None else known.tag
+    north, east = sim.vehicle.initial_north_east_m
+    start = (north + r.start_north_east_m[0], east + r.start_north_east_m[1], 0.0)
+    path = rover_path(r.path, start, math.radians(r.heading_deg), r.speed_mps, size_m=r.size_m,
+                      accel_m_s2=r.accel_mps2, seed=scenario.seed)
+    texture, _ = pad_texture(tag.kind, tag.size_m, ids=tag.ids, dictionary=tag.dictionary)
+    anchors = u.anchors if u.anchors is not None else known.uwb.anchors_frd_m
+    uwb = sim.uwb.model_copy(update={
+        key: value for key, value in (("range_noise_m", u.range_noise_m),
+                                      ("dropout", u.dropout),
+                                      ("nlos_fraction", u.nlos_fraction)) if value is not None})
+    body = Rover(ROVER, path,
+                 deck_size_m=tuple(r.deck_size_m or known.deck_size_m),
+                 deck_height_m=r.deck_height_m if r.deck_height_m is not None
+                 else known.deck_height_m,
+                 deck_texture_bgr=texture, tag_size_m=tag.size_m,
+                 anchors_frd_m=[tuple(a) for a in anchors])
+    objects: list[ScenarioObject] = [body]
+    if scenario.image is None and scenario.pad is None:
+        objects.insert(0, FeatureGround(seed=scenario.seed + 7))
+    return sim.model_copy(update={"uwb": uwb}), objects
 
 
 def landing_pads(scenario: Scenario, sim: SimConfig, *,

@@ -67,7 +67,8 @@ async def serve(config: AppConfig, scenario: Scenario | None, *, instance: int =
     ``signing``, only signed MAVLink is accepted."""
     if videos is FROM_CONFIG:
         videos = video_destinations(config)
-    sim_config, objects = build_world(scenario, with_instance_id(config.sim, instance))
+    sim_config, objects = build_world(scenario, with_instance_id(config.sim, instance),
+                                      config.rover)
     vehicle = SimDriver(sim_config, scenario=objects, lockstep=False)
     await vehicle.connect()
     face = MavlinkFace(vehicle, instance=instance, events=vehicle.events(), host=host,

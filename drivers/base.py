@@ -302,6 +302,47 @@ class LandingTarget:
                              f"{self.position_ned_m}")
 
 
+@dataclass(frozen=True, slots=True, eq=False)
+class UwbRanges:
+    """Ultra-wideband ranges from the drone's tag to anchors on another vehicle (a rover),
+    all captured at ``time_s``: ``ranges_m[i]`` to anchor ``anchor_ids[i]`` (where each anchor
+    is, on that vehicle, is configuration: ``rover.uwb.anchors_frd_m``)."""
+
+    time_s: float
+    anchor_ids: tuple[int, ...]
+    ranges_m: tuple[float, ...]
+
+    def __post_init__(self) -> None:
+        if len(self.anchor_ids) != len(self.ranges_m):
+            raise ValueError("one range per anchor id")
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class RoverState:
+    """Another vehicle's state as its own autopilot reports it (a PX4 rover or ArduRover on
+    the same MAVLink network): its reference point's position in *this* vehicle's local NED
+    frame (from its global position and this vehicle's EKF origin), its velocity, its compass
+    heading, and the accuracy it claims; captured at ``time_s`` (this vehicle's clock)."""
+
+    time_s: float
+    position_ned_m: np.ndarray
+    velocity_ned_m_s: np.ndarray
+    heading_rad: float  # NaN: not reported
+    position_std_m: float = NAN  # horizontal (MAVLink eph)
+    velocity_std_m_s: float = NAN
+    heading_std_rad: float = NAN
+    system_id: int = 0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "position_ned_m", _frozen_array(self.position_ned_m, (3,)))
+        object.__setattr__(self, "velocity_ned_m_s",
+                           _frozen_array(self.velocity_ned_m_s, (3,)))
+
+
+class SensorUnavailable(Exception):
+    """The vehicle has no such sensor stream (no UWB radio, no rover on the link)."""
+
+
 class VehicleError(Exception):
     """Base class for everything a driver raises."""
 
@@ -423,6 +464,20 @@ class Vehicle(abc.ABC):
         """Report the landing target's position (MAVLink LANDING_TARGET, MAV_FRAME_LOCAL_NED:
         what PX4's precision landing flies to). Fire and forget; stream it while it is seen."""
         raise CommandDenied("landing target", "this vehicle takes no landing target")
+
+    @property
+    def sensors(self) -> frozenset[str]:
+        """The extra sensor streams this vehicle offers: ``uwb`` (:meth:`uwb_ranges`),
+        ``rover`` (:meth:`rover_states`)."""
+        return frozenset()
+
+    def uwb_ranges(self, buffer: int = 8) -> AsyncIterator[UwbRanges]:
+        """A new subscription to UWB ranges (buffered: every reading counts)."""
+        raise SensorUnavailable("this vehicle has no UWB ranging")
+
+    def rover_states(self, buffer: int = 8) -> AsyncIterator[RoverState]:
+        """A new subscription to the rover's reported state (buffered)."""
+        raise SensorUnavailable("no rover is heard on this vehicle's link")
 
     @abc.abstractmethod
     def telemetry(self, buffer: int = 1) -> AsyncIterator[VehicleState]:

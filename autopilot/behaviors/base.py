@@ -29,6 +29,7 @@ class RequestKind(enum.Enum):
     LAND = "land"
     PRECISION_LAND = "precision_land"  # PX4's AUTO.PRECLAND, on LANDING_TARGET
     LANDING_TARGET = "landing_target"  # report where the landing target is (not logged)
+    DISARM = "disarm"  # stop the motors (``force``: in the air too, as PX4's kill)
 
 
 @dataclass(frozen=True, slots=True)
@@ -38,6 +39,7 @@ class VehicleRequest:
     #: LANDING_TARGET: the target's position (local NED) at ``time_s``
     position_ned_m: tuple[float, float, float] | None = None
     time_s: float = 0.0
+    force: bool = False  # DISARM: in the air too
 
 
 @dataclass(frozen=True, slots=True, eq=False)

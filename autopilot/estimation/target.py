@@ -69,6 +69,8 @@ class TargetEstimate:
     heading_rad: float | None = None
     heading_rate_rad_s: float = 0.0
     heading_std_rad: float | None = None
+    #: its acceleration (NED), for a target whose filter estimates one (a rover's deck)
+    acceleration_ned_m_s2: np.ndarray | None = None
 
     @property
     def position_std_m(self) -> np.ndarray:

@@ -37,6 +37,9 @@ PLANNED_PATH = "/planning/path"  # a trajectory step's plan, when it starts
 PHOTOS = "/photos"  # photos taken by the steps (orbit, survey)
 MISSION_STATUS = "/mission/status"  # the status code (autopilot.status), on each change
 MISSION_GOALS = "/mission/goals"  # goals run (the goal API), as the plan's step records
+RELATIVE_ESTIMATES = "/estimation/relative"  # the relative-state filter (land_on_rover)
+UWB_RANGES = "/sensors/uwb"  # UWB ranges to a rover's anchors
+ROVER_STATES = "/sensors/rover"  # the rover's own reports (another MAVLink system)
 
 
 def detection_topic(pipeline: str) -> str:
@@ -105,6 +108,18 @@ SCHEMAS: dict[str, dict] = {
     MISSION_PLAN: _obj("MissionPlan", mission=_STR, source=_STR, steps={"type": "array"},
                        driver=_STR, scenario={"type": ["object", "null"]},
                        config={"type": "object"}),
+    RELATIVE_ESTIMATES: _obj("RelativeEstimate", time_s=_NUM, pipeline=_STR, source=_STR,
+                             measurement_time_s=_NUM, accepted=_BOOL, late=_BOOL, parts=_INT,
+                             mahalanobis2=_NUM, relative_position_m=_vec(3),
+                             relative_velocity_m_s=_vec(3), position_std_m=_vec(3),
+                             velocity_std_m_s=_vec(3), position_cov_m2=_vec(9),
+                             heading_rad=_NUM, heading_std_rad=_NUM, bias_m=_vec(3)),
+    UWB_RANGES: _obj("UwbRanges", time_s=_NUM, anchor_ids={"type": "array", "items": _INT},
+                     ranges_m={"type": "array", "items": _NUM}, received_s=_NUM),
+    ROVER_STATES: _obj("RoverState", time_s=_NUM, position_ned_m=_vec(3),
+                       velocity_ned_m_s=_vec(3), heading_rad=_NUM, position_std_m=_NUM,
+                       velocity_std_m_s=_NUM, heading_std_rad=_NUM, system_id=_INT,
+                       received_s=_NUM),
     CONTROL_TARGET: _obj("ControlTarget", time_s=_NUM, pipeline=_STR, step=_STR,
                          step_index=_INT, present=_BOOL, position_ned_m=_vec(3),
                          velocity_ned_m_s=_vec(3), position_std_m=_vec(3), age_s=_NUM,

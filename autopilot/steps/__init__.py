@@ -10,6 +10,7 @@ from autopilot.steps import (  # noqa: F401 (registers them)
     follow_ball,
     follow_marker,
     hover_image,
+    land_on_rover,
     land_pad,
     trajectory,
 )

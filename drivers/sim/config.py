@@ -126,6 +126,34 @@ class RangefinderConfig(_Model):
     noise_m: NonNegative
 
 
+class UwbConfig(_Model):
+    """UWB ranging between the drone's tag and anchors on a rover (when the scenario has one):
+    two-way ranging to every anchor at once."""
+
+    rate_hz: Annotated[float, Field(gt=0, le=100)]
+    latency_s: Annotated[float, Field(ge=0, le=1)]
+    range_noise_m: NonNegative
+    dropout: Fraction  # each anchor's reading is missing with this probability
+    nlos_fraction: Fraction  # readings lengthened by a non-line-of-sight path
+    nlos_max_m: NonNegative  # by up to this
+    max_range_m: Positive
+    tag_frd_m: Vec3  # the drone's tag, from its body origin
+
+
+class RoverLinkConfig(_Model):
+    """The rover's own autopilot reporting its state over MAVLink (another system id)."""
+
+    rate_hz: Annotated[float, Field(gt=0, le=100)]
+    latency_s: Annotated[float, Field(ge=0, le=2)]
+    latency_jitter_s: Annotated[float, Field(ge=0, le=0.5)]
+    position_error_m: tuple[NonNegative, NonNegative, NonNegative]  # its GNSS (Gauss–Markov)
+    position_error_time_constant_s: Positive
+    velocity_noise_m_s: NonNegative
+    heading_noise_deg: NonNegative  # its compass, each reading
+    heading_bias_deg: NonNegative  # its compass's slowly wandering bias
+    system_id: Annotated[int, Field(ge=1, le=255)]
+
+
 class PositionControlConfig(_Model):
     """PX4 ``mc_pos_control`` (MPC_*). Velocity gains are in m/s² per m/s, as PX4's *_ACC."""
 
@@ -236,6 +264,8 @@ class SimConfig(_Model):
     estimator: EstimatorConfig
     telemetry: TelemetryConfig
     rangefinder: RangefinderConfig
+    uwb: UwbConfig
+    rover_link: RoverLinkConfig
     flight_stack: FlightStackConfig
     #: the vehicle's cameras (the application fills them in from ``vehicle.cameras``)
     cameras: dict[str, CameraConfig] = Field(default_factory=dict)

@@ -38,7 +38,9 @@ from drivers.base import (
     FlightMode,
     Frame,
     LandingTarget,
+    RoverState,
     Setpoint,
+    UwbRanges,
     Vehicle,
     VehicleError,
     VehicleState,
@@ -81,6 +83,8 @@ class SimDriver(Vehicle):
         self._events: Broadcast[tuple[float, str]] = Broadcast()
         self._mission_events: Broadcast[NavEvent] = Broadcast()
         self._photos: Broadcast[Photo] = Broadcast()
+        self._uwb: Broadcast[UwbRanges] = Broadcast()
+        self._rover: Broadcast[RoverState] = Broadcast()
         #: PX4 parameters as the vehicle will boot with them (the live ones once connected)
         self._param_defaults = config_defaults(config)
         self._frames: dict[str, Broadcast[Frame]] = {
@@ -168,6 +172,26 @@ class SimDriver(Vehicle):
 
     def telemetry(self, buffer: int = 1) -> AsyncIterator[VehicleState]:
         return self._telemetry.subscribe(buffer)
+
+    @property
+    def sensors(self) -> frozenset[str]:
+        """``uwb`` and ``rover`` when the scenario has a rover (with UWB anchors)."""
+        from drivers.sim.rover import Rover
+
+        rover = next((o for o in self._scenario if isinstance(o, Rover)), None)
+        if rover is None:
+            return frozenset()
+        return frozenset({"rover", "uwb"} if len(rover.anchors_frd_m) else {"rover"})
+
+    def uwb_ranges(self, buffer: int = 8) -> AsyncIterator[UwbRanges]:
+        if "uwb" not in self.sensors:
+            return super().uwb_ranges(buffer)
+        return self._uwb.subscribe(buffer)
+
+    def rover_states(self, buffer: int = 8) -> AsyncIterator[RoverState]:
+        if "rover" not in self.sensors:
+            return super().rover_states(buffer)
+        return self._rover.subscribe(buffer)
 
     def frames(self, camera: str) -> AsyncIterator[Frame]:
         if camera not in self._frames:
@@ -398,7 +422,7 @@ class SimDriver(Vehicle):
 
     def _broadcasts(self) -> list[Broadcast]:
         return [self._telemetry, self._truth, self._events, self._mission_events, self._photos,
-                *self._frames.values()]
+                self._uwb, self._rover, *self._frames.values()]
 
     def _publish(self, outputs: list[SimOutput]) -> None:
         for out in outputs:
@@ -413,6 +437,10 @@ class SimDriver(Vehicle):
                 self._mission_events.publish(out.payload)
             elif out.kind == "photo":
                 self._photos.publish(out.payload)
+            elif out.kind == "uwb":
+                self._uwb.publish(out.payload)
+            elif out.kind == "rover":
+                self._rover.publish(out.payload)
             else:
                 self._events.publish((out.delivery_s, out.payload))
 

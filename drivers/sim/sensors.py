@@ -103,6 +103,17 @@ class Rangefinder:
         dist = mujoco.mj_ray(model, data, origin, down, self._groups, 1, self._body_id, self._geom)
         return dist if dist >= 0.0 else math.inf
 
+    def surface_velocity(self, model: mujoco.MjModel, data: mujoco.MjData) -> np.ndarray:
+        """The velocity (NED) of what the last ray hit (zero for the ground or nothing): a
+        land detector on a moving deck judges the vehicle's motion relative to it."""
+        geom = int(self._geom[0])
+        body = int(model.geom_bodyid[geom]) if geom >= 0 else 0
+        if body <= 0:
+            return np.zeros(3)
+        res = np.zeros(6)
+        mujoco.mj_objectVelocity(model, data, mujoco.mjtObj.mjOBJ_BODY, body, res, 0)
+        return np.array([res[4], res[3], -res[5]])
+
     def measure(self, model: mujoco.MjModel, data: mujoco.MjData) -> float:
         dist = self.true_range(model, data)
         if not self.cfg.min_m <= dist <= self.cfg.max_m:

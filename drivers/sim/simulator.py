@@ -40,6 +40,13 @@ from drivers.sim.flight.navigator import NavEvent
 from drivers.sim.flight.params import Parameters, config_defaults
 from drivers.sim.frames import q_enu_flu_to_ned_frd, quat_ned_frd_to_enu_flu
 from drivers.sim.model import build_model
+from drivers.sim.rover import (
+    Rover,
+    RoverLinkModel,
+    RoverLinkSettings,
+    UwbModel,
+    UwbSettings,
+)
 from drivers.sim.scenario import BodyTruth, ScenarioObject
 from drivers.sim.sensors import BatteryModel, EstimatorModel, Rangefinder
 from drivers.sim.wind import DragModel, WindModel
@@ -55,7 +62,8 @@ def _mujoco_warning(message: str) -> None:
 
 mujoco.set_mju_user_warning(_mujoco_warning)
 
-OutputKind = Literal["telemetry", "frame", "truth", "event", "mission", "photo"]
+OutputKind = Literal["telemetry", "frame", "truth", "event", "mission", "photo", "uwb",
+                     "rover"]
 #: The camera that takes the photos of missions and camera commands.
 PHOTO_CAMERA = "down"
 #: sensor failures a test can inject; "telemetry" stops the telemetry stream (the vehicle flies
@@ -114,9 +122,9 @@ class Simulator:
                  seed: int | None = None) -> None:
         self.cfg = config
         self.seed = config.seed if seed is None else seed
-        seeds = np.random.SeedSequence(self.seed).spawn(5)
-        rng_est, rng_range, rng_wind, rng_latency, _spare = (np.random.default_rng(s)
-                                                             for s in seeds)
+        seeds = np.random.SeedSequence(self.seed).spawn(7)
+        rng_est, rng_range, rng_wind, rng_latency, _spare, rng_uwb, rng_rover = (
+            np.random.default_rng(s) for s in seeds)
         self._rng_latency = rng_latency
 
         self.scenario = list(scenario)
@@ -161,6 +169,21 @@ class Simulator:
                         for name, (cam_id, info) in built.cameras.items()}
         self._rig = CameraRig(self.model, self.seed)
         self._moving = [obj for obj in self.scenario if obj.moves]
+        #: the rover (a scenario with one), its UWB anchors and its own telemetry
+        self.rover: Rover | None = next((o for o in self.scenario if isinstance(o, Rover)),
+                                        None)
+        self.uwb: UwbModel | None = None
+        self.rover_link: RoverLinkModel | None = None
+        if self.rover is not None:
+            u, r = config.uwb, config.rover_link
+            if len(self.rover.anchors_frd_m):
+                self.uwb = UwbModel(UwbSettings(
+                    tuple(tuple(float(v) for v in a) for a in self.rover.anchors_frd_m),
+                    u.tag_frd_m, u.range_noise_m, u.dropout, u.nlos_fraction, u.nlos_max_m,
+                    u.max_range_m), rng_uwb)
+            self.rover_link = RoverLinkModel(RoverLinkSettings(
+                r.position_error_m, r.position_error_time_constant_s, r.velocity_noise_m_s,
+                r.heading_noise_deg, r.heading_bias_deg, r.system_id), rng_rover)
 
         self._step = 0
         #: Scripted motion starts when the vehicle first arms (None until then), so that a
@@ -174,6 +197,12 @@ class Simulator:
         self._truth = _Schedule(rate / config.ground_truth_rate_hz)
         self._cam_schedules = {name: _Schedule(rate / cam.info.rate_hz)
                                for name, cam in self.cameras.items()}
+        self._sensor_schedules: dict[str, _Schedule] = {}
+        if self.uwb is not None:
+            self._sensor_schedules["uwb"] = _Schedule(rate / config.uwb.rate_hz)
+        if self.rover_link is not None:
+            self._sensor_schedules["rover"] = _Schedule(rate / config.rover_link.rate_hz)
+        self._last_rover_delivery = 0.0
         self._last_tel_delivery = 0.0
         self._next_capture = 0
         self._tick = 0
@@ -228,6 +257,8 @@ class Simulator:
                           if include_truth or out[2].kind in ("telemetry", "frame"))
         candidates.extend(self._cam_schedules[name].next_step * dt + cam.latency_s
                           for name, cam in self.cameras.items() if cam.active)
+        candidates.extend(sched.next_step * dt + self._sensor_latency(name)
+                          for name, sched in self._sensor_schedules.items())
         if include_truth:
             candidates.append(self._truth.next_step * dt)
         return max(min(candidates), self.time_s + dt)
@@ -272,6 +303,10 @@ class Simulator:
         if k >= self._truth.next_step:
             self._queue(t, "truth", self.ground_truth())
             self._truth.advance(k)
+        for name, sched in self._sensor_schedules.items():
+            if k >= sched.next_step:
+                self._capture_rover_sensor(name, t)
+                sched.advance(k)
         motion = None
         for name, cam in self.cameras.items():
             sched = self._cam_schedules[name]
@@ -288,7 +323,8 @@ class Simulator:
 
     def _update_next_capture(self) -> None:
         self._next_capture = min(self._tel.next_step, self._truth.next_step,
-                                 *(s.next_step for s in self._cam_schedules.values()))
+                                 *(s.next_step for s in self._cam_schedules.values()),
+                                 *(s.next_step for s in self._sensor_schedules.values()))
 
     def _control_tick(self) -> None:
         """Rate-loop tick. The position loop and the slowly varying inputs (estimator error
@@ -310,7 +346,8 @@ class Simulator:
             self._est = est
             self.flight.update_outer(self.time_s, dt_outer, est, self._health,
                                      self.rangefinder.measure(self.model, d),
-                                     self.battery.remaining)
+                                     self.battery.remaining,
+                                     self.rangefinder.surface_velocity(self.model, d))
             q_est, gyro = est.q_ned_frd.tolist(), est.rates_frd_rad_s.tolist()
             while self.flight.events:
                 when, text = self.flight.events.popleft()
@@ -381,6 +418,25 @@ class Simulator:
     # ------------------------------------------------------------------------------------
     # Sensors and truth
     # ------------------------------------------------------------------------------------
+
+    def _sensor_latency(self, name: str) -> float:
+        return self.cfg.uwb.latency_s if name == "uwb" else self.cfg.rover_link.latency_s
+
+    def _capture_rover_sensor(self, name: str, t: float) -> None:
+        """A UWB reading or a rover state report captured now (state at ``t``)."""
+        pos, vel, yaw, _ = self.rover.state(self.data)
+        if name == "uwb":
+            drone_pos, _, q, _ = self._truth_state()
+            reading = self.uwb.measure(t, pos, yaw, drone_pos, q)
+            if reading is not None:
+                self._queue(t + self.cfg.uwb.latency_s, "uwb", reading)
+            return
+        link = self.cfg.rover_link
+        jitter = link.latency_jitter_s * float(self._rng_latency.random()) \
+            if link.latency_jitter_s else 0.0
+        delivery = max(t + link.latency_s + jitter, self._last_rover_delivery)
+        self._last_rover_delivery = delivery
+        self._queue(delivery, "rover", self.rover_link.measure(t, pos, vel, yaw))
 
     def health(self) -> Health:
         est_ok = self.time_s >= self.cfg.estimator.init_time_s

@@ -120,6 +120,7 @@ class FlightStack:
         self._health = Health(local_position_ok=False)
         self._battery_fraction = 1.0
         self._gcs_heard_s = _GCS_NEVER
+        self._surface_velocity: np.ndarray | None = None
         #: why the vehicle is outside its geofence now (None: inside, or no fence)
         self.geofence_breach: str | None = None
 
@@ -393,10 +394,14 @@ class FlightStack:
         self.navigator.set_time(now_s)
 
     def update_outer(self, now_s: float, dt_s: float, est: EstimatedState, health: Health,
-                     height_agl_m: float, battery_fraction: float) -> None:
-        """Position-loop tick: commander, mode logic, position/velocity control."""
+                     height_agl_m: float, battery_fraction: float,
+                     surface_velocity_ned_m_s: np.ndarray | None = None) -> None:
+        """Position-loop tick: commander, mode logic, position/velocity control.
+        ``surface_velocity_ned_m_s``: the velocity of the surface under the vehicle (a moving
+        deck), which the land detector judges the vehicle's motion against."""
         self.observe(now_s, est, health)
         self._battery_fraction = battery_fraction
+        self._surface_velocity = surface_velocity_ned_m_s
         self._outer(now_s, dt_s, est, height_agl_m)
 
     def _outer(self, now: float, dt: float, est: EstimatedState, height_agl: float) -> None:
@@ -420,8 +425,8 @@ class FlightStack:
             self._landing = False
             self._reset_controllers()
             self._att_sp = AttitudeSetpoint(body_z_to_attitude(LEVEL_DOWN, yaw_now), 0.0, 0.0)
-            self.land_detector.update(now, False, est.velocity_ned_m_s, est.rates_frd_rad_s,
-                                      0.0, False, height_agl)
+            self.land_detector.update(now, False, self._relative_velocity(est),
+                                      est.rates_frd_rad_s, 0.0, False, height_agl)
             return
 
         if self.mode is FlightMode.OFFBOARD and self._offboard_sp is not None:
@@ -474,11 +479,16 @@ class FlightStack:
 
         descent_commanded = self.position_ctrl.velocity_setpoint[2] > 0.1 and \
             self._phase != "ground"
-        self.land_detector.update(now, True, est.velocity_ned_m_s, est.rates_frd_rad_s,
+        self.land_detector.update(now, True, self._relative_velocity(est), est.rates_frd_rad_s,
                                   self._att_sp.thrust, descent_commanded, height_agl)
         if self._phase == "flight" and self.land_detector.landed:
             self._phase = "ground"
             self._event("landed")
+
+    def _relative_velocity(self, est: EstimatedState) -> np.ndarray:
+        """The vehicle's velocity over the surface under it."""
+        surface = self._surface_velocity
+        return est.velocity_ned_m_s if surface is None else est.velocity_ned_m_s - surface
 
     def _offboard_setpoint(self, dt: float) -> ControlSetpoint:
         pos, vel, yaw, yaw_rate, acc = self._offboard_sp
