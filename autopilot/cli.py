@@ -205,6 +205,35 @@ def build_parser() -> argparse.ArgumentParser:
 
     commands.add_parser("missions", help="list the shipped missions")
 
+    trials = commands.add_parser(
+        "trials", help="many seeded lockstep runs of a mission in parallel: each metric's "
+        "median, p95 and worst seed, and the failing seeds to replay")
+    trials.add_argument("mission", metavar="NAME|FILE")
+    trials.add_argument("--trials", type=int, default=10, metavar="N",
+                        help="runs (seeds SEED_START .. SEED_START+N-1; default 10)")
+    trials.add_argument("--seed-start", type=int, default=0, metavar="S",
+                        help="the first scenario seed (default 0)")
+    trials.add_argument("--set", dest="overrides", action="append", default=[],
+                        metavar="KEY=VALUE", help="override a mission or configuration key "
+                        "(every run)")
+    trials.add_argument("--vary", dest="varies", action="append", default=[],
+                        metavar="KEY=LOW:HIGH|KEY=A,B,C",
+                        help="draw a key's value per seed: uniformly in [LOW, HIGH], or one "
+                        "of the values (repeatable)")
+    trials.add_argument("--success", dest="criteria", action="append", default=None,
+                        metavar="KEY[OP NUMBER]",
+                        help="what a successful run shows, e.g. landing.on_deck or "
+                        "'landing.error_m<=0.1' (repeatable; default: completed, and on the "
+                        "deck or pad for a landing)")
+    trials.add_argument("--workers", type=int, default=None, metavar="N",
+                        help="parallel runs (default: one per core)")
+    trials.add_argument("--cluster", metavar="ADDRESS",
+                        help="run each trial as a task on this Ray cluster ('local': start "
+                        "a Ray instance here; needs pip install 'autopilot[cluster]')")
+    trials.add_argument("--out", metavar="DIR",
+                        help="keep each run's flight log and summary in DIR/seed<N>")
+    trials.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+
     bench = commands.add_parser("bench", help="run a benchmark")
     benches = bench.add_subparsers(dest="bench", required=True, metavar="BENCH")
     sitl = benches.add_parser(
@@ -251,6 +280,26 @@ def build_parser() -> argparse.ArgumentParser:
                           metavar="NAME", help="only this scenario (repeatable)")
     offboard.add_argument("--set", dest="overrides", action="append", default=[],
                           metavar="KEY=VALUE", help="override a mission or configuration key")
+
+    landing = benches.add_parser(
+        "landing", help="land_on_rover over many seeds: ours against seed 004's strategy "
+        "(UWB until the tag is seen, then the tag alone, with a PID) and ours without the tag, "
+        "in the same trials: success rate, median and p95 touchdown error (about 1 min per "
+        "10 trials on 2 cores)")
+    landing.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    landing.add_argument("--trials", type=int, default=20, metavar="N",
+                         help="seeds per strategy (default 20)")
+    landing.add_argument("--rover-speed", type=float, default=1.5, metavar="M_S",
+                         help="the rover's speed (default 1.5 m/s)")
+    landing.add_argument("--strategy", dest="strategies", action="append", default=None,
+                         choices=("ours", "seed004", "ours_uwb_only"),
+                         help="only this strategy (repeatable)")
+    landing.add_argument("--workers", type=int, default=None, metavar="N",
+                         help="parallel runs (default: one per core)")
+    landing.add_argument("--cluster", metavar="ADDRESS",
+                         help="run the trials on this Ray cluster ('local': start one here)")
+    landing.add_argument("--set", dest="overrides", action="append", default=[],
+                         metavar="KEY=VALUE", help="override a mission or configuration key")
 
     api_bench = benches.add_parser(
         "api", help="what the goal API costs the process: a real-time standby hover with the "
@@ -331,7 +380,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    if args.command in ("run", "bench", "sim", "doctor"):
+    if args.command in ("run", "bench", "sim", "doctor", "trials"):
         configure_for_flight()
     try:
         return _dispatch(args)
@@ -356,9 +405,38 @@ def _dispatch(args: argparse.Namespace) -> int:
     handlers = {"run": _run, "sim": _sim, "doctor": _doctor, "report": _report, "video": _video,
                 "replay": _replay, "score": _score, "bench": _bench, "calibrate": _calibrate,
                 "missions": lambda _args: _missions(), "validate": lambda a: _validate(a.file),
+                "trials": _trials,
                 "goal": _api_client, "status": _api_client, "cancel": _api_client,
                 "abort": _api_client}
     return handlers[args.command](args)
+
+
+def _trials(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from autopilot.trials import (
+        TrialsError,
+        parse_criterion,
+        parse_vary,
+        print_result,
+        run_trials,
+    )
+
+    log = (lambda message: None) if args.json else \
+        (lambda message: print(f"  {message}", file=sys.stderr, flush=True))
+    try:
+        varies = [parse_vary(v) for v in args.varies]
+        criteria = [parse_criterion(c) for c in args.criteria] if args.criteria else None
+        if args.workers is not None and args.workers < 1:
+            raise TrialsError("--workers must be at least 1")
+        result = run_trials(args.mission, args.trials, seed_start=args.seed_start,
+                            overrides=args.overrides, varies=varies, criteria=criteria,
+                            workers=args.workers, cluster=args.cluster,
+                            out_dir=Path(args.out) if args.out else None, progress=log)
+    except TrialsError as exc:
+        raise InputError(str(exc)) from None
+    print_result(result, args.json)
+    return EXIT_OK if not result.failing else EXIT_FAILED
 
 
 def _api_client(args: argparse.Namespace) -> int:
@@ -820,6 +898,19 @@ def _bench(args: argparse.Namespace) -> int:
             raise InputError(f"--seeds {args.seeds}: at least 1")
         result = down.run_bench(args.bench, args.seeds, args.overrides, log, args.scenarios)
         print(json.dumps(result) if args.json else down.format_table(result))
+        return EXIT_OK
+
+    if args.bench == "landing":
+        from autopilot.bench import landing
+
+        if args.trials < 1:
+            raise InputError(f"--trials {args.trials}: at least 1")
+        if not 0.0 <= args.rover_speed <= 5.0:
+            raise InputError(f"--rover-speed {args.rover_speed}: between 0 and 5 m/s")
+        result = landing.run_bench(args.trials, args.rover_speed, args.overrides, log,
+                                   workers=args.workers, cluster=args.cluster,
+                                   strategies=args.strategies)
+        print(json.dumps(result) if args.json else landing.format_table(result))
         return EXIT_OK
 
     if args.bench == "api":

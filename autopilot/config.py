@@ -313,6 +313,10 @@ class LinkConfig(_Model):
     connect_timeout_s: Annotated[float, Field(gt=0, le=300)]
     #: a file holding the MAVLink 2 signing key (None: unsigned)
     signing_key: str | None = None
+    #: a rover on the same link (land_on_rover): its MAVLink system id (None: none), and how
+    #: long its reports take to arrive (the pymavlink driver)
+    rover_system_id: Annotated[int, Field(ge=1, le=255)] | None = None
+    rover_latency_s: Annotated[float, Field(ge=0, le=2)] = 0.1
 
 
 class VehicleCameraConfig(CameraConfig):

@@ -252,7 +252,7 @@ class MissionPlan:
         """The cameras any step's pipelines read, in the order the steps first use them, then
         those steps take photos with (and, when the mission waits for goals, the photo camera
         goals use by default)."""
-        cameras = [spec.camera for spec in self.all_pipelines().values()]
+        cameras = [spec.camera for spec in self.all_pipelines().values() if spec.camera]
         for step in self.steps:
             kind = step_kind(step.name)
             photo = kind.photo_camera(step.params, self.config)

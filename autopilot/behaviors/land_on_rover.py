@@ -41,7 +41,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Annotated
+from typing import Annotated, Literal
 
 import numpy as np
 from pydantic import Field
@@ -86,6 +86,9 @@ class LandOnRoverParams(Params):
     wait_timeout_s: Positive = 10.0
     timeout_s: Positive = 180.0
     face_rover_heading: bool = True  # else keep the heading at the start
+    #: ours, or seed004: seed 004's strategy (a baseline for `autopilot bench landing`): UWB
+    #: positions until the tag is seen, then the tag alone; a PID on the position error
+    strategy: Literal["ours", "seed004"] = "ours"
     trim_gain_per_s: Annotated[float, Field(ge=0, le=5)] = 0.6  # integral action over the deck
     max_trim_m: Annotated[float, Field(ge=0, le=1)] = 0.15
 
@@ -383,3 +386,95 @@ class LandOnRover(Behavior):
             self._set_phase("aligning", now)
         return self._out(self._setpoint(t, np.array([0.0, 0.0, -p.approach_height_m]), now,
                                         position=position, max_step_m=p.approach_speed_m_s / 1.8))
+
+
+class Seed004LandOnRover(Behavior):
+    """Seed 004's landing controller, as a baseline for ``autopilot bench landing``: velocity
+    setpoints from a PID on the relative position error (the report's tracking gains; integral
+    action scheduled in within ``near_m`` of the deck, where a moving deck would otherwise be
+    trailed for ever), no feed-forward of the rover's motion. Approach at the current height;
+    descend at ``final_speed_m_s`` while the horizontal error is within
+    ``acceptance_radius_m`` × 2, hold the height otherwise; below the commit height keep
+    descending; at contact the motors are cut, as ours does (the comparison is of estimation
+    and control, not of the touchdown)."""
+
+    name = "land_on_rover"
+
+    def __init__(self, params: LandOnRoverParams, settings: LandOnRoverSettings,
+                 pid: tuple[float, float, float] = (1.5, 0.0, 0.1), near_m: float = 1.0,
+                 near_ki: float = 0.5) -> None:
+        self.params = params
+        self.settings = settings
+        self.kp, self.ki, self.kd = pid
+        self.near_m, self.near_ki = near_m, near_ki
+        self.phase = "approaching"
+        self.retries = 0
+        self._start = self._last = self._phase_since = 0.0
+        self._integral = np.zeros(2)
+        self._last_error: np.ndarray | None = None
+        self._yaw = math.nan
+        self._stalled_since: float | None = None
+
+    def activate(self, inputs: BehaviorInputs) -> BehaviorOutput:
+        s = inputs.state
+        self._start = self._last = self._phase_since = inputs.now_s
+        self._yaw = s.yaw_rad
+        return BehaviorOutput(Status.RUNNING, setpoint=Setpoint(
+            position_ned_m=np.array(s.position_ned_m, dtype=float), yaw_rad=self._yaw,
+            time_s=inputs.now_s), requests=(VehicleRequest(RequestKind.START_OFFBOARD),),
+            phase=self.phase)
+
+    def update(self, inputs: BehaviorInputs) -> BehaviorOutput:
+        p, s, now, t = self.params, inputs.state, inputs.now_s, inputs.target
+        dt = min(max(now - self._last, 1e-3), 0.5)
+        self._last = now
+        out = lambda sp, status=Status.RUNNING, req=(), reason="": BehaviorOutput(  # noqa: E731
+            status, setpoint=sp, requests=req, phase=self.phase, reason=reason)
+        if self.phase == "touching down":
+            if not s.armed:
+                return out(None, Status.SUCCEEDED)
+            return out(None, Status.FAILED, reason="still armed") \
+                if now - self._phase_since > 3.0 else out(None)
+        if now - self._start > p.timeout_s:
+            return out(None, Status.FAILED, reason=f"not landed within {p.timeout_s:g} s")
+        if t is None or t.stale:
+            return out(Setpoint.velocity_ned(0.0, 0.0, 0.0, yaw_rad=self._yaw, time_s=now))
+        error = np.asarray(t.position_ned_m[:2], dtype=float) - \
+            np.asarray(s.position_ned_m[:2], dtype=float)
+        distance = float(np.linalg.norm(error))
+        derivative = np.zeros(2) if self._last_error is None \
+            else (error - self._last_error) / dt
+        self._last_error = error
+        ki = self.near_ki if distance < self.near_m else self.ki
+        if ki > 0.0:  # anti-windup: the integral's share at most the approach speed
+            limit = p.approach_speed_m_s / ki
+            self._integral = np.clip(self._integral + error * dt, -limit, limit)
+        else:
+            self._integral[:] = 0.0
+        v = self.kp * error + ki * self._integral + self.kd * derivative
+        speed = float(np.linalg.norm(v))
+        if speed > p.approach_speed_m_s + 3.0:
+            v *= (p.approach_speed_m_s + 3.0) / speed
+        height = float(t.position_ned_m[2] - s.position_ned_m[2])
+        r = s.distance_to_ground_m
+        if math.isfinite(r) and distance < 0.3:
+            height = float(r * quat_to_matrix(s.attitude_q)[2, 2])
+        if self.phase == "approaching" and distance < 2.0 * p.acceptance_radius_m:
+            self.phase, self._phase_since = "descending", now
+        vz = 0.0
+        if self.phase == "descending":
+            if height <= p.touchdown_height_m or self._stalled(s, now, height):
+                self.phase, self._phase_since = "touching down", now
+                return out(None, req=(VehicleRequest(RequestKind.DISARM, force=True),))
+            if distance < 2.0 * p.acceptance_radius_m or height < p.commit_height_m:
+                vz = p.final_speed_m_s
+        return out(Setpoint.velocity_ned(float(v[0]), float(v[1]), vz, yaw_rad=self._yaw,
+                                         time_s=now))
+
+    def _stalled(self, s: VehicleState, now: float, height: float) -> bool:
+        if height < self.params.commit_height_m and abs(float(s.velocity_ned_m_s[2])) < 0.05:
+            self._stalled_since = self._stalled_since if self._stalled_since is not None \
+                else now
+            return now - self._stalled_since > 0.5
+        self._stalled_since = None
+        return False

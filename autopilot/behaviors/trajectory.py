@@ -13,9 +13,10 @@ path, interpolated between ticks to the moment it crossed); the runtime takes th
 frame from the step's camera.
 
 Positions are in a *frame*: ``world`` (the local NED frame; altitudes are heights above its
-origin), ``home`` (north/east/altitude from where the vehicle armed) or ``rover`` (accepted, and
-refused while no rover source exists). ``latlon`` forms give WGS-84 latitude and longitude, with
-the altitude above home.
+origin), ``home`` (north/east/altitude from where the vehicle armed) or ``rover`` (north/east
+from the rover's deck and altitude above it, where the deck pipeline's estimate puts it when
+the step starts — seed 004's rover frame; the step runs that pipeline). ``latlon`` forms give
+WGS-84 latitude and longitude, with the altitude above home.
 """
 
 from __future__ import annotations
@@ -54,8 +55,9 @@ Speed = Annotated[float, Field(gt=0, le=20)]
 NorthEast = tuple[float, float]
 LatLon = tuple[Annotated[float, Field(ge=-90, le=90)], Annotated[float, Field(ge=-180, le=180)]]
 
-_NO_ROVER = ("frame: rover needs a rover position source (the rover-landing work adds one); "
-             "none is configured: use frame world or home")
+_NO_ROVER = ("frame: rover, but there is no estimate of the rover yet (no rover report, UWB "
+             "range or deck tag heard): fly with frame world or home, or wait for the rover")
+_ROVER_LATLON = "latitude/longitude are absolute: frame rover does not apply to them"
 
 
 class PlanError(ValueError):
@@ -170,7 +172,11 @@ class TrajectorySettings:
 def _frame_offset(frame: str, inputs: BehaviorInputs) -> np.ndarray:
     """The NED position of the frame's origin in the local frame."""
     if frame == "rover":
-        raise PlanError(_NO_ROVER)
+        t = inputs.target
+        if t is None or t.kind != "deck" or t.stale or \
+                not np.all(np.isfinite(t.position_ned_m)):
+            raise PlanError(_NO_ROVER)
+        return np.asarray(t.position_ned_m, dtype=float)
     if frame == "home":
         if inputs.home_ned_m is None:
             raise PlanError("frame: home, but the vehicle has not said where home is "
@@ -197,7 +203,7 @@ def resolve_point(inputs: BehaviorInputs, frame: str, north_east_alt=None, latlo
     """A position given in a step's frame (or as lat/lon + altitude over home) in local NED."""
     if latlon_alt is not None:
         if frame == "rover":
-            raise PlanError(_NO_ROVER)
+            raise PlanError(_ROVER_LATLON)
         ne = _latlon_ne(latlon_alt[0], latlon_alt[1], inputs)
         return np.array([ne[0], ne[1], _home_down(inputs) - latlon_alt[2]])
     off = _frame_offset(frame, inputs)
@@ -208,7 +214,7 @@ def resolve_point(inputs: BehaviorInputs, frame: str, north_east_alt=None, latlo
 def resolve_ne(inputs: BehaviorInputs, frame: str, north_east=None, latlon=None) -> np.ndarray:
     if latlon is not None:
         if frame == "rover":
-            raise PlanError(_NO_ROVER)
+            raise PlanError(_ROVER_LATLON)
         return _latlon_ne(latlon[0], latlon[1], inputs)
     off = _frame_offset(frame, inputs)
     return np.array([off[0] + north_east[0], off[1] + north_east[1]])

@@ -635,3 +635,98 @@ def tag_measurement(position_cam_m, rotation_cam_pad, r_world_body: np.ndarray,
         top = -(r_world_cam @ np.asarray(rotation_cam_pad, dtype=float))[:, 1]
         heading = math.atan2(top[1], top[0])
     return TagMeasurement(-offset, cov, heading, heading_std_rad, rng)
+
+
+class Seed004Relative:
+    """Seed 004's estimation strategy, as a baseline for ``autopilot bench landing``: the
+    drone's position relative to the deck from a position pre-solved from the UWB ranges
+    (multilateration in the rover's frame, turned into NED with the rover's compass) until the
+    deck's tag is seen, then from the tag alone while it is seen (UWB again once it has not
+    been for ``tag_timeout_s``: the switching of the theses seed 004 started from); each fed
+    as it arrives into a
+    constant-velocity Kalman filter (filterpy) with the report's ``R_uwb = 2`` and
+    ``R_tag = 0.5``. No delayed-measurement handling, no rover motion model, no gating."""
+
+    def __init__(self, geometry: DeckGeometry, r_uwb: float = 2.0, r_tag: float = 0.5,
+                 accel_var: float = 1.0, tag_timeout_s: float = 0.5) -> None:
+        self.geometry = geometry
+        self._anchors = np.array(geometry.anchors_frd_m, dtype=float).reshape(-1, 3) \
+            + np.array([0.0, 0.0, geometry.deck_height_m])
+        self._tag_lever = np.array(geometry.tag_frd_m, dtype=float)
+        self.r_uwb, self.r_tag, self.accel_var = r_uwb, r_tag, accel_var
+        self._kf: KalmanFilter | None = None
+        self._time = -math.inf
+        self.heading = math.nan
+        self.tag_timeout_s = tag_timeout_s
+        self._tag_s = -math.inf
+        self._guess = np.array([0.0, 0.0, -3.0])  # the tag in the rover's frame, above the deck
+        self.updates = dict.fromkeys(SOURCES, 0)
+        self.last_update_s = dict.fromkeys(SOURCES, -math.inf)
+
+    def add_rover(self, time_s: float, heading_rad: float) -> None:
+        if math.isfinite(heading_rad):
+            self.heading = heading_rad
+            self.last_update_s["rover"] = time_s
+            self.updates["rover"] += 1
+
+    def add_uwb(self, time_s: float, anchor_ids, ranges_m, r_world_body: np.ndarray) -> None:
+        if time_s - self._tag_s < self.tag_timeout_s or not math.isfinite(self.heading) \
+                or len(anchor_ids) < 3:
+            return
+        from scipy.optimize import least_squares
+
+        anchors = self._anchors[list(anchor_ids)]
+        ranges = np.asarray(ranges_m, dtype=float)
+        fit = least_squares(lambda p: np.linalg.norm(anchors - p, axis=1) - ranges,
+                            self._guess, method="lm")
+        if not fit.success:
+            return
+        self._guess = fit.x if fit.x[2] < 0.0 else fit.x * np.array([1.0, 1.0, -1.0])
+        relative = _yaw(self.heading) @ self._guess - r_world_body @ self._tag_lever
+        self._update(time_s, relative, self.r_uwb)
+        self.last_update_s["uwb"] = time_s
+        self.updates["uwb"] += 1
+
+    def add_tag(self, time_s: float, relative_m) -> None:
+        self._tag_s = max(self._tag_s, time_s)
+        self._update(time_s, np.asarray(relative_m, dtype=float), self.r_tag)
+        self.last_update_s["tag"] = time_s
+        self.updates["tag"] += 1
+
+    def _transition(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        from filterpy.common import Q_discrete_white_noise
+
+        f = np.eye(6)
+        f[:3, 3:] = np.eye(3) * dt
+        q1 = Q_discrete_white_noise(2, dt=max(dt, 1e-6), var=self.accel_var)
+        q = np.zeros((6, 6))
+        for axis in range(3):
+            idx = [axis, 3 + axis]
+            q[np.ix_(idx, idx)] = q1
+        return f, q
+
+    def _update(self, time_s: float, z: np.ndarray, r: float) -> None:
+        if self._kf is None:
+            self._kf = KalmanFilter(dim_x=6, dim_z=3)
+            self._kf.x = np.concatenate([z, np.zeros(3)]).reshape(6, 1)
+            self._kf.P = np.diag([r] * 3 + [1.0] * 3)
+            self._kf.H = np.hstack([np.eye(3), np.zeros((3, 3))])
+            self._time = time_s
+            return
+        dt = max(time_s - self._time, 0.0)  # as it arrives: an older one is applied now
+        f, q = self._transition(dt)
+        self._kf.predict(F=f, Q=q)
+        self._time = max(self._time, time_s)
+        self._kf.update(z.reshape(3, 1), R=np.eye(3) * r)
+
+    def estimate(self, time_s: float) -> RelativeEstimate | None:
+        kf = self._kf
+        if kf is None:
+            return None
+        dt = min(max(time_s - self._time, 0.0), 0.5)
+        f, q = self._transition(dt)
+        x, p = (f @ kf.x)[:, 0], f @ kf.P @ f.T + q
+        return RelativeEstimate(time_s, x[:3].copy(), x[3:].copy(), p.copy(),
+                                self.heading if math.isfinite(self.heading) else 0.0,
+                                math.radians(5.0), 0.0, np.zeros(3), np.zeros(3),
+                                dict(self.last_update_s))

@@ -26,6 +26,7 @@ from autopilot.estimation.relative import (
     RelativeEstimate,
     RelativeFilter,
     RelativeSettings,
+    Seed004Relative,
     tag_measurement,
 )
 from autopilot.estimation.target import TargetEstimate
@@ -42,18 +43,24 @@ ROVER_BODY = "rover"  # the simulator's truth body of a scenario's rover (its de
 STALE_AFTER_S = 1.5
 
 
-def deck_spec(cfg: AppConfig, use_uwb: bool = True, use_marker: bool = True) -> PipelineSpec:
-    """The deck pipeline a landing with these sources uses (one per combination)."""
+def deck_spec(cfg: AppConfig, use_uwb: bool = True, use_marker: bool = True,
+              strategy: str = "ours") -> PipelineSpec:
+    """The deck pipeline a landing with these sources (and estimation strategy) uses: one
+    per combination."""
     name = KIND if use_uwb and use_marker else \
         f"{KIND}_{'uwb' if use_uwb else 'nouwb'}_{'tag' if use_marker else 'notag'}"
+    if strategy != "ours":
+        name += f"_{strategy}"
     return PipelineSpec(KIND, cfg.rover.camera if use_marker else "", truth_body=ROVER_BODY,
                         target_size_m=cfg.rover.tag.size_m, name=name,
-                        target=f"uwb={int(use_uwb)},tag={int(use_marker)}")
+                        target=f"uwb={int(use_uwb)},tag={int(use_marker)},strategy={strategy}")
 
 
-def parse_deck_target(target: str) -> tuple[bool, bool]:
+def parse_deck_target(target: str) -> tuple[bool, bool, str]:
+    """(use_uwb, use_tag, strategy) of a spec's ``target``."""
     flags = dict(part.split("=", 1) for part in (target or "uwb=1,tag=1").split(","))
-    return flags.get("uwb", "1") == "1", flags.get("tag", "1") == "1"
+    return (flags.get("uwb", "1") == "1", flags.get("tag", "1") == "1",
+            flags.get("strategy", "ours"))
 
 
 def relative_settings(cfg: AppConfig) -> RelativeSettings:
@@ -106,7 +113,7 @@ class DeckPipeline:
         self.name = spec.key
         self.camera = spec.camera
         self.size_m = spec.target_size_m
-        use_uwb, use_tag = parse_deck_target(spec.target)
+        use_uwb, use_tag, self.strategy = parse_deck_target(spec.target)
         tag = cfg.rover.tag
         self.layout = marker_pad_layout(tag.size_m, tag.ids, tag.dictionary)
         self.detector = MarkerPadDetector(MarkerPadSettings(
@@ -115,6 +122,10 @@ class DeckPipeline:
         self.deck_height_m = cfg.rover.deck_height_m
         self.filter = RelativeFilter(relative_settings(cfg), deck_geometry(cfg),
                                      use_uwb=use_uwb, use_tag=use_tag)
+        #: seed 004's strategy (a baseline): used instead of the filter when chosen
+        self.seed004 = Seed004Relative(deck_geometry(cfg)) if self.strategy == "seed004" \
+            else None
+        self._use_uwb, self._use_tag = use_uwb, use_tag
         e = cfg.estimation.relative
         self._tag_noise = (e.tag_pixel_noise_px, e.tag_range_noise_fraction,
                            math.radians(e.tag_heading_noise_deg))
@@ -128,6 +139,8 @@ class DeckPipeline:
 
     def add_state(self, state: VehicleState) -> None:
         self.history.add(state)
+        if self.seed004 is not None:
+            return
         self.filter.add_velocity(state.time_s, state.velocity_ned_m_s)
         r = state.distance_to_ground_m
         if math.isfinite(r) and r != self._last_reading:
@@ -139,6 +152,9 @@ class DeckPipeline:
 
     def add_sensor(self, sample: object) -> None:
         """A UWB reading or a rover report (see :attr:`drivers.base.Vehicle.sensors`)."""
+        if self.seed004 is not None:
+            self._seed004_sensor(sample)
+            return
         if isinstance(sample, UwbRanges):
             pose = self.history.pose_at(sample.time_s)
             if pose is not None:
@@ -157,6 +173,15 @@ class DeckPipeline:
                     heading_std_rad=sample.heading_std_rad,
                     rover_velocity_m_s=sample.velocity_ned_m_s)
         self._collect()
+
+    def _seed004_sensor(self, sample: object) -> None:
+        if isinstance(sample, RoverState):
+            self.seed004.add_rover(sample.time_s, sample.heading_rad)
+        elif isinstance(sample, UwbRanges) and self._use_uwb:
+            pose = self.history.pose_at(sample.time_s)
+            if pose is not None:
+                self.seed004.add_uwb(sample.time_s, sample.anchor_ids, sample.ranges_m,
+                                     quat_to_matrix(pose.attitude_q))
 
     def _drone_at(self, time_s: float) -> tuple[np.ndarray, np.ndarray] | None:
         pose = self.history.pose_at(time_s)
@@ -210,6 +235,10 @@ class DeckPipeline:
                             pixel_noise_px=pixel, range_noise_fraction=fraction,
                             attitude_std_rad=self._attitude_std, heading_std_rad=heading_std)
         # the tag is printed on the deck: its centre is the deck's top centre
+        if self.seed004 is not None:
+            if self._use_tag:
+                self.seed004.add_tag(time_s, m.relative_m)
+            return None
         self.filter.add_tag(time_s, m.relative_m, m.covariance, m.heading_rad,
                             m.heading_std_rad)
         self._collect()
@@ -220,7 +249,8 @@ class DeckPipeline:
 
     def target(self, time_s: float, vehicle_position_ned_m=None) -> TargetEstimate | None:
         """The deck's top centre at ``time_s`` in the drone's local frame (see the notes)."""
-        rel = self.filter.estimate(time_s)
+        source = self.seed004 if self.seed004 is not None else self.filter
+        rel = source.estimate(time_s)
         latest = self.history.latest
         if rel is None or latest is None:
             return None
@@ -228,7 +258,7 @@ class DeckPipeline:
         drone = np.asarray(latest.position_ned_m) + np.asarray(latest.velocity_ned_m_s) * dt
         last = max(rel.last_update_s[s] for s in ("uwb", "tag", "rover"))
         age = time_s - last
-        updates = sum(self.filter.updates.values())
+        updates = sum(source.updates.values())
         return TargetEstimate(
             time_s=time_s, position_ned_m=drone - rel.position_m,
             velocity_ned_m_s=np.asarray(latest.velocity_ned_m_s) - rel.velocity_m_s,

@@ -324,6 +324,66 @@ def _status(fig, records, phases, target) -> None:
     _shade(ax, phases)
 
 
+def _rover(fig, records, phases, target) -> None:
+    """Landing on the rover: the drone relative to the deck (truth, and the estimate the
+    controller flew on) from above and from the side in the rover's axes; the relative
+    estimate's error per source at each update, with its 2σ; when each source updated."""
+    import numpy as np
+
+    from autopilot.steps.land_on_rover import relative_tracks
+
+    tr = relative_tracks(records)
+    if tr is None:
+        raise _NoData("no rover in this log")
+    fig.set_size_inches(10, 7.5)
+    (top, side), (err, avail) = fig.subplots(2, 2)
+    length, width = tr["deck_size_m"]
+    top.add_patch(__import__("matplotlib.patches", fromlist=["Rectangle"]).Rectangle(
+        (-width / 2, -length / 2), width, length, fill=False, color="#888", lw=1))
+    top.plot(tr["truth"][:, 1], tr["truth"][:, 0], "-", lw=1, label="truth")
+    if len(tr["flown"]):
+        top.plot(tr["flown"][:, 1], tr["flown"][:, 0], ":", lw=1, label="estimate flown on")
+    top.set(xlabel="across the rover (m, right +)", ylabel="along the rover (m, front +)",
+            title="relative track from above (deck outlined)", aspect="equal")
+    near = np.abs(tr["truth"][:, 2]) < 4.0
+    if near.any():
+        span = max(1.0, float(np.abs(tr["truth"][near, :2]).max()) * 1.1)
+        top.set(xlim=(-span, span), ylim=(-span, span))
+    top.legend(fontsize=7)
+    side.axhspan(-0.02, 0.0, color="#888")
+    side.plot(tr["truth"][:, 0], tr["truth"][:, 2], "-", lw=1, label="truth")
+    if len(tr["flown"]):
+        side.plot(tr["flown"][:, 0], tr["flown"][:, 2], ":", lw=1, label="estimate flown on")
+    side.set(xlabel="along the rover (m)", ylabel="height above the deck (m)",
+             title="from the side")
+    side.legend(fontsize=7)
+    colours = {"uwb": "#1f77b4", "tag": "#d62728", "range": "#2ca02c", "rover": "#9467bd"}
+    for source, rows in tr["updates"].items():
+        if len(rows["t"]):
+            err.plot(rows["t"], rows["error_m"] * 100.0, ".", ms=2, color=colours[source],
+                     label=f"after {source}")
+    if len(tr["sigma_t"]):
+        err.plot(tr["sigma_t"], tr["two_sigma_m"] * 100.0, "-", lw=0.8, color="#555",
+                 label="2σ (horizontal)")
+    err.set(xlabel="time (s)", ylabel="horizontal error (cm)", yscale="log",
+            title="relative estimate against truth, per source")
+    err.legend(fontsize=6, ncol=2)
+    _shade(err, phases)
+    for row, source in enumerate(("uwb", "tag", "range", "rover")):
+        rows = tr["updates"][source]
+        if len(rows["t"]):
+            avail.plot(rows["t"], np.full(len(rows["t"]), row), "|", ms=8,
+                       color=colours[source])
+        rej = tr["rejected"][source]
+        if len(rej):
+            avail.plot(rej, np.full(len(rej), row - 0.3), "|", ms=4, color="#999")
+    avail.set(yticks=range(4), yticklabels=["UWB", "tag", "rangefinder", "rover report"],
+              xlabel="time (s)", title="sensor updates (grey: rejected by the gate)",
+              ylim=(-0.8, 3.5))
+    _shade(avail, phases)
+    fig.tight_layout()
+
+
 #: panel name (as step kinds list them in their ``report``) → title, drawing, per target?
 PLOTS = {
     "trajectory": ("Trajectories", _trajectories, False),
@@ -335,6 +395,7 @@ PLOTS = {
     "latency": ("Latency", _latency, False),
     "path": ("Planned path and flown track", _path, False),
     "status": ("Mission status", _status, False),
+    "rover": ("Landing on the rover", _rover, False),
 }
 ALWAYS = ("trajectory", "velocity", "status")
 

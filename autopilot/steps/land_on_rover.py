@@ -33,6 +33,7 @@ from autopilot.behaviors.land_on_rover import (
     LandOnRover,
     LandOnRoverParams,
     LandOnRoverSettings,
+    Seed004LandOnRover,
 )
 from autopilot.flightlog import records as ch
 from autopilot.perception.deck_pipeline import ROVER_BODY, deck_spec
@@ -48,12 +49,14 @@ def _behavior(params: LandOnRoverParams, ctx: StepContext) -> LandOnRover:
     config = ctx.config
     if params.use_marker:
         camera_of(ctx, config.rover.camera, "rover.camera")
-    return LandOnRover(params, LandOnRoverSettings(tuple(config.rover.deck_size_m),
-                                                   config.rover.deck_height_m))
+    settings = LandOnRoverSettings(tuple(config.rover.deck_size_m), config.rover.deck_height_m)
+    if params.strategy == "seed004":
+        return Seed004LandOnRover(params, settings, config.control.trajectory.seed004_pid)
+    return LandOnRover(params, settings)
 
 
 def _spec(params: LandOnRoverParams, config):
-    return (deck_spec(config, params.use_uwb, params.use_marker),)
+    return (deck_spec(config, params.use_uwb, params.use_marker, params.strategy),)
 
 
 def _check(params: LandOnRoverParams, config) -> None:
@@ -207,9 +210,65 @@ def relative_metrics(log: Mapping[str, Sequence[Mapping]], intervals: list[tuple
     return out
 
 
+def relative_tracks(log: Mapping[str, Sequence[Mapping]], body: str = ROVER_BODY) -> dict | None:
+    """What the report's rover panel draws: the drone relative to the deck in the rover's axes
+    (along, across, height above the deck) — truth, and the estimate flown on — and the
+    relative filter's updates per source with their horizontal error against truth."""
+    truth = [s for s in log.get(ch.GROUND_TRUTH, []) if body in s.get("bodies", {})]
+    if len(truth) < 2:
+        return None
+    t = np.array([s["time_s"] for s in truth])
+    rel = np.array([np.subtract(s["vehicle_position_ned_m"],
+                                s["bodies"][body]["position_ned_m"]) for s in truth])
+    yaw = np.array([_yaw_of(s["bodies"][body]["attitude_q"]) for s in truth])
+
+    def axes(r: np.ndarray, psi: np.ndarray) -> np.ndarray:
+        c, s_ = np.cos(psi), np.sin(psi)
+        return np.column_stack((c * r[:, 0] + s_ * r[:, 1], -s_ * r[:, 0] + c * r[:, 1],
+                                -r[:, 2]))
+
+    out: dict = {"deck_size_m": tuple(_config(log).get("deck_size_m", (1.0, 0.8))),
+                 "truth": axes(rel, yaw)}
+    states = log.get(ch.VEHICLE_STATE, [])
+    ticks = [r for r in log.get(ch.CONTROL_TARGET, [])
+             if r.get("present") and str(r.get("pipeline", "")).startswith("deck")]
+    flown = np.zeros((0, 3))
+    if ticks and len(states) >= 2:
+        st = np.array([r["time_s"] for r in states])
+        sp = np.array([r["position_ned_m"] for r in states], dtype=float)
+        tt = np.array([r["time_s"] for r in ticks])
+        keep = (tt >= max(st[0], t[0])) & (tt <= t[-1])
+        if keep.any():
+            tt = tt[keep]
+            deck = np.array([r["position_ned_m"] for r, k in zip(ticks, keep, strict=True)
+                             if k], dtype=float)
+            flown = axes(_interp(tt, st, sp) - deck, np.interp(tt, t, np.unwrap(yaw)))
+    out["flown"] = flown
+    updates, rejected = {}, {}
+    records = [r for r in log.get(ch.RELATIVE_ESTIMATES, []) if t[0] <= r["time_s"] <= t[-1]]
+    for source in SOURCES:
+        rows = [r for r in records if r.get("source") == source and r.get("accepted")]
+        times = np.array([r["time_s"] for r in rows])
+        if len(rows):
+            est = np.array([r["relative_position_m"] for r in rows], dtype=float)
+            true = _interp(times, t, rel)
+            error = np.hypot(est[:, 0] - true[:, 0], est[:, 1] - true[:, 1])
+        else:
+            error = np.zeros(0)
+        updates[source] = {"t": times, "error_m": np.maximum(error, 1e-4)}
+        rejected[source] = np.array([r["measurement_time_s"] for r in records
+                                     if r.get("source") == source and not r.get("accepted")])
+    out["updates"], out["rejected"] = updates, rejected
+    sig = [r for r in records if r.get("accepted")]
+    out["sigma_t"] = np.array([r["time_s"] for r in sig])
+    out["two_sigma_m"] = np.array([2.0 * max(r["position_std_m"][0], r["position_std_m"][1])
+                                   for r in sig]) if sig else np.zeros(0)
+    return out
+
+
 register(StepKind(
     "land_on_rover", LandOnRoverParams, _behavior, pipelines=_spec, metrics=landing_metrics,
-    report=("trajectory", "latency"), check=_check,
+    report=("trajectory", "rover", "latency"), check=_check,
     description="land on a moving rover's deck: UWB, its tag and its reports fused "
                 "(seed 004)",
     status=(8, 9)))

@@ -86,9 +86,17 @@ def _check_speed(speed: float, config: AppConfig) -> None:
 
 
 def _check_frame(frame: str) -> None:
-    if frame == "rover":
-        raise ValueError("frame: rover needs a rover position source, and none exists yet "
-                         "(it comes with the rover-landing work): use frame world or home")
+    """Every frame can be planned in; ``rover`` needs the rover's estimate when the step
+    starts (the step fails then, clearly, without one)."""
+
+
+def _frame_pipelines(params, config: AppConfig):
+    """frame: rover runs the deck pipeline (the rover's estimate is the frame's origin)."""
+    if getattr(params, "frame", "world") != "rover":
+        return ()
+    from autopilot.perception.deck_pipeline import deck_spec
+
+    return (deck_spec(config),)
 
 
 def _check_camera(params, config: AppConfig) -> None:
@@ -390,16 +398,19 @@ def _survey_info(params: SurveyParams, config: AppConfig) -> dict:
 
 register(StepKind(
     "goto", GotoParams, _goto, check=_check_goto, metrics=goto_metrics,
+    pipelines=_frame_pipelines,
     report=("trajectory", "path"), status=(4, 5),
     description="fly a straight line to position_m (or latlon) at speed_m_s"))
 register(StepKind(
     "orbit", OrbitParams, _orbit, check=_check_orbit, metrics=orbit_metrics,
+    pipelines=_frame_pipelines,
     report=("trajectory", "path"), status=(6, 7),
     photo_camera=lambda params, config: _photo_camera(params, config) if params.images
     else None,
     description="circle center_m at radius_m facing it, taking `images` photos"))
 register(StepKind(
     "survey", SurveyParams, _survey, check=_check_survey, metrics=survey_metrics,
+    pipelines=_frame_pipelines,
     report=("trajectory", "path"), status=(10, 11), photo_camera=_photo_camera,
     plan_info=_survey_info,
     description="lawnmower over polygon_m at altitude_m, photos every photo_spacing_m"))

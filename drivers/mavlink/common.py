@@ -18,6 +18,7 @@ from drivers.base import (
     Frame,
     Health,
     LandedState,
+    RoverState,
     Vehicle,
     VehicleError,
     VehicleState,
@@ -62,6 +63,12 @@ class MavlinkVehicle(Vehicle):
         self._origin: GlobalOrigin | None = None
         self._home_ned: np.ndarray | None = None
         self._origin_from_ekf = False  # GPS_GLOBAL_ORIGIN heard (HOME_POSITION then ignored)
+        #: a rover on the same link (another MAVLink system: a PX4 rover or ArduRover, e.g.
+        #: relayed by a router): its system id (None: no rover), and how long its reports
+        #: take to arrive (its clock is not ours: reports are stamped arrival − this)
+        self.rover_system_id: int | None = None
+        self.rover_latency_s = 0.1
+        self._rovers: Broadcast[RoverState] = Broadcast()
 
     @property
     def global_origin(self) -> GlobalOrigin | None:
@@ -90,6 +97,29 @@ class MavlinkVehicle(Vehicle):
     def telemetry(self, buffer: int = 1) -> AsyncIterator[VehicleState]:
         return self._telemetry.subscribe(buffer)
 
+    @property
+    def sensors(self) -> frozenset[str]:
+        return frozenset({"rover"}) if self.rover_system_id is not None else frozenset()
+
+    def rover_states(self, buffer: int = 8) -> AsyncIterator[RoverState]:
+        if self.rover_system_id is None:
+            return super().rover_states(buffer)
+        return self._rovers.subscribe(buffer)
+
+    def _on_rover(self, msg) -> None:
+        """A message from the rover's system: GLOBAL_POSITION_INT becomes a report (its
+        position in our local frame through our EKF origin, its velocity, its heading)."""
+        if msg.get_type() != "GLOBAL_POSITION_INT" or self._origin is None:
+            return
+        n, e, d = self._origin.to_ned(msg.lat / 1e7, msg.lon / 1e7, msg.alt / 1e3)
+        heading = math.radians(msg.hdg / 100.0) if msg.hdg != 65535 else math.nan
+        self._rovers.publish(RoverState(
+            time_s=self._clock.now() - self.rover_latency_s,
+            position_ned_m=np.array([n, e, d]),
+            velocity_ned_m_s=np.array([msg.vx, msg.vy, msg.vz], dtype=float) / 100.0,
+            heading_rad=math.remainder(heading, 2.0 * math.pi) if math.isfinite(heading)
+            else math.nan, system_id=msg.get_srcSystem()))
+
     def _publish_position(self, vehicle_s: float, position_ned_m, velocity_ned_m_s) -> None:
         """A LOCAL_POSITION_NED stamped ``vehicle_s`` (boot time) arrived: publish a sample
         made of it and the newest of everything else."""
@@ -108,6 +138,7 @@ class MavlinkVehicle(Vehicle):
 
     def _end_telemetry(self, error: VehicleError | None) -> None:
         self._telemetry.close(error)
+        self._rovers.close(error)
 
     @property
     def clock(self) -> MonotonicClock:

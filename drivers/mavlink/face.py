@@ -29,6 +29,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import math
 import struct
 import time
 from collections.abc import AsyncIterator, Callable, Coroutine
@@ -89,8 +90,12 @@ class _Link(asyncio.DatagramProtocol):
         self.mav = mavlink.MAVLink(None, srcSystem=face.system_id, srcComponent=COMPONENT_ID)
         self._rx = mavlink.MAVLink(None, srcSystem=face.system_id, srcComponent=COMPONENT_ID)
         self._rx.robust_parsing = True
+        #: the scenario's rover, a second system on the same port (as a router relays it)
+        self.rover_mav = mavlink.MAVLink(None, srcSystem=face.rover_system_id,
+                                         srcComponent=COMPONENT_ID)
         if face.signing is not None:
             face.signing.apply(self.mav, self._rx)
+            face.signing.apply(self.rover_mav, mavlink.MAVLink(None))
 
     def connection_made(self, transport) -> None:
         self.transport = transport
@@ -114,11 +119,13 @@ class _Link(asyncio.DatagramProtocol):
     def error_received(self, exc: Exception) -> None:  # e.g. ICMP port unreachable
         log.debug("%s: %s", self.name, exc)
 
-    def send(self, msg) -> None:
+    def send(self, msg, mav=None) -> None:
+        """``msg`` from the vehicle (or from the system ``mav`` speaks for: the rover)."""
         if self.transport is None or self.transport.is_closing():
             return
-        refresh(self.mav)
-        self.transport.sendto(pack(self.mav, msg), self.peer)
+        mav = mav or self.mav
+        refresh(mav)
+        self.transport.sendto(pack(mav, msg), self.peer)
 
 
 @dataclass
@@ -172,6 +179,10 @@ class MavlinkFace:
         self.instance = instance
         #: MAV_SYS_ID (PX4 SITL gives instance i the id i + 1; read once, as PX4 at boot)
         self.system_id = int(vehicle.param("MAV_SYS_ID"))
+        #: a scenario's rover speaks as this system (sim.rover_link.system_id)
+        self.rover_system_id = int(getattr(getattr(getattr(vehicle, "config", None),
+                                                   "rover_link", None), "system_id", 0)
+                                   or self.system_id + 1)
         self.host = host
         self.signing = signing
         self.stats = FaceStats()
@@ -215,6 +226,8 @@ class MavlinkFace:
                        loop.create_task(self._housekeeping(), name="mavlink-housekeeping")]
         if self._events is not None:
             self._tasks.append(loop.create_task(self._statustext(), name="mavlink-events"))
+        if "rover" in getattr(self.vehicle, "sensors", ()):
+            self._tasks.append(loop.create_task(self._rover(), name="mavlink-rover"))
 
     async def close(self) -> None:
         await cancel_all(self._tasks)
@@ -286,6 +299,34 @@ class MavlinkFace:
                   px4.MAV_STATE_ACTIVE if armed else px4.MAV_STATE_STANDBY)
         return mav.heartbeat_encode(px4.MAV_TYPE_QUADROTOR, px4.MAV_AUTOPILOT_PX4, base_mode(s),
                                     custom, status)
+
+    async def _rover(self) -> None:
+        """The scenario's rover as its own autopilot (a PX4 rover) would appear on a router's
+        link: HEARTBEAT (MAV_TYPE_GROUND_ROVER) once a second and GLOBAL_POSITION_INT with
+        each of its reports (its position, velocity and compass heading), from its system id,
+        stamped with its capture time on the shared boot clock."""
+        last_heartbeat = -math.inf
+        async with contextlib.aclosing(self.vehicle.rover_states(buffer=16)) as reports:
+            async for r in reports:
+                now = time.monotonic()
+                n, e, d = (float(v) for v in r.position_ned_m)
+                vn, ve, vd = (float(v) for v in r.velocity_ned_m_s)
+                lat, lon, alt = self.telemetry.origin.to_global(n, e, d)
+                hdg = round(math.degrees(r.heading_rad) % 360.0 * 100.0) % 36000 \
+                    if math.isfinite(r.heading_rad) else 65535
+                for link in self.links.values():
+                    mav = link.rover_mav
+                    if now - last_heartbeat >= 1.0:
+                        link.send(mav.heartbeat_encode(
+                            mavlink.MAV_TYPE_GROUND_ROVER, px4.MAV_AUTOPILOT_PX4,
+                            px4.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 0, px4.MAV_STATE_ACTIVE),
+                            mav)
+                    link.send(mav.global_position_int_encode(
+                        self._boot_ms(r.time_s), round(lat * 1e7), round(lon * 1e7),
+                        round(alt * 1000), round(-d * 1000), round(vn * 100), round(ve * 100),
+                        round(vd * 100), hdg), mav)
+                if now - last_heartbeat >= 1.0:
+                    last_heartbeat = now
 
     async def _telemetry(self) -> None:
         async with contextlib.aclosing(self.vehicle.telemetry()) as samples:

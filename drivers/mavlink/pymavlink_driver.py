@@ -337,6 +337,9 @@ class PymavlinkDriver(MavlinkVehicle):
     def _receive(self, msg, address) -> None:
         src = (msg.get_srcSystem(), msg.get_srcComponent())
         kind = msg.get_type()
+        if self.rover_system_id is not None and src[0] == self.rover_system_id:
+            self._on_rover(msg)  # the rover (never taken for the vehicle)
+            return
         if kind == "HEARTBEAT":
             if msg.autopilot == MAV_AUTOPILOT_INVALID or msg.type in (6, 18) or \
                     (self._target is None and src[1] != AUTOPILOT_COMPONENT):

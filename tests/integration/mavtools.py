@@ -12,9 +12,9 @@ CLIENT_URL = f"udpin://127.0.0.1:{14540 + INSTANCE}"
 
 
 @contextlib.asynccontextmanager
-async def served(config, **kwargs):
+async def served(config, scenario=(), **kwargs):
     """The simulator in real time behind its MAVLink face (instance :data:`INSTANCE`)."""
-    vehicle = SimDriver(config, lockstep=False)
+    vehicle = SimDriver(config, scenario=scenario, lockstep=False)
     await vehicle.connect()
     face = MavlinkFace(vehicle, instance=INSTANCE, gcs_port=14557 + INSTANCE,
                        events=vehicle.events(), **kwargs)

@@ -19,7 +19,6 @@ def _problems(tmp_path, steps: str) -> str:
 @pytest.mark.parametrize(("step", "expected"), [
     ("  - goto: {position_m: [1, 2, 3], latlon: [47.3, 8.5, 3]}", "exactly one of position_m"),
     ("  - goto: {position_m: [1, 2]}", "steps[1].goto.position_m"),
-    ("  - goto: {position_m: [1, 2, 3], frame: rover}", "frame: rover needs a rover"),
     ("  - goto: {position_m: [1, 2, 3], frame: moon}", "steps[1].goto.frame"),
     ("  - goto: {position_m: [1, 2, 3], speed_m_s: 15}", "max_speed_m_s"),
     ("  - orbit: {center_m: [1, 2], radius_m: 2, speed_m_s: 4}", "at most 1.73 m/s"),
@@ -91,3 +90,40 @@ def test_a_goal_needing_a_camera_the_vehicle_lacks_is_refused():
     goals.goals.clear()
     takeoff = validate_goal({"takeoff": {}}, plan.config)
     assert goals.submit(takeoff, 1.0, MissionStatus.LANDING_COMPLETED, True, False).active
+
+
+def test_the_rover_frame_is_the_rover_estimate_when_the_step_starts():
+    """frame: rover (seed 004): positions from the deck pipeline's estimate of the rover at
+    the start of the step; without one, the step fails saying so; lat/lon stay absolute."""
+    import numpy as np
+
+    from autopilot.behaviors.base import BehaviorInputs, Status
+    from autopilot.estimation.target import TargetEstimate
+    from autopilot.mission import build_behavior
+    from autopilot.steps import step_kind
+
+    from ..factories import front_camera, vehicle_state
+
+    plan = load_mission("orbit", ["steps.1.orbit.frame=rover", "steps.1.orbit.center_m=[0, 0]",
+                                  "steps.1.orbit.images=0"])
+    step = plan.steps[1]
+    specs = step_kind("orbit").pipelines(step.params, plan.config)
+    assert [s.kind for s in specs] == ["deck"]  # the rover's estimate runs with the step
+    cameras = {"down": front_camera(), "front": front_camera()}
+    state = vehicle_state(1.0, pos=(0.0, 0.0, -3.0))
+    out = build_behavior(step, plan.config, cameras).activate(BehaviorInputs(1.0, state))
+    assert out.status is Status.FAILED
+    assert "no estimate of the rover" in out.reason
+    deck = TargetEstimate(1.0, np.array([10.0, 5.0, -0.45]), np.array([1.5, 0.0, 0.0]),
+                          np.eye(6) * 1e-4, 0.05, False, 50, True, kind="deck")
+    behavior = build_behavior(step, plan.config, cameras)
+    out = behavior.activate(BehaviorInputs(1.0, state, target=deck))
+    assert out.status is Status.RUNNING
+    radius = step.params.radius_m
+    centre = np.asarray(out.plan["look_at_ned_m"], dtype=float)
+    assert centre[:2] == pytest.approx([10.0, 5.0])
+    ring = np.asarray(out.plan["points_ned_m"], dtype=float)
+    far = np.linalg.norm(ring[:, :2] - centre[:2], axis=1)
+    assert np.median(far) == pytest.approx(radius, abs=0.1)  # (after its entry leg)
+    # its altitude is above the deck
+    assert ring[len(ring) // 2, 2] == pytest.approx(-0.45 - step.params.altitude_m, abs=0.05)

@@ -1,0 +1,56 @@
+"""The rover as a second MAVLink system: the simulator's face speaks for the scenario's rover
+(system 2, a ground rover's HEARTBEAT and GLOBAL_POSITION_INT) on the vehicle's own port, as a
+router relays both; the pymavlink driver told the rover's system id turns its reports into
+RoverState in the drone's local frame, and never takes the rover for the vehicle."""
+
+import asyncio
+import contextlib
+import math
+
+import numpy as np
+
+from autopilot.mission import load_mission
+from autopilot.scenario import build_world
+from drivers.mavlink.pymavlink_driver import PymavlinkDriver
+
+from .mavtools import CLIENT_URL, served
+
+
+def test_the_rovers_reports_reach_the_driver_as_a_second_system():
+    plan = load_mission("land_on_rover", ["scenario.rover.path=straight"])
+    sim_cfg, objects = build_world(plan.mission.scenario, plan.config.sim, plan.config.rover)
+    cams = {k: v.model_copy(update={"enabled": False}) for k, v in sim_cfg.cameras.items()}
+    sim_cfg = sim_cfg.model_copy(update={"cameras": cams})
+
+    async def main():
+        async with served(sim_cfg, scenario=objects) as (vehicle, face):
+            assert face.rover_system_id == 2
+            driver = PymavlinkDriver(CLIENT_URL)
+            driver.rover_system_id = 2
+            await driver.connect(timeout_s=10.0)
+            try:
+                assert driver.sensors == frozenset({"rover"})
+                assert driver._target[0] == face.system_id  # the vehicle, not the rover
+                got = []
+                async with contextlib.aclosing(driver.rover_states()) as reports:
+                    async with asyncio.timeout(20.0):
+                        async for report in reports:
+                            got.append((report, vehicle.simulator.ground_truth()))
+                            if len(got) >= 10:
+                                break
+                for report, truth in got:
+                    assert report.system_id == 2
+                    rover = truth.bodies["rover"]
+                    # its GNSS wanders (σ 0.8 m) and it is seen a moment later
+                    assert np.hypot(*(report.position_ned_m[:2] - rover.position_ned_m[:2])) \
+                        < 4.0
+                    assert math.isfinite(report.heading_rad)
+                    assert report.time_s <= driver.clock.now()
+                # the vehicle's own telemetry is untouched by the rover's messages
+                state = driver.latest_state
+                assert state is not None
+                assert abs(state.position_ned_m[0]) < 1.0
+            finally:
+                await driver.close()
+
+    asyncio.run(main())
