@@ -92,22 +92,25 @@ def replay(run_dir: Path, overrides: Sequence[str] = ()) -> dict:
     if not specs:
         raise ReplayError(f"{path}: no step of this flight used a perception pipeline")
     replayed = dict(records)
-    estimates, ticks = [], []
+    estimates, ticks, relative = [], [], []
     frames_replayed = frames_flown = 0
     for spec in specs.values():
         result = _replay_pipeline(path, records, make_pipeline(cfg, spec), spec)
         replayed[ch.detection_topic(spec.key)] = result.detections
         estimates += result.estimates
         ticks += result.ticks
+        relative += result.relative
         frames_replayed += len(result.detections)
         frames_flown += result.flown
-    if not frames_replayed:
+    if not frames_replayed and not relative:
         cameras = ", ".join(sorted({s.camera for s in specs.values()}))
         raise ReplayError(f"{path}: no logged camera frames of {cameras} to replay "
                           "(frames are logged by default in the simulator; on a vehicle set "
                           "log.frames.vehicle_rate_hz)")
     replayed[ch.TARGET_ESTIMATES] = sorted(estimates, key=lambda r: r["time_s"])
     replayed[ch.CONTROL_TARGET] = sorted(ticks, key=lambda r: r["time_s"])
+    if relative or ch.RELATIVE_ESTIMATES in records:
+        replayed[ch.RELATIVE_ESTIMATES] = sorted(relative, key=lambda r: r["time_s"])
     # the flight's own figures over the same frames (equal to summary.json's when every
     # frame was logged)
     as_flown = dict(records)
@@ -136,6 +139,8 @@ def _replay_groups(metrics: dict) -> dict:
         if found or group == "follow":
             groups[group] = {k: found.get(k) for k in keys} if found else {}
     groups["estimation"] = metrics.get("estimation") or {}
+    if metrics.get("relative"):  # the relative-state filter of a landing on a rover
+        groups["relative"] = metrics["relative"]
     return groups
 
 
@@ -169,27 +174,46 @@ class _Replayed:
         self.detections: list[dict] = []
         self.estimates: list[dict] = []
         self.ticks: list[dict] = []
+        self.relative: list[dict] = []
         self.flown = 0
 
 
 def _replay_pipeline(path: Path, records, pipeline: Pipeline, spec: PipelineSpec) -> _Replayed:
     out = _Replayed()
     info = next((c for c in records.get(ch.CAMERA_INFO, []) if c["name"] == spec.camera), None)
-    if info is None:
+    if info is None and spec.camera:
         raise ReplayError(f"{path}: no {ch.CAMERA_INFO} record for camera {spec.camera!r}")
-    camera = ch.camera_info_from_record(info)
+    camera = ch.camera_info_from_record(info) if info is not None else None
     flown_rows = records.get(ch.detection_topic(spec.key), [])
     out.flown = len(flown_rows)
     flown = {ch.time_key(r["time_s"]): r for r in flown_rows}
-    states = records.get(ch.VEHICLE_STATE, [])  # in arrival order
-    arrival = [s.get("received_s", s["time_s"]) for s in states]
+    # telemetry, and the extra sensors (UWB, the rover's reports) for a pipeline that takes
+    # them, merged in arrival order
+    inputs = [(s.get("received_s", s["time_s"]), 0, ch.vehicle_state_from_record(s))
+              for s in records.get(ch.VEHICLE_STATE, [])]
+    add_sensor = getattr(pipeline, "add_sensor", None)
+    take = getattr(pipeline, "take_records", None)
+    if add_sensor is not None:
+        inputs += [(r.get("received_s", r["time_s"]), 1, ch.uwb_ranges_from_record(r))
+                   for r in records.get(ch.UWB_RANGES, [])]
+        inputs += [(r.get("received_s", r["time_s"]), 1, ch.rover_state_from_record(r))
+                   for r in records.get(ch.ROVER_STATES, [])]
+        inputs.sort(key=lambda item: (item[0], item[1]))
+    arrival = [item[0] for item in inputs]
+    states = inputs
     ticks = [r for r in records.get(ch.CONTROL_TARGET, []) if r.get("pipeline") == spec.key]
     next_state = next_tick = 0
 
     def telemetry_until(time_s: float) -> None:
         nonlocal next_state
         while next_state < len(states) and arrival[next_state] <= time_s:
-            pipeline.add_state(ch.vehicle_state_from_record(states[next_state]))
+            _, kind, sample = states[next_state]
+            if kind == 0:
+                pipeline.add_state(sample)
+            else:
+                add_sensor(sample)
+            if take is not None:
+                out.relative += take()
             next_state += 1
 
     def control_until(time_s: float) -> None:
@@ -200,7 +224,7 @@ def _replay_pipeline(path: Path, records, pipeline: Pipeline, spec: PipelineSpec
             out.ticks.append(_tick_record(tick, pipeline.target(tick["time_s"])))
             next_tick += 1
 
-    for image in read_images(path, spec.camera):
+    for image in read_images(path, spec.camera) if spec.camera else ():
         live = flown.get(ch.time_key(image.time_s))
         if live is None:
             continue  # logged but never processed in flight (the step was not running)
@@ -219,6 +243,13 @@ def _replay_pipeline(path: Path, records, pipeline: Pipeline, spec: PipelineSpec
             estimate = pipeline.estimate(image.time_s, camera, detection)
             if estimate is not None:
                 out.estimates.append(estimate)
+            if take is not None:
+                out.relative += take()
+    if not spec.camera:  # a pipeline without a camera: its inputs and control ticks alone
+        for tick in ticks:
+            telemetry_until(tick["time_s"])
+            control_until(tick["time_s"] + 1e-9)
+    telemetry_until(math.inf)
     control_until(math.inf)
     return out
 

@@ -223,6 +223,22 @@ def ground_truth_record(gt) -> dict:
     }
 
 
+def uwb_ranges_from_record(r: dict):
+    from drivers.base import UwbRanges
+
+    return UwbRanges(float(r["time_s"]), tuple(int(i) for i in r["anchor_ids"]),
+                     tuple(num(v) for v in r["ranges_m"]))
+
+
+def rover_state_from_record(r: dict):
+    from drivers.base import RoverState
+
+    return RoverState(float(r["time_s"]), vec(r["position_ned_m"]), vec(r["velocity_ned_m_s"]),
+                      num(r.get("heading_rad")), num(r.get("position_std_m")),
+                      num(r.get("velocity_std_m_s")), num(r.get("heading_std_rad")),
+                      int(r.get("system_id") or 0))
+
+
 def num(value: Any) -> float:
     """A record's number (null → NaN)."""
     return math.nan if value is None else float(value)

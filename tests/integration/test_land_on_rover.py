@@ -12,6 +12,7 @@ from autopilot.cli import main
 from autopilot.flightlog import records as ch
 from autopilot.flightlog.log import read_log
 from autopilot.mission import load_mission
+from autopilot.replay import replay
 from autopilot.report.html import write_report
 from autopilot.run import fly
 from autopilot.trials import TrialsError, parse_criterion, parse_vary, run_trials
@@ -37,6 +38,12 @@ def test_lands_on_the_moving_deck_within_5_cm(tmp_path):
     assert {r["source"] for r in log[ch.RELATIVE_ESTIMATES]} >= {"uwb", "tag", "range", "rover"}
     page = write_report(tmp_path).read_text()
     assert "Landing on the rover" in page
+    # the replay drives the deck pipeline with the logged telemetry, UWB ranges, rover reports
+    # and (every second) down-camera frame, as they arrived
+    again = replay(tmp_path)
+    assert again["metrics"]["relative"]["ticks"] == relative["ticks"]
+    assert again["metrics"]["relative"]["rms_horizontal_error_m"] < \
+        2.0 * relative["rms_horizontal_error_m"]
 
 
 def test_uwb_only_lands_on_the_deck():
