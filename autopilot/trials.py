@@ -270,6 +270,11 @@ def run_trials(mission: str, trials: int, *, seed_start: int = 0,
         raise TrialsError("--trials must be at least 1")
     from autopilot.mission import load_mission
 
+    # a mission file travels as an absolute path (a worker's directory may differ)
+    if Path(mission).is_file():
+        mission = str(Path(mission).resolve())
+    if out_dir is not None:
+        out_dir = Path(out_dir).resolve()
     # nothing flies on an invalid mission: check it (and every varied value) here first
     jobs = []
     for i in range(trials):

@@ -248,14 +248,24 @@ class LandOnRover(Behavior):
                 return self._out(None, Status.FAILED,
                                  reason="still armed 3 s after the motors were cut")
             return self._out(None)
-        relative = np.asarray(s.velocity_ned_m_s) - (np.asarray(t.velocity_ned_m_s)
-                                                      if t is not None else 0.0)
-        if float(np.linalg.norm(relative)) > 0.1 and now - self._phase_since < 3.0:
+        # standing on something (the rangefinder reads the skids' depth, no vertical motion),
+        # and that something is the deck, not the ground beside it (the estimate's height
+        # above the deck: the ground is the deck's height lower)
+        r = s.distance_to_ground_m
+        resting = abs(float(s.velocity_ned_m_s[2])) < 0.1 and (
+            not math.isfinite(r) or r <= self.params.touchdown_height_m + 0.05)
+        if resting and t is not None and np.all(np.isfinite(t.position_ned_m)):
+            above = float(t.position_ned_m[2] - self._now_position(s, now)[2])
+            resting = -0.05 < above < 0.4
+        if not resting:
             self._stalled_since = None
+            if now - self._phase_since >= 3.0:
+                return self._out(None, Status.FAILED,
+                                 reason="the motors were cut but the vehicle did not come to "
+                                        "rest on the deck")
             return self._out(None)
         self._stalled_since = self._stalled_since if self._stalled_since is not None else now
-        if now - self._stalled_since >= min(self.params.settle_s, 0.5) or \
-                now - self._phase_since >= 3.0:
+        if now - self._stalled_since >= min(self.params.settle_s, 0.5):
             return self._out(None, Status.SUCCEEDED)
         return self._out(None)
 

@@ -40,7 +40,7 @@ def _percentile(values: Sequence[float], q: float) -> float | None:
     v = np.asarray(values, dtype=float)
     if not len(v):
         return None
-    p = float(np.percentile(v, q))
+    p = float(np.percentile(v, q, method="higher"))  # (misses are +inf: never averaged)
     return p if math.isfinite(p) else None
 
 

@@ -322,12 +322,14 @@ class RelativeFilter:
         f[B_, B_] = np.eye(3) * a
         f[PSI, W_] = dt
         # the rover's acceleration a: v' = −a (the drone's own is the input), r'' = −a
-        g = math.exp(-dt / s.accel_time_constant_s)
+        tau = s.accel_time_constant_s
+        g = math.exp(-dt / tau)
         f[A_, A_] = np.eye(2) * g
         c = math.exp(-dt / s.compass_bias_time_constant_s)
         f[BETA, BETA] = c
-        f[3:5, A_] = -np.eye(2) * dt
-        f[0:2, A_] = -np.eye(2) * 0.5 * dt * dt
+        # a decays over the interval: its integrals, exactly
+        f[3:5, A_] = -np.eye(2) * tau * (1.0 - g)
+        f[0:2, A_] = -np.eye(2) * tau * (dt - tau * (1.0 - g))
         q = np.zeros((N, N))
         for axis, sigma in ((0, s.accel_noise_m_s2), (1, s.accel_noise_m_s2),
                             (2, s.vertical_accel_noise_m_s2)):
@@ -385,6 +387,8 @@ class RelativeFilter:
             self._velocity = v
             return
         if not self._initialised:
+            if kind == "rover" and not np.all(np.isfinite(event.data[0])):
+                return  # a report without a position cannot start the estimate
             if kind in ("rover", "tag"):
                 (self._initialise_rover if kind == "rover" else self._initialise_tag)(event)
                 self._record(kind, event.time_s, (True, 0.0, 1), late)
@@ -393,6 +397,10 @@ class RelativeFilter:
         handler = {"uwb": self._fuse_uwb, "tag": self._fuse_tag, "range": self._fuse_range,
                    "rover": self._fuse_rover}[kind]
         result = handler(event)
+        if not np.all(np.isfinite(self._kf.x)) or not np.all(np.isfinite(self._kf.P)):
+            self._initialised = False  # never fly on a broken estimate: start again
+            self._record(kind, event.time_s, (False, math.inf, 0), late)
+            return
         if result is not None:
             self._record(kind, event.time_s, result, late)
 
@@ -420,8 +428,8 @@ class RelativeFilter:
         s = self.s
         x = np.zeros(N)
         x[R_] = rough
-        x[V_] = v_rel
-        x[PSI] = heading
+        x[V_] = np.where(np.isfinite(v_rel), v_rel, 0.0)
+        x[PSI] = heading if math.isfinite(heading) else 0.0
         p = np.zeros((N, N))
         bias = np.diag(np.square(np.array(s.rough_position_std_m)))
         white = np.eye(3) * s.rough_white_std_m ** 2
@@ -430,8 +438,11 @@ class RelativeFilter:
         p[B_, B_] = bias
         p[V_, V_] = np.eye(3) * max(self._rover_velocity_var(v_std),
                                     s.initial_velocity_std_m_s ** 2 * 0.25)
-        p[PSI, PSI] = self._rover_heading_var(h_std) + s.compass_bias_std_rad ** 2
-        p[PSI, BETA] = p[BETA, PSI] = -s.compass_bias_std_rad ** 2  # ψ = z − β
+        if math.isfinite(heading):
+            p[PSI, PSI] = self._rover_heading_var(h_std) + s.compass_bias_std_rad ** 2
+            p[PSI, BETA] = p[BETA, PSI] = -s.compass_bias_std_rad ** 2  # ψ = z − β
+        else:  # no compass in the report: the heading is unknown until something tells
+            p[PSI, PSI] = math.pi ** 2
         p[BETA, BETA] = s.compass_bias_std_rad ** 2
         p[W_, W_] = s.initial_yaw_rate_std_rad_s ** 2
         p[A_, A_] = np.eye(2) * 1.0
@@ -483,8 +494,6 @@ class RelativeFilter:
 
     def _fuse_uwb(self, event: _Event):
         ids, ranges, r_wb = event.data
-        psi = float(self._kf.x[PSI, 0])
-        rot, drot = _yaw(psi), _dyaw(psi)
         lever = r_wb @ self._tag
         used, worst = 0, 0.0
         var = self.s.uwb_range_noise_m ** 2
@@ -493,6 +502,8 @@ class RelativeFilter:
                 continue
             a = self._anchors[anchor_id]
             x = self._kf.x[:, 0]
+            psi = float(x[PSI])  # (each range's update moves it: linearise at the newest)
+            rot, drot = _yaw(psi), _dyaw(psi)
             d = x[R_] + lever - rot @ a
             dist = float(np.linalg.norm(d))
             if dist < 1e-3:
@@ -557,8 +568,9 @@ class RelativeFilter:
         rough, v_rel, heading, v_std, h_std, rover_velocity = event.data
         s = self.s
         worst = 0.0
+        ok_v = ok_p = False
         course = None
-        if rover_velocity is not None:
+        if rover_velocity is not None and np.all(np.isfinite(rover_velocity[:2])):
             speed = float(np.hypot(*rover_velocity[:2]))
             if speed >= s.course_min_speed_m_s:
                 var = self._rover_velocity_var(v_std) / (speed * speed) + s.course_noise_rad ** 2
@@ -567,9 +579,10 @@ class RelativeFilter:
         h = np.zeros((2, N))
         h[0, 3], h[1, 4] = 1.0, 1.0
         x = self._kf.x[:, 0]
-        ok_v, d2 = self._update(v_rel[:2], h, np.eye(2) * self._rover_velocity_var(v_std),
-                                x[3:5], s.gate_chi2)
-        worst = max(worst, d2)
+        if np.all(np.isfinite(v_rel[:2])):
+            ok_v, d2 = self._update(v_rel[:2], h, np.eye(2) * self._rover_velocity_var(v_std),
+                                    x[3:5], s.gate_chi2)
+            worst = max(worst, d2)
         if math.isfinite(heading):  # the compass: ψ + β
             hp = np.zeros((1, N))
             hp[0, PSI] = hp[0, BETA] = 1.0
@@ -595,9 +608,10 @@ class RelativeFilter:
         hr[:, R_] = np.eye(3)
         hr[:, B_] = np.eye(3)
         x = self._kf.x[:, 0]
-        ok_p, d2 = self._update(rough, hr, np.eye(3) * s.rough_white_std_m ** 2,
-                                x[R_] + x[B_], s.gate_chi2)
-        worst = max(worst, d2)
+        if np.all(np.isfinite(rough)):
+            ok_p, d2 = self._update(rough, hr, np.eye(3) * s.rough_white_std_m ** 2,
+                                    x[R_] + x[B_], s.gate_chi2)
+            worst = max(worst, d2)
         return ok_v or ok_p, worst, 1
 
 

@@ -226,7 +226,9 @@ class MavlinkFace:
                        loop.create_task(self._housekeeping(), name="mavlink-housekeeping")]
         if self._events is not None:
             self._tasks.append(loop.create_task(self._statustext(), name="mavlink-events"))
-        if "rover" in getattr(self.vehicle, "sensors", ()):
+        rover_link = getattr(getattr(self.vehicle, "config", None), "rover_link", None)
+        if "rover" in getattr(self.vehicle, "sensors", ()) and \
+                getattr(rover_link, "mavlink", False):
             self._tasks.append(loop.create_task(self._rover(), name="mavlink-rover"))
 
     async def close(self) -> None:

@@ -341,7 +341,9 @@ class PymavlinkDriver(MavlinkVehicle):
             self._on_rover(msg)  # the rover (never taken for the vehicle)
             return
         if kind == "HEARTBEAT":
-            if msg.autopilot == MAV_AUTOPILOT_INVALID or msg.type in (6, 18) or \
+            # (6 GCS, 18 onboard controller; 10-12 rover, boat, submarine: another vehicle on
+            # the link, never the one this autopilot flies)
+            if msg.autopilot == MAV_AUTOPILOT_INVALID or msg.type in (6, 10, 11, 12, 18) or \
                     (self._target is None and src[1] != AUTOPILOT_COMPONENT):
                 return  # a ground station, companion computer, gimbal…: not the autopilot
             if self._target is None:

@@ -152,6 +152,10 @@ class RoverLinkConfig(_Model):
     heading_noise_deg: NonNegative  # its compass, each reading
     heading_bias_deg: NonNegative  # its compass's slowly wandering bias
     system_id: Annotated[int, Field(ge=1, le=255)]
+    #: ``autopilot sim``: speak for the rover on the vehicle's MAVLink ports as ``system_id``
+    #: (off by default: a ground station that takes the first autopilot it hears could take
+    #: the rover)
+    mavlink: bool = False
 
 
 class PositionControlConfig(_Model):

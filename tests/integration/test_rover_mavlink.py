@@ -20,11 +20,20 @@ def test_the_rovers_reports_reach_the_driver_as_a_second_system():
     plan = load_mission("land_on_rover", ["scenario.rover.path=straight"])
     sim_cfg, objects = build_world(plan.mission.scenario, plan.config.sim, plan.config.rover)
     cams = {k: v.model_copy(update={"enabled": False}) for k, v in sim_cfg.cameras.items()}
-    sim_cfg = sim_cfg.model_copy(update={"cameras": cams})
+    link = sim_cfg.rover_link.model_copy(update={"mavlink": True})
+    sim_cfg = sim_cfg.model_copy(update={"cameras": cams, "rover_link": link})
 
     async def main():
         async with served(sim_cfg, scenario=objects) as (vehicle, face):
             assert face.rover_system_id == 2
+            # a driver not told about the rover: takes the vehicle, ignores the rover
+            plain = PymavlinkDriver(CLIENT_URL)
+            await plain.connect(timeout_s=10.0)
+            try:
+                assert plain._target[0] == face.system_id
+                assert plain.sensors == frozenset()
+            finally:
+                await plain.close()
             driver = PymavlinkDriver(CLIENT_URL)
             driver.rover_system_id = 2
             await driver.connect(timeout_s=10.0)

@@ -183,3 +183,16 @@ def test_the_step_validates_its_heights():
                                        "steps.1.land_on_rover.approach_height_m=3"])
     plan = load_mission("land_on_rover", ["steps.1.land_on_rover.use_marker=false"])
     assert plan.steps[1].params.use_marker is False
+
+
+def test_a_vehicle_that_ends_on_the_ground_beside_the_deck_has_not_landed_on_it():
+    b = _landing()
+    b.activate(BehaviorInputs(0.0, _state(0.0, (5.0, 0.0, -3.0))))
+    b.phase, b._phase_since = "touching down", 1.0
+    # disarmed, standing on something 0.095 m below the body, but 0.36 m below the deck's top:
+    # the ground beside the rover
+    for t in (1.5, 2.5, 4.1):
+        pos = _deck(t).position_ned_m + np.array([1.2, 0.0, 0.36])
+        out = _tick(b, t, pos, _deck(t), armed=False, range_m=0.095, vel=(0.0, 0.0, 0.0))
+    assert out.status is Status.FAILED
+    assert "did not come to rest on the deck" in out.reason
