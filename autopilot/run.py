@@ -99,13 +99,9 @@ def make_vehicle(plan: MissionPlan, *, realtime: bool = False, connect: str | No
         else:
             from drivers.mavlink.pymavlink_driver import PymavlinkDriver as Driver
         vehicle = Driver(url, signing=signing)
-        if link.rover_system_id is not None:
-            if driver == "pymavlink":
-                vehicle.rover_system_id = link.rover_system_id
-                vehicle.rover_latency_s = link.rover_latency_s
-            elif warn is not None:
-                warn("link.rover_system_id: the mavsdk driver does not read a second system; "
-                     "the rover's reports need --set driver=pymavlink")
+        if link.rover_system_id is not None:  # a rover on the same link (land_on_rover)
+            vehicle.rover_system_id = link.rover_system_id
+            vehicle.rover_latency_s = link.rover_latency_s
         for setup in setups:
             if warn is not None and setup.warning():
                 warn(setup.warning())

@@ -58,7 +58,9 @@ _MODES = {"HOLD": FlightMode.HOLD, "TAKEOFF": FlightMode.TAKEOFF, "LAND": Flight
           "ALTCTL": FlightMode.ALTCTL, "POSCTL": FlightMode.POSCTL,
           "STABILIZED": FlightMode.MANUAL, "ACRO": FlightMode.MANUAL}
 _LOST = {"NO_SYSTEM", "CONNECTION_ERROR"}
-_GCS_OR_COMPANION = (6, 18)  # MAV_TYPE_GCS, MAV_TYPE_ONBOARD_CONTROLLER
+#: never taken for the vehicle: MAV_TYPE_GCS, ONBOARD_CONTROLLER, and another vehicle on the
+#: link (GROUND_ROVER, SURFACE_BOAT, SUBMARINE: a rover landing's rover)
+_GCS_OR_COMPANION = (6, 18, 10, 11, 12)
 _MAV_AUTOPILOT_INVALID = 8
 #: MAV_COMP_ID_AUTOPILOT1: the flight controller (as MAVSDK, we take no other component for it:
 #: a gimbal or camera with its own heartbeat is not the vehicle)
@@ -255,6 +257,9 @@ class MavsdkDriver(MavlinkVehicle):
     def _from_vehicle(self, msg, address) -> None:
         src = (msg.get_srcSystem(), msg.get_srcComponent())
         kind = msg.get_type()
+        if self.rover_system_id is not None and src[0] == self.rover_system_id:
+            self._on_rover(msg)  # the rover: read here, never shown to MAVSDK
+            return
         if kind == "HEARTBEAT" and self._target is None and src[1] == _AUTOPILOT_COMPONENT and \
                 msg.autopilot != _MAV_AUTOPILOT_INVALID and msg.type not in _GCS_OR_COMPANION:
             self._target = src

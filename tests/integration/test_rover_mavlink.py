@@ -63,3 +63,30 @@ def test_the_rovers_reports_reach_the_driver_as_a_second_system():
                 await driver.close()
 
     asyncio.run(main())
+
+
+def test_the_mavsdk_driver_reads_the_rover_too_and_never_shows_it_to_mavsdk():
+    from drivers.mavlink.mavsdk_driver import MavsdkDriver
+
+    plan = load_mission("land_on_rover")
+    sim_cfg, objects = build_world(plan.mission.scenario, plan.config.sim, plan.config.rover)
+    cams = {k: v.model_copy(update={"enabled": False}) for k, v in sim_cfg.cameras.items()}
+    link = sim_cfg.rover_link.model_copy(update={"mavlink": True})
+    sim_cfg = sim_cfg.model_copy(update={"cameras": cams, "rover_link": link})
+
+    async def main():
+        async with served(sim_cfg, scenario=objects) as (_vehicle, face):
+            driver = MavsdkDriver(CLIENT_URL)
+            driver.rover_system_id = 2
+            await driver.connect(timeout_s=15.0)
+            try:
+                assert driver._target[0] == face.system_id
+                async with contextlib.aclosing(driver.rover_states()) as reports:
+                    async with asyncio.timeout(20.0):
+                        report = await anext(reports)
+                assert report.system_id == 2
+                assert math.isfinite(report.heading_rad)
+            finally:
+                await driver.close()
+
+    asyncio.run(main())
