@@ -221,6 +221,7 @@ def _replay_pipeline(path: Path, records, pipeline: Pipeline, spec: PipelineSpec
         nonlocal next_tick
         while next_tick < len(ticks) and ticks[next_tick]["time_s"] < time_s:
             tick = ticks[next_tick]
+            telemetry_until(tick["time_s"])  # what had arrived by then, and nothing later
             out.ticks.append(_tick_record(tick, pipeline.target(tick["time_s"])))
             next_tick += 1
 
@@ -231,12 +232,13 @@ def _replay_pipeline(path: Path, records, pipeline: Pipeline, spec: PipelineSpec
         frame = cv2.imdecode(np.frombuffer(image.jpeg, np.uint8), cv2.IMREAD_COLOR)
         if frame is None:
             raise ReplayError(f"{path}: the frame at {image.time_s:.3f} s is not a valid JPEG")
+        control_until(live.get("received_s", image.time_s))
         telemetry_until(live.get("received_s", image.time_s))
         hint = pipeline.hint(image.time_s, camera)
         detection = pipeline.detect(frame, camera, image.time_s, hint)
         detected_s = live.get("detected_s", image.time_s)
-        telemetry_until(detected_s)
         control_until(detected_s)
+        telemetry_until(detected_s)
         out.detections.append(pipeline.detection_record(live["seq"], image.time_s, camera.name,
                                                         detection, hint))
         if detection is not None:

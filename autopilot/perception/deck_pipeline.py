@@ -251,17 +251,16 @@ class DeckPipeline:
         """The deck's top centre at ``time_s`` in the drone's local frame (see the notes)."""
         source = self.seed004 if self.seed004 is not None else self.filter
         rel = source.estimate(time_s)
-        latest = self.history.latest
-        if rel is None or latest is None:
+        drone_at = self._drone_at(time_s)  # the drone's own estimate at that moment
+        if rel is None or drone_at is None:
             return None
-        dt = min(max(time_s - latest.time_s, 0.0), 0.3)
-        drone = np.asarray(latest.position_ned_m) + np.asarray(latest.velocity_ned_m_s) * dt
+        drone, velocity = drone_at
         last = max(rel.last_update_s[s] for s in ("uwb", "tag", "rover"))
         age = time_s - last
         updates = sum(source.updates.values())
         return TargetEstimate(
             time_s=time_s, position_ned_m=drone - rel.position_m,
-            velocity_ned_m_s=np.asarray(latest.velocity_ned_m_s) - rel.velocity_m_s,
+            velocity_ned_m_s=velocity - rel.velocity_m_s,
             covariance=rel.covariance, age_s=age, stale=age > STALE_AFTER_S,
             updates=updates, confirmed=updates >= 3, kind=KIND,
             heading_rad=rel.heading_rad, heading_rate_rad_s=rel.yaw_rate_rad_s,
