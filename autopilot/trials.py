@@ -140,16 +140,25 @@ def run_trial(mission: str, overrides: Sequence[str], seed: int,
               out_dir: str | None = None) -> dict:
     """One run (in a worker process): its status, metrics (flattened), and wall time."""
     os.environ.setdefault("MUJOCO_GL", "egl")
+    import shutil
+    import tempfile
+
     from autopilot.mission import load_mission
     from autopilot.run import fly
 
     started = time.perf_counter()
+    # a run always writes its log, as `autopilot run` does (the frame log's encoding takes
+    # its turn on the lockstep clock): the replay command then flies exactly this run
+    where = Path(out_dir) if out_dir else Path(tempfile.mkdtemp(prefix=f"trial{seed}-"))
     try:
         plan = load_mission(mission, list(overrides))
-        summary = asyncio.run(fly(plan, Path(out_dir) if out_dir else None))
+        summary = asyncio.run(fly(plan, where))
     except Exception as exc:  # a run that could not fly is a result too, not a crash
         return {"seed": seed, "status": "error", "reason": f"{type(exc).__name__}: {exc}",
                 "metrics": {}, "wall_s": time.perf_counter() - started, "sim_s": 0.0}
+    finally:
+        if not out_dir:
+            shutil.rmtree(where, ignore_errors=True)
     return {"seed": seed, "status": summary.get("status"), "reason": summary.get("reason", ""),
             "metrics": flatten({k: v for k, v in summary.get("metrics", {}).items()
                                 if k not in ("sim", "latency_ms")}),

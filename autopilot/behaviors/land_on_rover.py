@@ -398,23 +398,22 @@ class LandOnRover(Behavior):
                                         position=position, max_step_m=p.approach_speed_m_s / 1.8))
 
 
-class Seed004LandOnRover(Behavior):
+class Seed004LandOnRover(LandOnRover):
     """Seed 004's landing controller, as a baseline for ``autopilot bench landing``: velocity
     setpoints from a PID on the relative position error (the report's tracking gains; integral
     action scheduled in within ``near_m`` of the deck, where a moving deck would otherwise be
     trailed for ever), no feed-forward of the rover's motion. Approach at the current height;
     descend at ``final_speed_m_s`` while the horizontal error is within
     ``acceptance_radius_m`` × 2, hold the height otherwise; below the commit height keep
-    descending; at contact the motors are cut, as ours does (the comparison is of estimation
-    and control, not of the touchdown)."""
+    descending; at contact the motors are cut and the landing ends once resting on the deck,
+    as ours does (the comparison is of estimation and control, not of the touchdown)."""
 
     name = "land_on_rover"
 
     def __init__(self, params: LandOnRoverParams, settings: LandOnRoverSettings,
                  pid: tuple[float, float, float] = (1.5, 0.0, 0.1), near_m: float = 1.0,
                  near_ki: float = 0.5) -> None:
-        self.params = params
-        self.settings = settings
+        super().__init__(params, settings)
         self.kp, self.ki, self.kd = pid
         self.near_m, self.near_ki = near_m, near_ki
         self.phase = "approaching"
@@ -441,10 +440,7 @@ class Seed004LandOnRover(Behavior):
         out = lambda sp, status=Status.RUNNING, req=(), reason="": BehaviorOutput(  # noqa: E731
             status, setpoint=sp, requests=req, phase=self.phase, reason=reason)
         if self.phase == "touching down":
-            if not s.armed:
-                return out(None, Status.SUCCEEDED)
-            return out(None, Status.FAILED, reason="still armed") \
-                if now - self._phase_since > 3.0 else out(None)
+            return self._touching_down(inputs)
         if now - self._start > p.timeout_s:
             return out(None, Status.FAILED, reason=f"not landed within {p.timeout_s:g} s")
         if t is None or t.stale:
@@ -475,6 +471,7 @@ class Seed004LandOnRover(Behavior):
         if self.phase == "descending":
             if height <= p.touchdown_height_m or self._stalled(s, now, height):
                 self.phase, self._phase_since = "touching down", now
+                self._stalled_since = None
                 return out(None, req=(VehicleRequest(RequestKind.DISARM, force=True),))
             if distance < 2.0 * p.acceptance_radius_m or height < p.commit_height_m:
                 vz = p.final_speed_m_s

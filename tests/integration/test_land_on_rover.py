@@ -91,6 +91,9 @@ def test_trials_tabulate_seeds_and_list_the_failing_ones(tmp_path, capsys):
     command = strict.replay_command(strict.failing[0])
     assert f"scenario.seed={worst_seed}" in command
     assert "scenario.wind.gust_mps=" in command
+    # ... and flying those overrides again is the same run (lockstep, the log written alike)
+    again = asyncio.run(fly(load_mission(str(mission), strict.failing[0]["overrides"]), tmp_path))
+    assert again["metrics"]["goto"]["final_error_m"] == pytest.approx(errors[2], abs=1e-9)
     # the command line: a table, exit status 1 when a seed fails
     code = main(["trials", str(mission), "--trials", "1", "--json",
                  "--success", "goto.final_error_m<=0"])
