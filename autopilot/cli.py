@@ -284,8 +284,8 @@ def build_parser() -> argparse.ArgumentParser:
     landing = benches.add_parser(
         "landing", help="land_on_rover over many seeds: ours against seed 004's strategy "
         "(UWB until the tag is seen, then the tag alone, with a PID) and ours without the tag, "
-        "in the same trials: success rate, median and p95 touchdown error (about 1 min per "
-        "10 trials on 2 cores)")
+        "in the same trials: success rate, median and p95 touchdown error (about 15 min for "
+        "the default 20 trials of each on 2 cores)")
     landing.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     landing.add_argument("--trials", type=int, default=20, metavar="N",
                          help="seeds per strategy (default 20)")
