@@ -638,10 +638,14 @@ def _run(args: argparse.Namespace) -> int:
                        "centre_in_frame")),
             ("survey", ("rms_cross_track_m", "max_cross_track_m", "coverage", "photos",
                         "photos_planned")),
-            ("goto", ("rms_cross_track_m", "final_error_m"))):
+            ("goto", ("rms_cross_track_m", "final_error_m")),
+            ("landing", ("on_deck", "on_pad", "error_m", "relative_horizontal_speed_m_s",
+                         "touchdown_speed_m_s", "time_to_land_s", "retries")),
+            ("relative", ("rms_horizontal_error_m", "within_2sigma", "lost_share"))):
         values = summary["metrics"].get(group) or {}
         if values:
-            lines.append(f"{group}: " + ", ".join(f"{k}={_fmt(values.get(k))}" for k in keys))
+            lines.append(f"{group}: " + ", ".join(f"{k}={_fmt(values.get(k))}" for k in keys
+                                                   if k in values))
     if summary.get("photos") and summary["photos"].get("taken"):
         lines.append(f"photos: {summary['photos']['taken']} in {out / 'photos'} "
                      "(JPEG + EXIF GPS, photos.geojson)")
