@@ -58,6 +58,7 @@ from autopilot.behaviors.base import (
 from autopilot.estimation.target import TargetEstimate
 from drivers.base import Setpoint, VehicleState
 from drivers.geometry import quat_to_matrix
+from drivers.geometry import rot_z as _yaw_matrix
 
 Positive = Annotated[float, Field(gt=0)]
 
@@ -97,11 +98,6 @@ class LandOnRoverParams(Params):
 class LandOnRoverSettings:
     deck_size_m: tuple[float, float]
     deck_height_m: float
-
-
-def _yaw_matrix(psi: float) -> np.ndarray:
-    c, s = math.cos(psi), math.sin(psi)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
 class LandOnRover(Behavior):

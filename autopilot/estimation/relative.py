@@ -51,6 +51,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from filterpy.kalman import KalmanFilter
 
+from drivers.geometry import rot_z as _yaw
+
 N = 14
 R_, V_, B_, PSI, W_, A_, BETA = slice(0, 3), slice(3, 6), slice(6, 9), 9, 10, slice(11, 13), 13
 SOURCES = ("uwb", "tag", "range", "rover")
@@ -131,11 +133,6 @@ class _Event:
     seq: int
     kind: str  # "velocity" or a source
     data: tuple
-
-
-def _yaw(psi: float) -> np.ndarray:
-    c, s = math.cos(psi), math.sin(psi)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
 def _dyaw(psi: float) -> np.ndarray:

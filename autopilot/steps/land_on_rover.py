@@ -39,6 +39,7 @@ from autopilot.flightlog import records as ch
 from autopilot.perception.deck_pipeline import ROVER_BODY, deck_spec
 from autopilot.steps.follow_ball import camera_of
 from autopilot.steps.registry import StepContext, StepKind, register
+from drivers.geometry import yaw_from_quat as _yaw_of
 
 #: resting: within this of the height the vehicle finally rests at over the deck
 _REST_BAND_M = 0.015
@@ -74,11 +75,6 @@ def _check(params: LandOnRoverParams, config) -> None:
 def _interp(t: np.ndarray, times: np.ndarray, values: np.ndarray) -> np.ndarray:
     return np.stack([np.interp(t, times, values[:, i]) for i in range(values.shape[1])],
                     axis=1)
-
-
-def _yaw_of(q: Sequence[float]) -> float:
-    w, x, y, z = (float(v) for v in q)
-    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
 
 
 def landing_metrics(log: Mapping[str, Sequence[Mapping]], intervals: list[tuple[float, float]],

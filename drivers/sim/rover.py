@@ -38,6 +38,7 @@ import numpy as np
 
 from drivers.base import RoverState, UwbRanges
 from drivers.geometry import quat_from_euler, quat_to_matrix
+from drivers.geometry import rot_z as _yaw_matrix
 from drivers.sim.scenario import BodyTruth, ScenarioObject, WorldFrame
 from drivers.sim.sensors import GaussMarkov
 
@@ -46,11 +47,6 @@ ROVER_PATHS: tuple[str, ...] = ("straight", "circle", "random_turns", "stop_and_
 
 #: contact bits: rover geoms collide with what has bit 2 (the drone's skids), not the ground
 ROVER_CONTACT = 2
-
-
-def _yaw_matrix(yaw_rad: float) -> np.ndarray:
-    c, s = math.cos(yaw_rad), math.sin(yaw_rad)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
 class RoverPath:
