@@ -13,6 +13,9 @@ action servers), on FastAPI, served by uvicorn inside the autopilot's own event 
 ``POST /api/goals/{id}/cancel``         → the vehicle hovers (status 3)
 ``POST /api/abort``                     → status 12 and the safe stop (hold, land, disarm)
 ``GET /docs``                           the OpenAPI page: every goal kind and its parameters
+``GET /``, ``GET /video/{camera}.mjpg``  with ``--console``: the operator console's page, its
+``WS /api/console``                     live video, and its socket (values, events, keys);
+``GET /api/console/stats``              see :mod:`autopilot.console`
 ======================================  =====================================================
 
 Security: it binds 127.0.0.1 unless told otherwise; on any other address every request needs
@@ -20,9 +23,12 @@ Security: it binds 127.0.0.1 unless told otherwise; on any other address every r
 the server refuses to start). On loopback, requests must be addressed to a loopback name (a web
 page elsewhere whose name resolves to 127.0.0.1 — DNS rebinding — is refused). Requests that
 change anything carry JSON or no body, and no foreign ``Origin`` (a web page elsewhere cannot
-drive the vehicle); no CORS headers are ever sent. Handlers only read the runtime's state and
-queue requests (a goal's validation, which may read a file, runs in a thread): they never wait
-on the vehicle, so the control loop is never held up by a client.
+drive the vehicle), and no browser fetch made for another origin's page (``Sec-Fetch-Site``);
+no CORS headers are ever sent. The console's page cannot send a header from the browser's
+address bar: off loopback, ``/?token=TOKEN`` once sets the token as an HttpOnly, SameSite=Strict
+cookie, which the page's video, socket and goal requests then carry. Handlers only read the
+runtime's state and queue requests (a goal's validation, which may read a file, runs in a
+thread): they never wait on the vehicle, so the control loop is never held up by a client.
 """
 
 from __future__ import annotations
@@ -44,6 +50,7 @@ from autopilot.goals import GoalError, goal_kinds, validate_goal
 from autopilot.steps import STEP_KINDS
 
 if TYPE_CHECKING:
+    from autopilot.console import Console
     from autopilot.runtime import Runtime
 
 log = logging.getLogger(__name__)
@@ -118,20 +125,33 @@ def _hostname(host_port: str) -> str:
     return host.rsplit(":", 1)[0] if host.count(":") == 1 else host
 
 
+TOKEN_COOKIE = "autopilot_token"
+
+
 def build_app(runtime: Runtime, token: str | None, stream_rate_hz: float = 5.0,
-              loopback_only: bool = True) -> FastAPI:
+              loopback_only: bool = True, console: Console | None = None) -> FastAPI:
     app = FastAPI(title="autopilot goal API", version="1",
                   description="Goals (mission steps) at runtime, status, cancel and abort. "
-                  "Local by default; any other address needs a bearer token.")
+                  "Local by default; any other address needs a bearer token."
+                  + (" The operator console: the page at /, live video at "
+                     "/video/{camera}.mjpg, values, events and keys on the WebSocket "
+                     "/api/console (see autopilot.console)." if console is not None else ""))
 
     def refuse(status: int, error: str) -> JSONResponse:
         return JSONResponse({"error": error}, status_code=status)
 
-    def authorised(headers) -> bool:
+    def token_is(given: str | None) -> bool:
+        return given is not None and hmac.compare_digest(given.encode(), token.encode())
+
+    def authorised(headers, cookies=None) -> bool:
+        """The bearer token in the header, or (the console's page, which a browser loads
+        without headers of its own) in the same-site cookie ``/?token=`` set."""
         if token is None:
             return True
         given = headers.get("authorization", "")
-        return hmac.compare_digest(given.encode(), f"Bearer {token}".encode())
+        if hmac.compare_digest(given.encode(), f"Bearer {token}".encode()):
+            return True
+        return token_is((cookies or {}).get(TOKEN_COOKIE))
 
     def host_ok(headers) -> bool:
         """On loopback, only requests addressed to a loopback name (a page on another site
@@ -153,8 +173,14 @@ def build_app(runtime: Runtime, token: str | None, stream_rate_hz: float = 5.0,
     async def guard(request: Request, call_next):
         if not host_ok(request.headers):
             return refuse(403, "requests must be addressed to 127.0.0.1 or localhost")
-        if not authorised(request.headers):
-            return refuse(401, "a bearer token is needed (Authorization: Bearer TOKEN)")
+        if request.headers.get("sec-fetch-site") in ("cross-site", "same-site"):
+            # a browser fetching for a page of another origin (an <img> of the video, …)
+            return refuse(403, "cross-origin request refused")
+        if not authorised(request.headers, request.cookies) and not (
+                console is not None and request.url.path == "/"
+                and token_is(request.query_params.get("token"))):
+            return refuse(401, "a bearer token is needed (Authorization: Bearer TOKEN; the "
+                          "console: open /?token=TOKEN once)")
         if request.method not in ("GET", "HEAD", "OPTIONS"):
             if not origin_ok(request.headers):
                 return refuse(403, f"cross-origin request from {request.headers['origin']} "
@@ -171,15 +197,20 @@ def build_app(runtime: Runtime, token: str | None, stream_rate_hz: float = 5.0,
     async def status() -> dict:
         return runtime.api_status()
 
-    @app.websocket("/api/status/stream")
-    async def stream(ws: WebSocket) -> None:
+    async def socket_allowed(ws: WebSocket) -> bool:
         if not host_ok(ws.headers) or not origin_ok(ws.headers):
             await ws.close(code=4403)
-            return
-        if not authorised(ws.headers):
+            return False
+        if not authorised(ws.headers, ws.cookies):
             await ws.close(code=4401)
-            return
+            return False
         await ws.accept()
+        return True
+
+    @app.websocket("/api/status/stream")
+    async def stream(ws: WebSocket) -> None:
+        if not await socket_allowed(ws):
+            return
         period = 1.0 / stream_rate_hz
         try:
             while True:
@@ -233,6 +264,9 @@ def build_app(runtime: Runtime, token: str | None, stream_rate_hz: float = 5.0,
         runtime.abort("abort requested through the goal API")
         return {"status": "aborting"}
 
+    if console is not None:
+        _console_routes(app, runtime, console, socket_allowed, token_is)
+
     def openapi() -> dict:
         if app.openapi_schema is None:
             schema = get_openapi(title=app.title, version=app.version,
@@ -246,6 +280,58 @@ def build_app(runtime: Runtime, token: str | None, stream_rate_hz: float = 5.0,
 
     app.openapi = openapi
     return app
+
+
+def _console_routes(app: FastAPI, runtime: Runtime, console: Console, socket_allowed,
+                    token_is) -> None:
+    from fastapi.responses import HTMLResponse, RedirectResponse, StreamingResponse
+
+    from autopilot.console import BOUNDARY, page_html
+
+    page = page_html()
+    security = {"Cache-Control": "no-store", "X-Frame-Options": "DENY",
+                "Content-Security-Policy": "default-src 'self'; img-src 'self' blob: data:; "
+                "style-src 'self' 'unsafe-inline'; script-src 'self' 'unsafe-inline'; "
+                "connect-src 'self'; frame-ancestors 'none'",
+                "Referrer-Policy": "no-referrer"}
+
+    @app.get("/", summary="The operator console (a page: video, values, map, keys, goals)",
+             response_class=HTMLResponse)
+    async def console_page(request: Request):
+        given = request.query_params.get("token")
+        if given is not None and token_is(given):
+            # once: the token becomes a same-site cookie (the page, its video and its socket
+            # then carry it), and leaves the address bar
+            answer = RedirectResponse("/", status_code=303)
+            answer.set_cookie(TOKEN_COOKIE, given, httponly=True, samesite="strict",
+                              secure=request.url.scheme == "https")
+            return answer
+        return HTMLResponse(page, headers=security)
+
+    @app.get("/video/{camera}.mjpg", summary="Live MJPEG of a camera with the overlays",
+             response_class=StreamingResponse,
+             responses={200: {"content": {f"multipart/x-mixed-replace; boundary={BOUNDARY}":
+                                          {}}},
+                        404: {"description": "no such camera"}})
+    async def video(camera: str, fps: float | None = None, overlay: int = 1):
+        if camera not in runtime.vehicle.cameras:
+            return JSONResponse({"error": f"no camera {camera!r}; cameras: "
+                                 f"{sorted(runtime.vehicle.cameras)}"}, status_code=404)
+        if fps is not None and not 0 < fps <= 60:
+            return JSONResponse({"error": "fps: expected 0 < fps <= 60"}, status_code=422)
+        feed = console.feed(camera, overlay=bool(overlay))
+        return StreamingResponse(feed.stream(fps),
+                                 media_type=f"multipart/x-mixed-replace; boundary={BOUNDARY}",
+                                 headers={"Cache-Control": "no-store"})
+
+    @app.get("/api/console/stats", summary="What the console's video costs")
+    async def console_stats() -> dict:
+        return console.stats()
+
+    @app.websocket("/api/console")
+    async def console_socket(ws: WebSocket) -> None:
+        if await socket_allowed(ws):
+            await console.serve_socket(ws)
 
 
 def _quiet_server_class():
@@ -267,7 +353,7 @@ class ApiServer:
     name = "goal-api"
 
     def __init__(self, runtime: Runtime, host: str, port: int, token: str | None,
-                 stream_rate_hz: float = 5.0) -> None:
+                 stream_rate_hz: float = 5.0, console: bool = False) -> None:
         import uvicorn
 
         if not is_loopback(host) and not token:
@@ -276,8 +362,11 @@ class ApiServer:
                 f"(--api-token-file FILE, or the {TOKEN_ENV} environment variable)")
         self.host, self.port = host, port
         check_listen(host, port)
+        from autopilot.console import Console
+
+        self.console = Console(runtime) if console else None
         self.app = build_app(runtime, token if token else None, stream_rate_hz,
-                             loopback_only=is_loopback(host))
+                             loopback_only=is_loopback(host), console=self.console)
         config = uvicorn.Config(self.app, host=host, port=port, log_level="warning",
                                 lifespan="off", ws="websockets-sansio", access_log=False)
         self._server = _quiet_server_class()(config)
@@ -317,6 +406,8 @@ class ApiServer:
         if graceful and self.started.is_set() and linger_s > 0:
             await asyncio.sleep(linger_s)
         self._server.should_exit = True
+        if self.console is not None:
+            self.console.close()
         task = self._serve_task
         if task is not None and not task.done() and not graceful:
             task.cancel()

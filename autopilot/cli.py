@@ -51,6 +51,10 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--api", metavar="HOST:PORT",
                      help="serve the goal API (HTTP + WebSocket; docs at /docs) on HOST:PORT, "
                      "e.g. 127.0.0.1:8080; an address other than loopback needs a token")
+    run.add_argument("--console", metavar="HOST:PORT",
+                     help="serve the operator console (a page: live video with overlays, "
+                     "values, map, keyboard flying, goals) and the goal API on HOST:PORT, e.g. "
+                     "127.0.0.1:8090; an address other than loopback needs a token")
     run.add_argument("--api-token-file", metavar="FILE",
                      help="the goal API's bearer token (else the AUTOPILOT_API_TOKEN "
                      "environment variable); required off loopback")
@@ -576,6 +580,16 @@ def _run(args: argparse.Namespace) -> int:
     from autopilot.run import default_out_dir, fly
 
     overrides = [*args.overrides, *([f"driver={args.driver}"] if args.driver else [])]
+    if args.console:
+        try:
+            console = parse_address(args.console)
+            same = not args.api or parse_address(args.api) == console
+        except ApiSetupError as exc:
+            raise InputError(str(exc).replace("--api", "--console")) from None
+        if not same:
+            raise InputError(f"--api {args.api} and --console {args.console}: the console is "
+                             "served with the goal API, on one address (give one of them)")
+        args.api = args.console
     plan = load_mission(args.mission, overrides, args.config)
     token = None
     waits = [i for i, step in enumerate(plan.steps)
@@ -614,7 +628,7 @@ def _run(args: argparse.Namespace) -> int:
                               calibration=args.calibration,
                               record_video=args.record_video,
                               signing_key=Path(args.signing_key) if args.signing_key else None,
-                              api=args.api, api_token=token))
+                              api=args.api, api_token=token, console=bool(args.console)))
     if sys.stderr.isatty():
         sys.stderr.write("\n")
     follow = summary["metrics"].get("follow") or {}

@@ -386,6 +386,52 @@ class RoverConfig(_Model):
         return self
 
 
+KeyName = Annotated[str, Field(min_length=1, max_length=12)]
+
+
+class ConsoleKeysConfig(_Model):
+    """The console's keys (``KeyboardEvent.key`` names, case-insensitive): seed 000's."""
+
+    forward: KeyName = "w"
+    back: KeyName = "s"
+    left: KeyName = "a"
+    right: KeyName = "d"
+    yaw_left: KeyName = "q"
+    yaw_right: KeyName = "e"
+    up: KeyName = "]"
+    down: KeyName = "["
+    takeoff: KeyName = "t"
+    land: KeyName = "l"
+    emergency: KeyName = "r"
+    autopilot: KeyName = "y"
+    follow_mode: KeyName = "f"
+
+    @model_validator(mode="after")
+    def _distinct(self) -> ConsoleKeysConfig:
+        seen: dict[str, str] = {}
+        for name, key in self.model_dump().items():
+            if key.lower() in seen:
+                raise ValueError(f"{name} and {seen[key.lower()]} both use the key {key!r}")
+            seen[key.lower()] = name
+        return self
+
+
+class ConsoleConfig(_Model):
+    """The operator console (``--console HOST:PORT``): video, values, keyboard flying."""
+
+    video_fps: Annotated[float, Field(gt=0, le=30)] = 15.0  # MJPEG rate (a viewer may ask less)
+    jpeg_quality: Annotated[int, Field(ge=20, le=95)] = 70
+    state_rate_hz: Annotated[float, Field(gt=0, le=20)] = 5.0  # values, map and status pushed
+    keys: ConsoleKeysConfig = ConsoleKeysConfig()
+    speed_m_s: Annotated[float, Field(gt=0, le=10)] = 1.5  # W/S/A/D
+    vertical_speed_m_s: Annotated[float, Field(gt=0, le=5)] = 0.8  # ] and [
+    yaw_rate_deg_s: Annotated[float, Field(gt=0, le=180)] = 45.0  # Q/E
+    #: wall clock: a held key the browser stops renewing counts as released after this long
+    key_timeout_s: Annotated[float, Field(ge=0.1, le=2)] = 0.5
+    min_altitude_m: Annotated[float, Field(ge=0.3, le=20)] = 0.8  # [ stops here (L lands)
+    takeoff_altitude_m: Annotated[float, Field(ge=1, le=50)] = 3.0  # T
+
+
 class AppConfig(_Model):
     """The whole of ``config.yaml``."""
 
@@ -399,6 +445,7 @@ class AppConfig(_Model):
     photos: PhotoConfig
     rover: RoverConfig
     log: LogConfig
+    console: ConsoleConfig = ConsoleConfig()
     sim: SimConfig  # its cameras are vehicle.cameras
 
     @model_validator(mode="before")

@@ -512,6 +512,19 @@ class MissionExecutor:
         return self._resume(inputs, [self._event("goal_cancelled",
                                                  f"goal {self.step_name} {reason}")])
 
+    def reactivate(self, inputs: BehaviorInputs, why: str) -> MissionOutput:
+        """Start the running step afresh from where the vehicle is (a step waiting for goals,
+        after manual flight: it hovers here, not back where it began)."""
+        if self._current is None:
+            return self._output(None, (), [], "")
+        return self._handle(self._current.activate(inputs), inputs,
+                            [self._event("resumed", f"{self._current.name} resumed: {why}")])
+
+    @property
+    def current(self) -> Behavior | None:
+        """The behaviour running now (a step's, a goal's or the fallback's)."""
+        return self._current
+
     @property
     def step_name(self) -> str:
         return self._current.name if self._current is not None else ""

@@ -44,17 +44,20 @@ from typing import Protocol
 
 import numpy as np
 
+from autopilot import values
 from autopilot.behaviors.base import (
     BehaviorInputs,
     Percept,
     RequestKind,
     VehicleRequest,
 )
+from autopilot.behaviors.manual import ACTIONS, HeldKeys, ManualFlight, ManualSettings
 from autopilot.estimation.target import TargetEstimate
 from autopilot.flightlog import records as ch
 from autopilot.flightlog.log import FlightLog
 from autopilot.framelog import FrameLogger
 from autopilot.goals import Goal, GoalError, GoalManager
+from autopilot.hooks import Event, EventHub
 from autopilot.mission import (
     MissionEvent,
     MissionExecutor,
@@ -111,6 +114,7 @@ class ProcessedFrame:
     seq: int
     frame: Frame
     detections: tuple[object | None, ...]
+    hints: tuple[object | None, ...] = ()  # where each pipeline was told to look
 
 
 @dataclass(slots=True)
@@ -210,6 +214,30 @@ class Runtime:
             rate = frames.sim_rate_hz if cfg.driver == "sim" else frames.vehicle_rate_hz
             log_cameras = {spec.camera: rate for spec in specs.values() if spec.camera}
         self.frame_logger = FrameLogger(vehicle, log, log_cameras, cfg.log.frames.jpeg_quality)
+        #: what happens, for hooks and the console (:mod:`autopilot.hooks`)
+        self.events = EventHub()
+        #: the ``name::value`` board (:mod:`autopilot.values`)
+        self.values = values.board()
+        # the console: keyboard flying, the frames it draws over, the plan it maps
+        c = cfg.console
+        self._manual_settings = ManualSettings(
+            c.speed_m_s, c.vertical_speed_m_s, math.radians(c.yaw_rate_deg_s), c.key_timeout_s,
+            c.min_altitude_m, takeoff_altitude_m=c.takeoff_altitude_m)
+        self.held_keys = HeldKeys(c.key_timeout_s)
+        #: the keys' clock: the wall clock (a person's keys, whatever the simulated clock
+        #: does); tests that drive the keys on the lockstep clock swap it
+        self.key_clock: Callable[[], float] = time.monotonic
+        self._manual = ManualFlight(self._manual_settings)
+        self.manual = False  # the console's Y: the mission waits, the keys fly
+        self._manual_enter = False
+        self._manual_from_air = False
+        self._manual_offboard_asked_s = -math.inf
+        self._console_actions: list[str] = []
+        self._resumed = False
+        self._emergency: str | None = None
+        self.latest_processed: dict[str, ProcessedFrame] = {}
+        self.intent_record: dict | None = None  # the newest setpoint, as the log keeps it
+        self.planned_path: tuple[int, list[list[float]]] = (0, [])
 
     # ------------------------------------------------------------------------------------
     # Control from outside
@@ -234,10 +262,12 @@ class Runtime:
             self.log.write(ch.CAMERA_INFO, self.clock.now(), ch.camera_info_record(camera))
         behaviors = [build_behavior(step, self.config, cameras) for step in self.plan.steps]
         self._executor = MissionExecutor(behaviors)
+        self.values.clear()
         try:
             async with asyncio.TaskGroup() as tasks:
                 self._group = tasks
                 background = [
+                    *self.events.tasks(tasks),
                     tasks.create_task(self._telemetry(), name="telemetry"),
                     tasks.create_task(self._streaming(), name="setpoint-streaming"),
                     *self._sensor_tasks(tasks),
@@ -270,6 +300,7 @@ class Runtime:
             await self._last_resort()
         finally:
             self._group = None
+            self.events.close()
             self._detect_pool.shutdown(wait=True, cancel_futures=True)
             self.photos.close()
             self.frame_logger.close()
@@ -300,15 +331,32 @@ class Runtime:
                 out = executor.abort(f"telemetry stale: {stale}", inputs)
                 await self._apply(out, None)
                 continue
+            self._publish_values(inputs)
+            if self._emergency is not None:
+                await self._emergency_stop(inputs)
+                return
             if self._stop_requested.is_set() and deadline is None:
+                self.manual = False  # the safe stop flies, whatever the console asked
                 deadline = self.clock.now() + self.config.runtime.shutdown_timeout_s
                 out = executor.abort(self._stop_reason or "stop requested", inputs)
             elif deadline is not None and self.clock.now() > deadline:
                 self.status, self.reason = "failed", "safe stop did not finish in time"
                 await self._last_resort()
                 return
+            elif (console := self._console_tick(inputs)) is not None:
+                out = console
+            elif self._resumed and executor.accepts_goals:
+                self._resumed = False  # a step waiting for goals waits here, not back there
+                out = executor.reactivate(inputs, "back from manual flight")
             else:
                 out = self._serve_goals(inputs) or executor.update(inputs)
+                if self._resumed and out.setpoint is not None and inputs.state.in_air and \
+                        inputs.state.mode is not FlightMode.OFFBOARD:
+                    # back from manual flight out of OFFBOARD (after T, or a landing
+                    # stopped): the step's setpoints need OFFBOARD again
+                    out = dataclasses.replace(out, requests=(
+                        VehicleRequest(RequestKind.START_OFFBOARD), *out.requests))
+                self._resumed = False
             await self._apply(out, source)
         self.status = executor.status
         self.reason = executor.failure
@@ -329,6 +377,12 @@ class Runtime:
         self.step_progress = out.progress
         if out.plan is not None:
             self.log.write(ch.PLANNED_PATH, now, ch.clean(dict(out.plan, time_s=now)))
+            points = out.plan.get("points_ned_m")
+            points = [] if points is None else list(points)
+            every = max(1, len(points) // 400)
+            self.planned_path = (self.planned_path[0] + 1,
+                                 [[round(float(p[0]), 2), round(float(p[1]), 2)]
+                                  for p in points[::every]])
         self.photos.want(out.photo_soon)
         for index, photo in out.photos:
             self.photos.request(index, self._steps[index].name, photo)
@@ -445,6 +499,7 @@ class Runtime:
                "time_s": self.clock.now(),
                "progress": self.step_progress if math.isfinite(self.step_progress) else None,
                "waiting_for_goals": self.waiting_for_goals,
+               "control": "manual" if self.manual else "autopilot",
                "photos": self.photos.taken}
         if s is None:
             return {**out, "position_ned_m": None, "velocity_ned_m_s": None, "yaw_deg": None,
@@ -477,6 +532,26 @@ class Runtime:
         self.request_stop(reason)
 
     async def _perform(self, request: VehicleRequest) -> None:
+        if request.kind is RequestKind.LANDING_TARGET:
+            await self._command(request)
+            return
+        name = request.kind.value
+        data = {"altitude_m": request.altitude_m} if request.altitude_m is not None else {}
+        if request.kind is RequestKind.DISARM:
+            data["force"] = request.force
+        self.events.emit(Event("command", name, self.clock.now(), f"command {name}", "before",
+                               data))
+        try:
+            await self._command(request)
+        except Exception as exc:
+            self.events.emit(Event("command", name, self.clock.now(),
+                                   f"command {name} failed: {exc}", "after",
+                                   {**data, "result": f"{type(exc).__name__}: {exc}"}))
+            raise
+        self.events.emit(Event("command", name, self.clock.now(), f"command {name} done",
+                               "after", {**data, "result": "ok"}))
+
+    async def _command(self, request: VehicleRequest) -> None:
         v = self.vehicle
         if request.kind is RequestKind.LANDING_TARGET:  # a stream, as setpoints: not an event
             await v.send_landing_target(LandingTarget(request.time_s, request.position_ned_m))
@@ -509,6 +584,237 @@ class Runtime:
         """The orderly stop failed or the link broke: one bounded attempt to land."""
         with contextlib.suppress(Exception):
             await self.clock.wait_for(self.vehicle.land(), 2.0)
+
+    # ------------------------------------------------------------------------------------
+    # The console (autopilot/console): values, events, keyboard flying
+    # ------------------------------------------------------------------------------------
+
+    def spawn(self, coro, name: str) -> asyncio.Task:
+        """Run ``coro`` as a task of the run (cancelled when it ends; an exception in it
+        fails the run, so a service catches its own)."""
+        if self._group is None:
+            raise RuntimeError("the run has not started (or has ended)")
+        task = self._group.create_task(coro, name=name)
+        self._late_tasks.append(task)
+        return task
+
+    def overlay_records(self, camera: str, frame: Frame) -> dict:
+        """What the console draws over ``frame``, as the flight log's records (for
+        :func:`autopilot.report.video.overlay_from`): the detections in it when a step's
+        pipelines processed it, the pose now, the target estimate, the newest setpoint."""
+        now = self.clock.now()
+        det = est = None
+        processed = self.latest_processed.get(camera)
+        for key in self._active:
+            track = self.tracks[key]
+            if track.pipeline.camera != camera:
+                continue
+            if processed is not None and processed.seq == frame.seq:
+                i = self._lanes[camera].keys.index(key) if camera in self._lanes and \
+                    key in self._lanes[camera].keys else -1
+                if i >= 0:
+                    det = track.pipeline.detection_record(
+                        frame.seq, frame.time_s, camera, processed.detections[i],
+                        processed.hints[i] if i < len(processed.hints) else None)
+            target = track.pipeline.target(now)
+            if target is not None:
+                cov = np.asarray(target.covariance)
+                est = {"time_s": now, "position_ned_m": target.position_ned_m.tolist(),
+                       "velocity_ned_m_s": target.velocity_ned_m_s.tolist(),
+                       "position_cov_m2": cov[:3, :3].reshape(-1).tolist(),
+                       "velocity_std_m_s": np.sqrt(np.clip(np.diag(cov)[3:6], 0, None)
+                                                   ).tolist()}
+            break
+        s = self._state
+        pose = None
+        if s is not None:
+            pose = (np.asarray(s.position_ned_m, dtype=float), np.asarray(s.attitude_q),
+                    {"mode": s.mode.value, "battery_remaining":
+                     s.battery.remaining_fraction if math.isfinite(
+                         s.battery.remaining_fraction) else None})
+        return {"det": det, "pose": pose, "est": est, "setpoint": self.intent_record,
+                "step": self._step, "phase": self._phase}
+
+    def map_snapshot(self) -> dict:
+        """The console's mini-map: where the vehicle is and faces, home, the target."""
+        s = self._state
+        out: dict = {"position_ne_m": None, "yaw_deg": None, "target_ne_m": None,
+                     "target_sigma_m": None, "path_id": self.planned_path[0]}
+        home = self.vehicle.home_ned_m
+        out["home_ne_m"] = [float(home[0]), float(home[1])] if home is not None else None
+        if s is None:
+            return out
+        out["position_ne_m"] = [round(float(s.position_ned_m[0]), 3),
+                                round(float(s.position_ned_m[1]), 3)]
+        out["yaw_deg"] = round(math.degrees(s.yaw_rad), 1)
+        if self._active:
+            target = self.tracks[self._active[0]].pipeline.target(self.clock.now())
+            if target is not None and not target.stale:
+                out["target_ne_m"] = [round(float(target.position_ned_m[0]), 3),
+                                      round(float(target.position_ned_m[1]), 3)]
+                out["target_sigma_m"] = round(float(np.sqrt(np.mean(
+                    np.diag(target.covariance)[:2]))), 3)
+        return out
+
+    def console_keys(self, held: Sequence[str]) -> None:
+        """The movement keys the console holds now (renewed by the page while held)."""
+        self.held_keys.report(held, self.key_clock())
+
+    def console_action(self, action: str, confirm: bool = False) -> str:
+        """One of the console's keys (:data:`~autopilot.behaviors.manual.ACTIONS`); acted on
+        at the next control tick. Returns what will happen (ValueError: refused now)."""
+        if action not in ACTIONS:
+            raise ValueError(f"unknown action {action!r}; actions: {list(ACTIONS)}")
+        if self._executor is None or self._stop_requested.is_set() or self._emergency:
+            raise ValueError("the mission is stopping: the console's keys are off")
+        if action == "emergency":
+            if not confirm:
+                raise ValueError("the emergency stop needs confirming (it stops the motors, in "
+                                 "the air too)")
+            self._emergency = "emergency stop from the console"
+            self._estimated.put(math.nan)  # act now, not at the next tick
+            return "emergency stop: the motors stop"
+        if action == "takeoff" and not self.manual:
+            raise ValueError("T acts in manual flight only (Y hands the vehicle to the keys)")
+        self._console_actions.append(action)
+        self._estimated.put(math.nan)
+        return {"autopilot": "manual flight" if not self.manual else "autopilot on",
+                "follow_mode": "switching follow mode", "takeoff": "taking off",
+                "land": "landing"}[action]
+
+    def _console_tick(self, inputs: BehaviorInputs) -> MissionOutput | None:
+        """The console's actions since the last tick, and the keys' setpoint while manual;
+        None: the mission runs this tick as usual."""
+        actions, self._console_actions = self._console_actions, []
+        s, now = inputs.state, inputs.now_s
+        requests: list[VehicleRequest] = []
+        for action in actions:
+            if action == "autopilot":
+                self._toggle_manual(s, now)
+            elif action == "follow_mode":
+                behavior = self._executor.current
+                toggle = getattr(behavior, "toggle_follow_mode", None)
+                if toggle is None:
+                    self._console_event(now, "follow_mode", "F: the running step does not follow "
+                                        "a target")
+                else:
+                    mode = toggle()
+                    self._console_event(now, "follow_mode", f"following by {mode}",
+                                        {"mode": mode})
+            elif action == "land":
+                if not self.manual:
+                    self.abort("land requested from the console")
+                    return None
+                self._console_event(now, "land", "landing (manual)")
+                requests.append(VehicleRequest(RequestKind.LAND))
+            elif action == "takeoff":
+                if s.in_air or s.armed:
+                    self._console_event(now, "takeoff", "T: already armed or flying")
+                else:
+                    self._console_event(now, "takeoff", "taking off (manual)")
+                    self._manual.reset()
+                    requests += [VehicleRequest(RequestKind.ARM), VehicleRequest(
+                        RequestKind.TAKEOFF, altitude_m=self._manual_settings.takeoff_altitude_m)]
+        if not self.manual or self._stop_requested.is_set():
+            return None
+        held = self.held_keys.held(self.key_clock())
+        setpoint = self._manual.setpoint(held, s, now) if s.in_air else None
+        if s.in_air and s.armed and s.mode is not FlightMode.OFFBOARD and not requests and \
+                (held or self._manual_enter) and now - self._manual_offboard_asked_s > 2.0:
+            self._manual_offboard_asked_s = now
+            requests.append(VehicleRequest(RequestKind.START_OFFBOARD))
+        self._manual_enter = False
+        return MissionOutput(setpoint, tuple(requests), (), False, "running", self._step,
+                             "manual", self._step_index)
+
+    def _toggle_manual(self, s: VehicleState, now: float) -> None:
+        if not self.manual:
+            self.manual = True
+            self._manual.reset()
+            self.held_keys.release_all()
+            self._manual_enter = s.in_air
+            self._manual_from_air = s.in_air
+            self._console_event(now, "autopilot", "autopilot off: manual flight (keys)",
+                                {"autopilot": False})
+            return
+        self.held_keys.release_all()
+        if not s.in_air and self._manual_from_air:
+            self.manual = False
+            self._console_event(now, "autopilot", "autopilot on: landed under manual "
+                                "control, so the mission ends", {"autopilot": True})
+            self.request_stop("landed under manual control")
+            return
+        self.manual = False
+        self._resumed = True
+        self._console_event(now, "autopilot", f"autopilot on: {self._step or 'mission'} "
+                            "resumes", {"autopilot": True})
+
+    def _console_event(self, now: float, name: str, text: str, data=None) -> None:
+        self._event(now, "console", text)
+        self.events.emit(Event("console", name, now, text, data=data or {}))
+
+    async def _emergency_stop(self, inputs: BehaviorInputs) -> None:
+        """R, confirmed: the motors stop now — flight termination in the air (a forced
+        disarm, PX4's kill), a disarm on the ground — and the run ends."""
+        in_air = inputs.state.in_air
+        reason = self._emergency or "emergency stop"
+        self._intent = None
+        self.manual = False
+        self._console_event(inputs.now_s, "emergency", f"{reason}: "
+                            + ("flight termination (motors off in the air)" if in_air
+                               else "disarm on the ground"))
+        try:
+            await self.clock.wait_for(self._perform(VehicleRequest(RequestKind.DISARM,
+                                                                   force=in_air)), 2.0)
+        except (VehicleError, TimeoutError) as exc:
+            self._event(self.clock.now(), "runtime", f"emergency disarm failed: {exc}")
+            await self._last_resort()
+        self.status, self.reason = "aborted", reason
+
+    def _state_events(self, previous: VehicleState | None, state: VehicleState) -> None:
+        if previous is None:
+            return
+        t = state.time_s
+        if state.mode is not previous.mode:
+            self.events.emit(Event("mode", state.mode.value, t, f"mode {state.mode.value}",
+                                   data={"previous": previous.mode.value}))
+        if state.armed != previous.armed:
+            name = "armed" if state.armed else "disarmed"
+            self.events.emit(Event("armed", name, t, name))
+        if state.failsafe and not previous.failsafe:
+            self.events.emit(Event("mission", "failsafe", t, "vehicle failsafe",
+                                   data={"failsafe": state.failsafe}))
+
+    def _publish_values(self, inputs: BehaviorInputs) -> None:
+        """The runtime's own values on the board (status, mode, battery, height, target)."""
+        pub = self.values.publish
+        s, code = inputs.state, self.status_tracker.code
+        pub("status", f"{int(code)} {code.label}")
+        pub("control", "manual" if self.manual else "autopilot")
+        pub("step", f"{self._step or '-'} / {self._phase or '-'}")
+        pub("mode", s.mode.value)
+        pub("armed", s.armed)
+        pub("alt_m", round(s.altitude_m, 2), "m")
+        pub("speed_m_s", round(float(np.linalg.norm(s.velocity_ned_m_s)), 2), "m/s")
+        battery = s.battery.remaining_fraction
+        pub("battery", f"{100 * battery:.0f} %" if math.isfinite(battery) else "?")
+        if math.isfinite(self.step_progress):
+            pub("progress", f"{100 * self.step_progress:.0f} %")
+        if self._active:
+            track = self.tracks[self._active[0]]
+            det = track.detection
+            score = getattr(det, "score", None)
+            pub("det.score", round(float(score), 3) if score is not None else
+                ("found" if det is not None else "none"))
+            if track.frames:
+                pub("det.rate", f"{100.0 * track.detections / track.frames:.0f} %")
+            est = inputs.target
+            if est is not None:
+                pub("target.range_m", round(float(np.linalg.norm(
+                    est.position_ned_m - s.position_ned_m)), 2), "m")
+                pub("target.sigma_m", round(float(np.sqrt(np.mean(
+                    np.diag(est.covariance)[:3]))), 3), "m")
+                pub("target.age_s", round(float(est.age_s), 2), "s")
 
     # ------------------------------------------------------------------------------------
     # Perception lanes: what the active step uses
@@ -550,8 +856,10 @@ class Runtime:
                 results = await self.clock.run_blocking(
                     _detect_all, pipelines, frame, hints, executor=self._detect_pool,
                     budget_s=budget)
-                lane.frames.put(ProcessedFrame(frame.time_s, frame.seq, frame,
-                                               tuple(det for det, _ in results)))
+                processed = ProcessedFrame(frame.time_s, frame.seq, frame,
+                                           tuple(det for det, _ in results), tuple(hints))
+                lane.frames.put(processed)
+                self.latest_processed[lane.camera] = processed
                 detected = self.clock.now()
                 for pipeline, hint, (det, elapsed_ms) in zip(pipelines, hints, results,
                                                              strict=True):
@@ -587,7 +895,8 @@ class Runtime:
     async def _telemetry(self) -> None:
         async with contextlib.aclosing(self.vehicle.telemetry(buffer=64)) as samples:
             async for state in samples:
-                self._state = state
+                previous, self._state = self._state, state
+                self._state_events(previous, state)
                 self.photos.add_state(state)
                 for pipeline in self.pipelines.values():
                     pipeline.add_state(state)
@@ -647,13 +956,15 @@ class Runtime:
             sp = intent.setpoint
             latency = None if intent.source_frame_time_s is None \
                 else (now - intent.source_frame_time_s) * 1e3
-            self.log.write(ch.SETPOINTS, now, {
+            record = {
                 "time_s": now, "source_frame_time_s": intent.source_frame_time_s,
                 "latency_ms": latency, "frame": sp.frame.value,
                 "position_ned_m": sp.position_ned_m, "velocity_m_s": sp.velocity_m_s,
                 "acceleration_m_s2": sp.acceleration_m_s2, "yaw_rad": sp.yaw_rad,
                 "yaw_rate_rad_s": sp.yaw_rate_rad_s,
-                "expires_s": intent.expires_s, "step": intent.step, "phase": intent.phase})
+                "expires_s": intent.expires_s, "step": intent.step, "phase": intent.phase}
+            self.intent_record = record
+            self.log.write(ch.SETPOINTS, now, record)
 
     def _simulator_tasks(self, tasks: asyncio.TaskGroup) -> list[asyncio.Task]:
         """Ground truth and status messages, when the vehicle is the simulator (for the log
@@ -676,6 +987,7 @@ class Runtime:
         async with contextlib.aclosing(stream(buffer=64)) as messages:
             async for time_s, text in messages:
                 self.log.write(ch.VEHICLE_STATUS, time_s, {"time_s": time_s, "text": text})
+                self.events.emit(Event("status_text", "status_text", time_s, text))
 
     # ------------------------------------------------------------------------------------
     # Helpers
@@ -746,6 +1058,16 @@ class Runtime:
 
     def _mission_event(self, time_s: float, event: MissionEvent) -> None:
         self._write_event(time_s, event.kind, event.step_index, event.step, event.text)
+        data = {"step_index": event.step_index, "step": event.step, "event": event.kind}
+        if event.kind == "step_started":
+            self.events.emit(Event("step_started", event.step, time_s, event.text, data=data))
+        elif event.kind in ("step_succeeded", "step_failed", "goal_cancelled"):
+            outcome = {"step_succeeded": "succeeded", "step_failed": "failed"}.get(
+                event.kind, "cancelled")
+            self.events.emit(Event("step_ended", event.step, time_s, event.text,
+                                   data={**data, "outcome": outcome}))
+        else:
+            self.events.emit(Event("mission", event.kind, time_s, event.text, data=data))
         tracker = self.status_tracker
         self._goal_event(event)
         codes = step_kind(self._steps[event.step_index].name).status \
@@ -776,6 +1098,8 @@ class Runtime:
         self.log.write(ch.MISSION_STATUS, now, {
             "time_s": now, "code": int(code), "status": code.label, "step": step,
             "step_index": index, "goal_id": goal.id if goal is not None else None})
+        self.events.emit(Event("status", code.label, now, f"status {int(code)} {code.label}",
+                               data={"code": int(code), "step": step}))
 
     def _event(self, time_s: float, kind: str, text: str) -> None:
         """The runtime's own events (``request``, ``runtime``), in the running step."""

@@ -11,12 +11,14 @@ the setpoint, acting on raw detections as the original did.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
 
+from autopilot import values
 from autopilot.behaviors.base import (
     Behavior,
     BehaviorInputs,
@@ -70,7 +72,22 @@ class FollowTarget(Behavior):
                               requests=(VehicleRequest(RequestKind.START_OFFBOARD),),
                               phase="starting")
 
+    @property
+    def follow_mode(self) -> str:
+        return self.follow.mode
+
+    def toggle_follow_mode(self) -> str:
+        """Switch between lateral and yaw following while flying (seed 001's
+        ``/toggle_lateral``); returns the new mode. (``face`` switches to lateral.)"""
+        mode = "yaw" if self.follow.mode == "lateral" else "lateral"
+        self.follow = dataclasses.replace(self.follow, mode=mode)
+        self.controller.settings = self.follow
+        if hasattr(self._rule, "lateral"):
+            self._rule.lateral = mode == "lateral"
+        return mode
+
     def update(self, inputs: BehaviorInputs) -> BehaviorOutput:
+        values.publish("follow.mode", self.follow.mode)
         if inputs.now_s - self._start >= self.params.duration_s:
             self._hold_here(inputs)
             return BehaviorOutput(Status.SUCCEEDED, setpoint=self._hold_setpoint(inputs.now_s),
@@ -86,6 +103,11 @@ class FollowTarget(Behavior):
                 self._tracking = True
             self._lost_since = None
             setpoint = self.controller.update(inputs.now_s, inputs.state, target)
+            rel = target.position_ned_m - np.asarray(inputs.state.position_ned_m)
+            values.publish("follow.lost_s", 0.0, "s")
+            values.publish("follow.range_m", round(float(np.linalg.norm(rel)), 3), "m")
+            values.publish("follow.bearing_deg", round(math.degrees(wrap_pi(
+                math.atan2(rel[1], rel[0]) - inputs.state.yaw_rad)), 1), "deg")
             return BehaviorOutput(Status.RUNNING, setpoint=setpoint, phase="tracking")
         return self._lost(inputs)
 
@@ -99,6 +121,7 @@ class FollowTarget(Behavior):
             self._search_aimed = False
             self._hold_here(inputs)
         lost_for = now - self._lost_since
+        values.publish("follow.lost_s", round(lost_for, 2), "s")
         if lost_for > self.lost.timeout_s:
             return BehaviorOutput(Status.FAILED, setpoint=self._hold_setpoint(now),
                                   phase="searching", reason=f"target lost for {lost_for:.1f} s")

@@ -29,6 +29,7 @@ import numpy as np
 from pydantic import Field, model_validator
 from shapely.geometry import Polygon
 
+from autopilot import values
 from autopilot.behaviors.base import (
     Behavior,
     BehaviorInputs,
@@ -374,6 +375,9 @@ class FollowTrajectory(Behavior):
         setpoint = self._setpoint(now, rate, ref) if st.tracker != "seed004" \
             else self._pid_setpoint(now, dt, pos, ref)
         soon = self._photo_soon(progress, inputs)
+        values.publish("path.lag_m", round(lag, 2), "m")
+        values.publish("path.off_reference_m",
+                       round(float(np.linalg.norm(pos - ref.position_ned_m)), 2), "m")
         if self._tau >= traj.duration_s:
             if self._ended_s is None:
                 self._ended_s = now

@@ -146,63 +146,71 @@ class OverlaySource:
         return pa + f * (pb - pa), slerp(ch.vec(a["attitude_q"]), ch.vec(b["attitude_q"]), f), b
 
     def overlay_at(self, time_s: float) -> Overlay:
-        det = self.detections.get(ch.time_key(time_s))
-        detection = hint = outline = None
-        panel: list[tuple[str, str]] = []
-        if det is not None:
-            if det["detected"]:
-                detection = (det["u_px"], det["v_px"], det["radius_px"])
-                corners = det.get("corners_px")
-                if corners:
-                    outline = tuple((float(corners[i]), float(corners[i + 1]))
-                                    for i in range(0, len(corners) - 1, 2))
-                what = f"id {det['marker_id']}" if det.get("marker_id") is not None else \
-                    f"score {det['score']:.2f}" if det.get("score") is not None else "found"
-                panel += [("det", f"{what}, r {det['radius_px']:.1f} px"),
-                          ("range", f"{det['range_m']:.2f} m (detection)")]
-            else:
-                panel.append(("det", "none"))
-            if det.get("hint_u_px") is not None:
-                hint = (det["hint_u_px"], det["hint_v_px"], det["hint_radius_px"])
         setpoint = self.setpoints.at_or_before(time_s)
         step = setpoint["step"] if setpoint else ""
         phase = setpoint["phase"] if setpoint else ""
         event = self.events.at_or_before(time_s)
         if event is not None and (not setpoint or event["time_s"] > setpoint["time_s"]):
             step = event.get("step") or step
-        pose = self.pose_at(time_s)
-        estimate_px = ellipse = None
-        if pose is not None:
-            p_v, q_v, state = pose
-            panel += [("mode", state["mode"]), ("alt", f"{-p_v[2]:.2f} m")]
-            if state.get("battery_remaining") is not None:
-                panel.append(("battery", f"{100 * state['battery_remaining']:.0f} %"))
-            est = self.estimates.at_or_before(time_s)
-            if est is not None and time_s - est["time_s"] <= ESTIMATE_MAX_AGE_S \
-                    and self.camera is not None:
-                dt = time_s - est["time_s"]
-                p_t = ch.vec(est["position_ned_m"]) + dt * ch.vec(est["velocity_ned_m_s"])
-                cov = ch.vec(est["position_cov_m2"]).reshape(3, 3) if est.get("position_cov_m2") \
-                    else np.diag(ch.vec(est["position_std_m"]) ** 2)
-                cov = cov + np.diag(ch.vec(est["velocity_std_m_s"]) ** 2) * dt * dt
-                projected = project_with_covariance(self.camera, p_v, q_v, p_t, cov)
-                if projected is not None:
-                    estimate_px, ellipse = projected
-                panel += [("target", f"{np.linalg.norm(p_t - p_v):.2f} m (estimate)"),
-                          ("sigma", f"{np.sqrt(np.trace(cov) / 3) * 100:.1f} cm")]
-        command = yaw_rate = None
-        if setpoint is not None and time_s - setpoint["time_s"] <= 1.0:
-            vel = ch.vec(setpoint["velocity_m_s"])
-            if np.all(np.isfinite(vel)):
-                if setpoint["frame"] != "body_frd" and pose is not None:
-                    vel = quat_to_matrix(pose[1]).T @ vel  # NED → body FRD
-                command = (float(vel[0]), float(vel[1]), float(vel[2]))
-            rate = ch.num(setpoint.get("yaw_rate_rad_s"))
-            yaw_rate = math.degrees(rate) if math.isfinite(rate) else None
-            if setpoint.get("latency_ms") is not None:
-                panel.append(("latency", f"{setpoint['latency_ms']:.0f} ms"))
-        return Overlay(time_s, step, phase, detection, outline, hint, estimate_px, ellipse,
-                       command, yaw_rate, tuple(panel))
+        return overlay_from(time_s, self.camera, self.detections.get(ch.time_key(time_s)),
+                            self.pose_at(time_s), self.estimates.at_or_before(time_s),
+                            setpoint, step, phase)
+
+
+def overlay_from(time_s: float, camera: Mapping | None, det: Mapping | None,
+                 pose: tuple[np.ndarray, np.ndarray, Mapping] | None, est: Mapping | None,
+                 setpoint: Mapping | None, step: str, phase: str) -> Overlay:
+    """What to draw over a frame captured at ``time_s``, from records as the flight log keeps
+    them (the detection in it, the vehicle's pose then, the newest target estimate and
+    setpoint): the same for a logged flight's video and for the console's live one."""
+    detection = hint = outline = None
+    panel: list[tuple[str, str]] = []
+    if det is not None:
+        if det["detected"]:
+            detection = (det["u_px"], det["v_px"], det["radius_px"])
+            corners = det.get("corners_px")
+            if corners:
+                outline = tuple((float(corners[i]), float(corners[i + 1]))
+                                for i in range(0, len(corners) - 1, 2))
+            what = f"id {det['marker_id']}" if det.get("marker_id") is not None else \
+                f"score {det['score']:.2f}" if det.get("score") is not None else "found"
+            panel += [("det", f"{what}, r {det['radius_px']:.1f} px"),
+                      ("range", f"{det['range_m']:.2f} m (detection)")]
+        else:
+            panel.append(("det", "none"))
+        if det.get("hint_u_px") is not None:
+            hint = (det["hint_u_px"], det["hint_v_px"], det["hint_radius_px"])
+    estimate_px = ellipse = None
+    if pose is not None:
+        p_v, q_v, state = pose
+        panel += [("mode", state["mode"]), ("alt", f"{-p_v[2]:.2f} m")]
+        if state.get("battery_remaining") is not None:
+            panel.append(("battery", f"{100 * state['battery_remaining']:.0f} %"))
+        if est is not None and time_s - est["time_s"] <= ESTIMATE_MAX_AGE_S \
+                and camera is not None:
+            dt = time_s - est["time_s"]
+            p_t = ch.vec(est["position_ned_m"]) + dt * ch.vec(est["velocity_ned_m_s"])
+            cov = ch.vec(est["position_cov_m2"]).reshape(3, 3) if est.get("position_cov_m2") \
+                else np.diag(ch.vec(est["position_std_m"]) ** 2)
+            cov = cov + np.diag(ch.vec(est["velocity_std_m_s"]) ** 2) * dt * dt
+            projected = project_with_covariance(camera, p_v, q_v, p_t, cov)
+            if projected is not None:
+                estimate_px, ellipse = projected
+            panel += [("target", f"{np.linalg.norm(p_t - p_v):.2f} m (estimate)"),
+                      ("sigma", f"{np.sqrt(np.trace(cov) / 3) * 100:.1f} cm")]
+    command = yaw_rate = None
+    if setpoint is not None and time_s - setpoint["time_s"] <= 1.0:
+        vel = ch.vec(setpoint["velocity_m_s"])
+        if np.all(np.isfinite(vel)):
+            if setpoint["frame"] != "body_frd" and pose is not None:
+                vel = quat_to_matrix(pose[1]).T @ vel  # NED → body FRD
+            command = (float(vel[0]), float(vel[1]), float(vel[2]))
+        rate = ch.num(setpoint.get("yaw_rate_rad_s"))
+        yaw_rate = math.degrees(rate) if math.isfinite(rate) else None
+        if setpoint.get("latency_ms") is not None:
+            panel.append(("latency", f"{setpoint['latency_ms']:.0f} ms"))
+    return Overlay(time_s, step, phase, detection, outline, hint, estimate_px, ellipse,
+                   command, yaw_rate, tuple(panel))
 
 
 # ----------------------------------------------------------------------------------------------
