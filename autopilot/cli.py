@@ -102,6 +102,13 @@ def build_parser() -> argparse.ArgumentParser:
                      "udp://127.0.0.1:5600, down udp://127.0.0.1:5601); a bare URL is the "
                      "front camera's, and only the cameras given stream")
     sim.add_argument("--no-video", action="store_true", help="do not stream any camera")
+    sim.add_argument("--console", metavar="HOST:PORT",
+                     help="serve a console that watches the simulated vehicle (its cameras, "
+                     "telemetry, track and messages) on HOST:PORT, e.g. 127.0.0.1:8091; an "
+                     "address other than loopback needs a token")
+    sim.add_argument("--api-token-file", metavar="FILE",
+                     help="the console's bearer token (else AUTOPILOT_API_TOKEN); required "
+                     "off loopback")
     sim.add_argument("--out", metavar="DIR", help="record ground truth into DIR/truth.mcap "
                      "(for 'autopilot score') and photos into DIR/photos/")
     sim.add_argument("--bind", default="127.0.0.1", metavar="HOST",
@@ -745,10 +752,32 @@ def _sim(args: argparse.Namespace) -> int:
 
     videos = None if args.no_video else (
         parse_camera_options(args.video, "--video", "front") if args.video else FROM_CONFIG)
+    token = None
+    if args.console:
+        from autopilot.api import (
+            ApiSetupError,
+            check_listen,
+            is_loopback,
+            parse_address,
+            read_token,
+        )
+
+        try:
+            host, port = parse_address(args.console)
+            token = read_token(args.api_token_file)
+            if not is_loopback(host) and not token:
+                raise ApiSetupError(f"--console {args.console} is reachable from other "
+                                    "machines: give a token (--api-token-file FILE, or "
+                                    "AUTOPILOT_API_TOKEN)")
+            check_listen(host, port)
+        except ApiSetupError as exc:
+            raise InputError(str(exc)) from None
     asyncio.run(serve(config, scenario, instance=args.instance, videos=videos,
                       out_dir=Path(args.out) if args.out else None,
                       log=lambda line: print(line, file=sys.stderr, flush=True),
-                      host=args.bind, signing=signing))
+                      host=args.bind, signing=signing, console=args.console,
+                      console_token=token,
+                      title=plan.mission.name if args.mission else "empty world"))
     return EXIT_OK
 
 

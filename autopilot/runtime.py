@@ -656,6 +656,15 @@ class Runtime:
                     np.diag(target.covariance)[:2]))), 3)
         return out
 
+    def console_about(self) -> dict:
+        """What the console's page is told first: the mission, the camera to show, whether
+        it may fly and send goals, and the clock."""
+        camera = next((p.camera for p in self.pipelines.values() if p.camera),
+                      next(iter(self.vehicle.cameras), ""))
+        return {"mission": self.plan.mission.name, "camera": camera, "can_fly": True,
+                "takes_goals": self.goals is not None,
+                "clock": "lockstep" if self.clock.lockstep else "realtime"}
+
     def console_keys(self, held: Sequence[str]) -> None:
         """The movement keys the console holds now (renewed by the page while held)."""
         self.held_keys.report(held, self.key_clock())

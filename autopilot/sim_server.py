@@ -60,11 +60,15 @@ async def serve(config: AppConfig, scenario: Scenario | None, *, instance: int =
                 videos: Mapping[str, str] | None = FROM_CONFIG, out_dir: Path | None = None,
                 log: Callable[[str], None] = print,
                 stop: asyncio.Event | None = None, host: str = "127.0.0.1",
-                signing: Signing | None = None) -> None:
+                signing: Signing | None = None, console: str | None = None,
+                console_token: str | None = None,
+                on_console: Callable[[object], None] | None = None,
+                title: str = "empty world") -> None:
     """Serve the simulated vehicle until ``stop`` is set (or SIGINT / SIGTERM when None),
     streaming each camera in ``videos`` (camera → URL; by default every enabled camera to its
     :func:`video_destinations`; None: no video). The MAVLink ports listen on ``host``; with
-    ``signing``, only signed MAVLink is accepted."""
+    ``signing``, only signed MAVLink is accepted. ``console`` (``HOST:PORT``) serves a console
+    that watches the vehicle (:mod:`autopilot.console.sim`; ``on_console`` gets its server)."""
     if videos is FROM_CONFIG:
         videos = video_destinations(config)
     sim_config, objects = build_world(scenario, with_instance_id(config.sim, instance),
@@ -106,6 +110,21 @@ async def serve(config: AppConfig, scenario: Scenario | None, *, instance: int =
             calibration = out_dir / f"{name}_calibration.yaml"
             write_calibration(calibration, info.intrinsics)
             log(f"{name} camera calibration → {calibration}")
+    console_source = console_server = console_task = None
+    if console is not None:
+        from autopilot.api import ApiServer, parse_address
+        from autopilot.console.sim import SimConsoleSource
+
+        console_source = SimConsoleSource(vehicle, config, title)
+        console_host, console_port = parse_address(console)
+        console_server = ApiServer(console_source, console_host, console_port, console_token,
+                                   console=True)
+        console_source.start()
+        console_task = loop.create_task(console_server.run(), name="sim-console")
+        await console_server.started.wait()
+        if on_console is not None:
+            on_console(console_server)
+        log(f"console on http://{console_host}:{console_server.bound_port}/ (watching)")
     try:
         await face.start()
         for name, url in (videos or {}).items():
@@ -133,7 +152,11 @@ async def serve(config: AppConfig, scenario: Scenario | None, *, instance: int =
         if handle_signals:
             for sig in (signal.SIGINT, signal.SIGTERM):
                 loop.remove_signal_handler(sig)
-        await cancel_all(t for t in (*streams, events, truth, photos) if t is not None)
+        if console_server is not None:
+            await console_server.stop(graceful=False)
+            await console_source.close()
+        await cancel_all(t for t in (*streams, events, truth, photos, console_task)
+                         if t is not None)
         await face.close()
         await vehicle.close()
         if truth_log is not None:

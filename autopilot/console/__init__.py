@@ -218,21 +218,12 @@ class Console:
         from autopilot.goals import goal_kinds
 
         keys = self.settings.keys.model_dump()
+        about = self.runtime.console_about()
         return {"type": "hello", "keys": keys, "axes": list(AXES), "actions": list(ACTIONS),
                 "cameras": list(self.runtime.vehicle.cameras),
-                "camera": self._default_camera(), "video_fps": self.settings.video_fps,
+                "video_fps": self.settings.video_fps,
                 "key_renew_s": min(0.1, self.settings.key_timeout_s / 3),
-                "goal_kinds": list(goal_kinds()),
-                "takes_goals": self.runtime.goals is not None,
-                "mission": self.runtime.plan.mission.name,
-                "clock": "lockstep" if self.runtime.clock.lockstep else "realtime"}
-
-    def _default_camera(self) -> str:
-        for key in self.runtime.pipelines:
-            camera = self.runtime.pipelines[key].camera
-            if camera:
-                return camera
-        return next(iter(self.runtime.vehicle.cameras), "front")
+                "goal_kinds": list(goal_kinds()) if about["takes_goals"] else [], **about}
 
     def state(self) -> dict:
         rt = self.runtime

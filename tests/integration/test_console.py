@@ -248,3 +248,95 @@ def test_console_and_api_addresses_must_agree(tmp_path, capsys):
     assert main(["run", "--mission", "standby", "--console", "127.0.0.1:99999",
                  "--out", str(tmp_path)]) != 0
     assert "--console '127.0.0.1:99999': port 99999 is out of range" in capsys.readouterr().err
+
+
+def test_console_manual_land_takeoff_and_emergency_stop(tmp_path):
+    """L in manual flight lands (and PX4 disarms); T takes off again; Y gives the vehicle back
+    (the standby hovers there). R needs confirming; then the motors stop — in the air, a
+    flight termination — and the run ends aborted."""
+    plan = load_mission("standby")
+
+    def script(c: Client, server):
+        c.wait(lambda s: s["status_code"] == 3 and s["waiting_for_goals"], 60, "standby")
+        sock = Socket(server.bound_port)
+        sock.send({"type": "action", "action": "autopilot"})
+        assert sock.next("answer")["ok"]
+        c.wait(lambda s: s["control"] == "manual", 30, "manual")
+        sock.send({"type": "action", "action": "land"})
+        assert sock.next("answer")["ok"]
+        c.wait(lambda s: not s["armed"] and not s["in_air"], 90, "landed and disarmed")
+        sock.send({"type": "action", "action": "takeoff"})
+        assert sock.next("answer")["ok"]
+        c.wait(lambda s: s["in_air"] and -s["position_ned_m"][2] > 2.5, 90, "airborne again")
+        sock.send({"type": "action", "action": "autopilot"})
+        assert sock.next("answer")["ok"]
+        c.wait(lambda s: s["control"] == "autopilot" and s["waiting_for_goals"], 30, "standby")
+        sock.send({"type": "action", "action": "emergency", "confirm": True})
+        assert "motors stop" in sock.next("answer")["text"]
+        try:
+            while True:
+                sock.next("event", 30)
+        except Exception:  # the run ended: the socket closed
+            pass
+        return sock.events
+
+    summary, events, hooked, iterated = _fly_console(plan, tmp_path / "run", script)
+    assert summary["status"] == "aborted"
+    assert "emergency stop from the console" in summary["reason"]
+    hooks = [e["hook"] for e in events]
+    assert "before_cmd_land" in hooks
+    assert "before_cmd_takeoff" in hooks
+    assert "before_cmd_disarm" in hooks
+    kill = next(e for e in events if e["hook"] == "before_cmd_disarm")
+    assert kill["data"]["force"] is True  # in the air: flight termination
+    assert "on_disarmed" in hooks
+
+
+def test_simulator_console_watches_the_vehicle():
+    """``autopilot sim --console``: the simulated vehicle's own console shows its camera,
+    telemetry values and messages, and does not fly it (the MAVLink client does)."""
+    from autopilot.config import load_config
+    from autopilot.sim_server import serve
+
+    servers = []
+
+    async def main():
+        stop = asyncio.Event()
+        sim = asyncio.ensure_future(serve(
+            load_config(), None, instance=9, videos=None, log=lambda line: None, stop=stop,
+            console="127.0.0.1:0", on_console=servers.append, title="test world"))
+        try:
+            while not servers:
+                if sim.done():
+                    sim.result()
+                await asyncio.sleep(0.05)
+            return await asyncio.to_thread(script, Client(servers[0].bound_port))
+        finally:
+            stop.set()
+            await asyncio.wait_for(sim, 60)
+
+    def script(c: Client):
+        sock = Socket(int(c.base.rsplit(":", 1)[1]))
+        assert sock.hello["can_fly"] is False
+        assert sock.hello["goal_kinds"] == []
+        assert "test world" in sock.hello["mission"]
+        state = c.wait(lambda s: s["mode"] is not None, 30, "telemetry")
+        assert state["control"] == "external"
+        values = sock.next("state")["values"]
+        for _ in range(20):
+            if "alt_m" in values:
+                break
+            values = sock.next("state")["values"]
+        assert "alt_m" in values
+        assert "mode" in values
+        sock.send({"type": "action", "action": "autopilot"})
+        answer = sock.next("answer")
+        assert not answer["ok"]
+        assert "watches" in answer["text"]
+        code, body = c.call("POST", "/api/goals", {"land": {}})
+        assert code == 409
+        with urllib.request.urlopen(c.base + "/video/front.mjpg", timeout=20) as resp:
+            assert resp.read(7) == b"--frame"
+        return True
+
+    assert asyncio.run(main())
