@@ -312,6 +312,22 @@ def build_parser() -> argparse.ArgumentParser:
     landing.add_argument("--set", dest="overrides", action="append", default=[],
                          metavar="KEY=VALUE", help="override a mission or configuration key")
 
+    console_bench = benches.add_parser(
+        "console", help="what the operator console costs the autopilot (a real-time "
+        "follow_ball, windows with and without a viewer of the front camera's MJPEG) and the "
+        "video's capture-to-viewer latency (about 1 min)")
+    console_bench.add_argument("--json", action="store_true",
+                               help="print one JSON object on stdout")
+    console_bench.add_argument("--window", type=float, default=8.0, metavar="S",
+                               help="each window's wall time (default 8)")
+    console_bench.add_argument("--windows", type=int, default=2, metavar="N",
+                               help="windows each way, alternating (default 2)")
+    console_bench.add_argument("--fps", type=float, default=15.0,
+                               help="the viewer's frame rate (default 15)")
+    console_bench.add_argument("--browser", action="store_true",
+                               help="the viewer is the console's page in headless chromium "
+                               "(Playwright): latency to the frame drawn")
+
     api_bench = benches.add_parser(
         "api", help="what the goal API costs the process: a real-time standby hover with the "
         "API idle, then busy (status polled, the status stream followed) (about 1 min)")
@@ -958,6 +974,17 @@ def _bench(args: argparse.Namespace) -> int:
                                    workers=args.workers, cluster=args.cluster,
                                    strategies=args.strategies)
         print(json.dumps(result) if args.json else landing.format_table(result))
+        return EXIT_OK
+
+    if args.bench == "console":
+        from autopilot.bench import console as console_bench
+
+        if args.window <= 0 or args.windows < 1 or not 0 < args.fps <= 30:
+            raise InputError("--window must be positive, --windows at least 1, --fps in "
+                             "(0, 30]")
+        result = console_bench.run_bench(args.window, args.windows, args.fps, args.browser,
+                                         log)
+        print(json.dumps(result) if args.json else console_bench.format_table(result))
         return EXIT_OK
 
     if args.bench == "api":
