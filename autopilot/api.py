@@ -128,6 +128,14 @@ def _hostname(host_port: str) -> str:
 TOKEN_COOKIE = "autopilot_token"
 
 
+def cookie_name(headers) -> str:
+    """The token's cookie, one per port: browsers share cookies across a host's ports, and
+    a run's console and a simulator's on one machine each keep their own."""
+    host = headers.get("host", "")
+    port = host.rsplit(":", 1)[1] if host.count(":") == 1 or "]:" in host else "80"
+    return f"{TOKEN_COOKIE}_{port if port.isdigit() else '80'}"
+
+
 def build_app(runtime: Runtime, token: str | None, stream_rate_hz: float = 5.0,
               loopback_only: bool = True, console: Console | None = None) -> FastAPI:
     app = FastAPI(title="autopilot goal API", version="1",
@@ -141,7 +149,8 @@ def build_app(runtime: Runtime, token: str | None, stream_rate_hz: float = 5.0,
         return JSONResponse({"error": error}, status_code=status)
 
     def token_is(given: str | None) -> bool:
-        return given is not None and hmac.compare_digest(given.encode(), token.encode())
+        return token is not None and given is not None and \
+            hmac.compare_digest(given.encode(), token.encode())
 
     def authorised(headers, cookies=None) -> bool:
         """The bearer token in the header, or (the console's page, which a browser loads
@@ -151,7 +160,7 @@ def build_app(runtime: Runtime, token: str | None, stream_rate_hz: float = 5.0,
         given = headers.get("authorization", "")
         if hmac.compare_digest(given.encode(), f"Bearer {token}".encode()):
             return True
-        return token_is((cookies or {}).get(TOKEN_COOKIE))
+        return token_is((cookies or {}).get(cookie_name(headers)))
 
     def host_ok(headers) -> bool:
         """On loopback, only requests addressed to a loopback name (a page on another site
@@ -161,13 +170,15 @@ def build_app(runtime: Runtime, token: str | None, stream_rate_hz: float = 5.0,
         return _hostname(headers.get("host", "")) in _LOOPBACK_NAMES
 
     def origin_ok(headers) -> bool:
+        """No foreign page: a browser's request carries its page's origin, which must be
+        this server exactly (scheme aside) — not another port on the same host (a notebook,
+        a dev server), nor another name — and no ``Sec-Fetch-Site`` but same-origin/none."""
+        if headers.get("sec-fetch-site") in ("cross-site", "same-site"):
+            return False
         origin = headers.get("origin")
         if origin is None:
             return True  # not a browser's cross-site request
-        name = _hostname(origin.split("://", 1)[-1])
-        if loopback_only:
-            return name in _LOOPBACK_NAMES
-        return origin.split("://", 1)[-1] == headers.get("host", "")
+        return origin.split("://", 1)[-1].lower() == headers.get("host", "").lower()
 
     @app.middleware("http")
     async def guard(request: Request, call_next):
@@ -303,7 +314,8 @@ def _console_routes(app: FastAPI, runtime: Runtime, console: Console, socket_all
             # once: the token becomes a same-site cookie (the page, its video and its socket
             # then carry it), and leaves the address bar
             answer = RedirectResponse("/", status_code=303)
-            answer.set_cookie(TOKEN_COOKIE, given, httponly=True, samesite="strict",
+            answer.set_cookie(cookie_name(request.headers), given, httponly=True,
+                              samesite="strict",
                               secure=request.url.scheme == "https")
             return answer
         return HTMLResponse(page, headers=security)

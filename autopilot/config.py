@@ -429,6 +429,7 @@ class ConsoleConfig(_Model):
     #: wall clock: a held key the browser stops renewing counts as released after this long
     key_timeout_s: Annotated[float, Field(ge=0.1, le=2)] = 0.5
     min_altitude_m: Annotated[float, Field(ge=0.3, le=20)] = 0.8  # [ stops here (L lands)
+    max_altitude_m: Annotated[float, Field(ge=2, le=500)] = 30.0  # ] stops here
     takeoff_altitude_m: Annotated[float, Field(ge=1, le=50)] = 3.0  # T
 
 

@@ -189,7 +189,15 @@ class EventHub:
         """Hand ``event`` to every subscriber (never blocks, never raises)."""
         self.emitted += 1
         for sub in list(self._subs):
-            sub.offer(event)
+            try:
+                sub.offer(event)
+            except Exception as exc:  # (a selector's bug): that subscriber goes, not the loop
+                sub.drop(f"{type(exc).__name__}: {exc}")
+
+    @property
+    def runners(self) -> list[asyncio.Task]:
+        """The callbacks' tasks (the owner cancels them when the run ends)."""
+        return list(self._runners)
 
     # -- the callbacks' runners (owned by the runtime's task group) --------------------------
 

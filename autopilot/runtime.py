@@ -233,6 +233,8 @@ class Runtime:
         self._manual_from_air = False
         self._manual_offboard_asked_s = -math.inf
         self._console_actions: list[str] = []
+        self._console_requests: tuple[VehicleRequest, ...] = ()
+        self._control_ended = False
         self._resumed = False
         self._emergency: str | None = None
         self.latest_processed: dict[str, ProcessedFrame] = {}
@@ -286,12 +288,14 @@ class Runtime:
                     await self._control()
                     ended = True
                 finally:
+                    self._control_ended = True
                     self._use_pipelines(())
                     for service in self._services:  # (after a failure: at once, no waiting)
                         await service.stop(graceful=ended)
                     if ended:
                         await self.photos.use(None)
-                    for task in [*background, *self._late_tasks]:
+                    self.events.close()  # (hooks added during the run end with it too)
+                    for task in [*background, *self._late_tasks, *self.events.runners]:
                         task.cancel()
         except* Exception as group:  # the link broke, or a bug: never leave the motors running
             self.status = "failed"
@@ -324,6 +328,8 @@ class Runtime:
                 # the mission's fallback bring the vehicle down (as for a lost link)
                 self._stale = True
                 self._intent = None
+                self.manual = False  # the fallback flies, whatever the console asked
+                self._console_actions.clear()
                 self._event(self.clock.now(), "runtime",
                             f"telemetry stale: {stale}; setpoints stopped")
                 with contextlib.suppress(VehicleError, TimeoutError):
@@ -337,6 +343,7 @@ class Runtime:
                 return
             if self._stop_requested.is_set() and deadline is None:
                 self.manual = False  # the safe stop flies, whatever the console asked
+                self._console_actions.clear()
                 deadline = self.clock.now() + self.config.runtime.shutdown_timeout_s
                 out = executor.abort(self._stop_reason or "stop requested", inputs)
             elif deadline is not None and self.clock.now() > deadline:
@@ -350,7 +357,11 @@ class Runtime:
                 out = executor.reactivate(inputs, "back from manual flight")
             else:
                 out = self._serve_goals(inputs) or executor.update(inputs)
-                if self._resumed and out.setpoint is not None and inputs.state.in_air and \
+                if self._resumed and out.setpoint is None and inputs.state.in_air:
+                    # a step flown by the vehicle's own modes (land, hold, the safe stop):
+                    # it asks for its mode again (manual flight left OFFBOARD behind)
+                    out = executor.reactivate(inputs, "back from manual flight")
+                elif self._resumed and out.setpoint is not None and inputs.state.in_air and \
                         inputs.state.mode is not FlightMode.OFFBOARD:
                     # back from manual flight out of OFFBOARD (after T, or a landing
                     # stopped): the step's setpoints need OFFBOARD again
@@ -358,6 +369,7 @@ class Runtime:
                         VehicleRequest(RequestKind.START_OFFBOARD), *out.requests))
                 self._resumed = False
             await self._apply(out, source)
+            await self._console_perform()
         self.status = executor.status
         self.reason = executor.failure
         s = self._state
@@ -595,6 +607,7 @@ class Runtime:
         if self._group is None:
             raise RuntimeError("the run has not started (or has ended)")
         task = self._group.create_task(coro, name=name)
+        self._late_tasks = [t for t in self._late_tasks if not t.done()]
         self._late_tasks.append(task)
         return task
 
@@ -665,24 +678,31 @@ class Runtime:
                 "takes_goals": self.goals is not None,
                 "clock": "lockstep" if self.clock.lockstep else "realtime"}
 
-    def console_keys(self, held: Sequence[str]) -> None:
-        """The movement keys the console holds now (renewed by the page while held)."""
-        self.held_keys.report(held, self.key_clock())
+    def console_keys(self, held: Sequence[str], source: object = None) -> None:
+        """The movement keys a console page (``source``) holds now (renewed while held)."""
+        self.held_keys.report(held, self.key_clock(), source)
+
+    def console_release(self, source: object = None) -> None:
+        """A console page went away: what it held is let go at once."""
+        self.held_keys.release(source)
 
     def console_action(self, action: str, confirm: bool = False) -> str:
         """One of the console's keys (:data:`~autopilot.behaviors.manual.ACTIONS`); acted on
         at the next control tick. Returns what will happen (ValueError: refused now)."""
         if action not in ACTIONS:
             raise ValueError(f"unknown action {action!r}; actions: {list(ACTIONS)}")
-        if self._executor is None or self._stop_requested.is_set() or self._emergency:
-            raise ValueError("the mission is stopping: the console's keys are off")
-        if action == "emergency":
+        if self._executor is None or self._control_ended:
+            raise ValueError("the mission is not flying: the console's keys are off")
+        if action == "emergency":  # (the kill switch works during a safe stop too)
             if not confirm:
                 raise ValueError("the emergency stop needs confirming (it stops the motors, in "
                                  "the air too)")
-            self._emergency = "emergency stop from the console"
+            self._emergency = self._emergency or "emergency stop from the console"
             self._estimated.put(math.nan)  # act now, not at the next tick
             return "emergency stop: the motors stop"
+        if self._stop_requested.is_set() or self._stale or self._emergency:
+            raise ValueError("the mission is stopping (a safe stop flies): only the emergency "
+                             "stop (R) acts now")
         if action == "takeoff" and not self.manual:
             raise ValueError("T acts in manual flight only (Y hands the vehicle to the keys)")
         self._console_actions.append(action)
@@ -724,6 +744,7 @@ class Runtime:
                     self._manual.reset()
                     requests += [VehicleRequest(RequestKind.ARM), VehicleRequest(
                         RequestKind.TAKEOFF, altitude_m=self._manual_settings.takeoff_altitude_m)]
+        self._console_requests = tuple(requests)
         if not self.manual or self._stop_requested.is_set():
             return None
         held = self.held_keys.held(self.key_clock())
@@ -731,10 +752,22 @@ class Runtime:
         if s.in_air and s.armed and s.mode is not FlightMode.OFFBOARD and not requests and \
                 (held or self._manual_enter) and now - self._manual_offboard_asked_s > 2.0:
             self._manual_offboard_asked_s = now
-            requests.append(VehicleRequest(RequestKind.START_OFFBOARD))
+            self._console_requests += (VehicleRequest(RequestKind.START_OFFBOARD),)
         self._manual_enter = False
-        return MissionOutput(setpoint, tuple(requests), (), False, "running", self._step,
-                             "manual", self._step_index)
+        return MissionOutput(setpoint, (), (), False, "running", self._step, "manual",
+                             self._step_index)
+
+    async def _console_perform(self) -> None:
+        """The console's vehicle commands (T, L, entering OFFBOARD): one refused is reported,
+        it fails no step (the step never asked for it)."""
+        requests, self._console_requests = self._console_requests, ()
+        for request in requests:
+            try:
+                await self._perform(request)
+            except VehicleError as exc:
+                self._console_event(self.clock.now(), "refused",
+                                    f"{request.kind.value} refused: {exc}")
+                return
 
     def _toggle_manual(self, s: VehicleState, now: float) -> None:
         if not self.manual:

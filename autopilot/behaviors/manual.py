@@ -9,7 +9,7 @@ a lost focus, a closed tab or a dropped socket all end in the keys expiring with
 behaviour's: W/S forward and back, A/D left and right, Q/E yaw, ``]``/``[`` up and down, all
 in the body frame at fixed speeds. With no key held it brakes (zero velocity) and, once nearly
 still, holds the position it stopped at, as PX4's Position mode does; it never descends below
-``min_altitude_m`` (landing is the L key's job).
+``min_altitude_m`` (landing is the L key's job) and never climbs above ``max_altitude_m``.
 """
 
 from __future__ import annotations
@@ -33,27 +33,37 @@ class ManualSettings:
     yaw_rate_rad_s: float = math.radians(45.0)
     key_timeout_s: float = 0.5  # wall clock: a key not renewed for this long is released
     min_altitude_m: float = 0.8
+    max_altitude_m: float = 30.0  # ] stops here (a key stuck down climbs no further)
     hold_below_m_s: float = 0.25  # braking: below this speed the position is held
     takeoff_altitude_m: float = 3.0
 
 
 class HeldKeys:
-    """The movement keys held, each until ``timeout_s`` after it was last reported."""
+    """The movement keys held, each until ``timeout_s`` after it was last reported, per
+    source (one page's socket): a key is held while any source holds it, and one page
+    letting go does not release what another holds."""
 
     def __init__(self, timeout_s: float) -> None:
         self.timeout_s = timeout_s
-        self._until: dict[str, float] = {}
+        self._until: dict[object, dict[str, float]] = {}
 
-    def report(self, axes: Iterable[str], now_s: float) -> None:
-        """The keys held now (all of them: any not named is released)."""
-        held = [a for a in axes if a in AXES]
-        self._until = {a: now_s + self.timeout_s for a in held}
+    def report(self, axes: Iterable[str], now_s: float, source: object = None) -> None:
+        """The keys ``source`` holds now (all of them: any not named is released)."""
+        held = {a: now_s + self.timeout_s for a in axes if a in AXES}
+        if held:
+            self._until[source] = held
+        else:
+            self._until.pop(source, None)
+
+    def release(self, source: object = None) -> None:
+        self._until.pop(source, None)
 
     def release_all(self) -> None:
         self._until.clear()
 
     def held(self, now_s: float) -> frozenset[str]:
-        return frozenset(a for a, until in self._until.items() if now_s < until)
+        return frozenset(a for keys in self._until.values()
+                         for a, until in keys.items() if now_s < until)
 
 
 class ManualFlight:
@@ -78,7 +88,8 @@ class ManualFlight:
         right = s.speed_m_s * axis("right", "left")
         down = -s.vertical_speed_m_s * axis("up", "down")
         yaw_rate = s.yaw_rate_rad_s * axis("yaw_right", "yaw_left")
-        if down > 0 and state.altitude_m <= s.min_altitude_m:
+        if (down > 0 and state.altitude_m <= s.min_altitude_m) or \
+                (down < 0 and state.altitude_m >= s.max_altitude_m):
             down = 0.0
         if forward or right or down or yaw_rate:
             self._hold_ned = None

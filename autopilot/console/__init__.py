@@ -118,7 +118,10 @@ class CameraFeed:
 
     def _start(self) -> None:
         if self._task is None or self._task.done():
-            self._task = self.runtime.spawn(self._produce(), f"console-video-{self.camera}")
+            try:
+                self._task = self.runtime.spawn(self._produce(), f"console-video-{self.camera}")
+            except RuntimeError as exc:  # the run has not started or has ended: no video
+                log.info("console video of %s not started: %s", self.camera, exc)
 
     def _stop(self) -> None:
         if self._task is not None:
@@ -247,7 +250,7 @@ class Console:
                 "held": sorted(rt.held_keys.held(rt.key_clock())),
                 "map": rt.map_snapshot()}
 
-    def handle(self, message: object) -> dict | None:
+    def handle(self, message: object, source: object = None) -> dict | None:
         """A message from the page → the answer to send back (None: none)."""
         if not isinstance(message, dict) or not isinstance(message.get("type"), str):
             return {"type": "error", "error": "expected a JSON object with a \"type\""}
@@ -258,7 +261,7 @@ class Console:
                     or len(held) > len(AXES):
                 return {"type": "error", "error": f"keys: \"held\" must be a list of axes "
                         f"({', '.join(AXES)})"}
-            self.runtime.console_keys(held)
+            self.runtime.console_keys(held, source)
             return None
         if kind == "action":
             action = message.get("action")
@@ -274,6 +277,7 @@ class Console:
         """One page's socket: push hello, state, path and events; take keys and actions.
         When it closes (the tab, the network), its held keys are let go at once."""
         rt = self.runtime
+        source = object()  # this page: its keys are its own
         events = rt.events.subscribe(name="console-socket", length=512)
         lock = asyncio.Lock()
 
@@ -306,7 +310,7 @@ class Console:
                 except json.JSONDecodeError as exc:
                     await send({"type": "error", "error": f"not JSON: {exc}"})
                     continue
-                answer = self.handle(message)
+                answer = self.handle(message, source)
                 if answer is not None:
                     await send(answer)
 
@@ -318,7 +322,7 @@ class Console:
         except Exception:  # the page went away, or the server is closing
             pass
         finally:
-            rt.console_keys([])  # a dropped socket lets go of its keys: hover
+            rt.console_release(source)  # a dropped socket lets go of its keys: hover
             events.close()
             for task in tasks:
                 task.cancel()

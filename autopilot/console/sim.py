@@ -98,7 +98,10 @@ class SimConsoleSource:
                 "camera": next(iter(self.vehicle.cameras), ""), "can_fly": False,
                 "takes_goals": False, "clock": "realtime"}
 
-    def console_keys(self, held) -> None:
+    def console_keys(self, held, source=None) -> None:
+        return None
+
+    def console_release(self, source=None) -> None:
         return None
 
     def console_action(self, action: str, confirm: bool = False) -> str:

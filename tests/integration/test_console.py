@@ -10,10 +10,12 @@ import asyncio
 import json
 import math
 import time
+import urllib.error
 import urllib.request
 
 import cv2
 import numpy as np
+import pytest
 from websockets.sync.client import connect
 
 from autopilot.mission import load_mission
@@ -280,7 +282,7 @@ def test_console_manual_land_takeoff_and_emergency_stop(tmp_path):
             pass
         return sock.events
 
-    summary, events, hooked, iterated = _fly_console(plan, tmp_path / "run", script)
+    summary, events, _, _ = _fly_console(plan, tmp_path / "run", script)
     assert summary["status"] == "aborted"
     assert "emergency stop from the console" in summary["reason"]
     hooks = [e["hook"] for e in events]
@@ -333,10 +335,91 @@ def test_simulator_console_watches_the_vehicle():
         answer = sock.next("answer")
         assert not answer["ok"]
         assert "watches" in answer["text"]
-        code, body = c.call("POST", "/api/goals", {"land": {}})
+        code, _ = c.call("POST", "/api/goals", {"land": {}})
         assert code == 409
         with urllib.request.urlopen(c.base + "/video/front.mjpg", timeout=20) as resp:
             assert resp.read(7) == b"--frame"
         return True
 
     assert asyncio.run(main())
+
+
+def test_console_security_token_cookie_and_origins(tmp_path):
+    """With a token: the page needs it (once as ?token=, then a same-site cookie per port);
+    the socket needs it too; a page of another origin — another port on this very host
+    included — cannot open the socket or fetch the video."""
+    from websockets.exceptions import InvalidStatus, WebSocketException
+
+    token = "t0ken-for-the-console-test"
+    plan = load_mission("standby")
+    servers = []
+
+    def script(c: Client):
+        port = int(c.base.rsplit(":", 1)[1])
+        c.wait(lambda s: s["status_code"] == 3, 60, "standby")
+        anonymous = Client(port)
+        assert anonymous.call("GET", "/api/status")[0] == 401
+        for bad in ("", "wrong-token-of-enough-length"):
+            assert _open(f"{c.base}/?token={bad}")[0] == 401
+        code, headers = _open(f"{c.base}/?token={token}")
+        assert code == 303
+        cookie = headers["Set-Cookie"]
+        assert cookie.startswith(f"autopilot_token_{port}=")
+        assert "HttpOnly" in cookie
+        assert "SameSite=strict" in cookie or "samesite=strict" in cookie.lower()
+        jar = cookie.split(";", 1)[0]
+        req = urllib.request.Request(c.base + "/", headers={"Cookie": jar})
+        with urllib.request.urlopen(req, timeout=10) as resp:
+            assert resp.status == 200
+        url = f"ws://127.0.0.1:{port}/api/console"
+        refused = (InvalidStatus, WebSocketException, ConnectionError, EOFError)
+        with pytest.raises(refused):
+            _hello(url)  # no cookie, no token
+        assert _hello(url, additional_headers={"Cookie": jar})["type"] == "hello"
+        for origin in ("http://127.0.0.1:9999", "http://evil.example"):
+            with pytest.raises(refused):
+                _hello(url, origin=origin, additional_headers={"Cookie": jar})
+        code, _ = c.call("GET", "/video/front.mjpg", headers={"Sec-Fetch-Site": "same-site"})
+        assert code == 403
+        c.call("POST", "/api/goals", {"land": {}})
+        return True
+
+    async def main():
+        flight = asyncio.ensure_future(fly(plan, tmp_path / "run", api="127.0.0.1:0",
+                                           api_token=token, console=True,
+                                           on_api=servers.append))
+        while not servers or not servers[0].started.is_set():
+            if flight.done():
+                return flight.result(), False
+            await asyncio.sleep(0.01)
+        client = Client(servers[0].bound_port, token)
+        try:
+            ok = await asyncio.to_thread(script, client)
+        except BaseException:
+            await asyncio.to_thread(client.call, "POST", "/api/abort")
+            await flight
+            raise
+        return await asyncio.wait_for(flight, 300), ok
+
+    summary, ok = asyncio.run(main())
+    assert ok
+    assert summary["status"] == "completed"
+
+
+class NoRedirect(urllib.request.HTTPRedirectHandler):
+    def redirect_request(self, *args, **kwargs):
+        return None
+
+
+def _open(url: str):
+    """(status, headers) without following a redirect."""
+    try:
+        with urllib.request.build_opener(NoRedirect).open(url, timeout=10) as resp:
+            return resp.status, resp.headers
+    except urllib.error.HTTPError as err:
+        return err.code, err.headers
+
+
+def _hello(url: str, **options) -> dict:
+    with connect(url, open_timeout=10, **options) as ws:
+        return json.loads(ws.recv(timeout=5))

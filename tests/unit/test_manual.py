@@ -82,3 +82,21 @@ def test_no_key_brakes_then_holds_where_it_stopped():
     assert sp.frame is SetpointFrame.BODY_FRD  # a key again: the hold point is let go
     sp = flight.setpoint(frozenset(), still, 5.0)
     np.testing.assert_allclose(sp.position_ned_m, [4.6, 1.0, -3.0])
+
+
+def test_each_page_holds_its_own_keys():
+    keys = HeldKeys(0.5)
+    keys.report(["forward"], 1.0, source="tab-a")
+    keys.report(["yaw_left"], 1.0, source="tab-b")
+    keys.report([], 1.1, source="tab-b")  # tab b lets go: tab a's key stays held
+    assert keys.held(1.2) == {"forward"}
+    keys.release("tab-a")  # its socket dropped
+    assert keys.held(1.2) == frozenset()
+
+
+def test_never_above_the_maximum_height_by_keys():
+    flight = ManualFlight(ManualSettings(max_altitude_m=30.0))
+    sp = flight.setpoint(frozenset({"up", "forward"}), _state(position=(0, 0, -30.5)), 1.0)
+    assert sp.velocity_m_s[2] == 0.0
+    sp = flight.setpoint(frozenset({"up"}), _state(position=(0, 0, -10.0)), 1.0)
+    assert sp.velocity_m_s[2] < 0
