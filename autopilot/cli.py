@@ -327,6 +327,9 @@ def build_parser() -> argparse.ArgumentParser:
     console_bench.add_argument("--browser", action="store_true",
                                help="the viewer is the console's page in headless chromium "
                                "(Playwright): latency to the frame drawn")
+    console_bench.add_argument("--bare", action="store_true",
+                               help="watch the bare frames (?overlay=0): the newest, without "
+                               "waiting for the frame's detections")
 
     api_bench = benches.add_parser(
         "api", help="what the goal API costs the process: a real-time standby hover with the "
@@ -983,7 +986,7 @@ def _bench(args: argparse.Namespace) -> int:
             raise InputError("--window must be positive, --windows at least 1, --fps in "
                              "(0, 30]")
         result = console_bench.run_bench(args.window, args.windows, args.fps, args.browser,
-                                         log)
+                                         log, overlay=not args.bare)
         print(json.dumps(result) if args.json else console_bench.format_table(result))
         return EXIT_OK
 

@@ -238,6 +238,7 @@ class Runtime:
         self._resumed = False
         self._emergency: str | None = None
         self.latest_processed: dict[str, ProcessedFrame] = {}
+        self._processed_signals: dict[str, asyncio.Event] = {}
         self.intent_record: dict | None = None  # the newest setpoint, as the log keeps it
         self.planned_path: tuple[int, list[list[float]]] = (0, [])
 
@@ -611,6 +612,23 @@ class Runtime:
         self._late_tasks.append(task)
         return task
 
+    async def processed_frame(self, camera: str, seq: int, timeout_s: float
+                              ) -> ProcessedFrame | None:
+        """The running step's pipelines' result for frame ``seq`` of ``camera``, waiting up to
+        ``timeout_s`` for it (None: no pipeline reads that camera now, or it did not come)."""
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + timeout_s
+        while camera in self._lanes:
+            found = self.latest_processed.get(camera)
+            if found is not None and found.seq >= seq:
+                return found if found.seq == seq else None
+            signal = self._processed_signals.setdefault(camera, asyncio.Event())
+            try:
+                await asyncio.wait_for(signal.wait(), deadline - loop.time())
+            except TimeoutError:
+                return None
+        return None
+
     def overlay_records(self, camera: str, frame: Frame) -> dict:
         """What the console draws over ``frame``, as the flight log's records (for
         :func:`autopilot.report.video.overlay_from`): the detections in it when a step's
@@ -902,6 +920,9 @@ class Runtime:
                                            tuple(det for det, _ in results), tuple(hints))
                 lane.frames.put(processed)
                 self.latest_processed[lane.camera] = processed
+                signal = self._processed_signals.pop(lane.camera, None)
+                if signal is not None:  # (whoever waits for this camera's next one)
+                    signal.set()
                 detected = self.clock.now()
                 for pipeline, hint, (det, elapsed_ms) in zip(pipelines, hints, results,
                                                              strict=True):

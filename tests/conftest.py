@@ -41,19 +41,22 @@ def no_camera_config(sim_config):
 
 def pytest_addoption(parser):
     parser.addoption("--run-long", action="store_true", default=False,
-                     help="also run the long real-time flights (MAVSDK's mission, offboard "
-                          "and MAVProxy examples flown end to end: several minutes)")
+                     help="also run the long cases: real-time flights of MAVSDK's mission, "
+                          "offboard and MAVProxy examples end to end, and the heavier closed "
+                          "loops (following under stress, precision landing without a target, "
+                          "the doctor on two camera streams): several minutes")
 
 
 def pytest_configure(config):
-    config.addinivalue_line("markers", "long: a long real-time flight; runs with --run-long")
+    config.addinivalue_line("markers", "long: a long case (a real-time flight, a heavy closed "
+                            "loop); runs with --run-long")
 
 
 def pytest_collection_modifyitems(config, items):
     if config.getoption("--run-long"):
         return
-    skip = pytest.mark.skip(reason="long real-time flight: run with --run-long (the short "
-                                   "version runs by default)")
+    skip = pytest.mark.skip(reason="long case: run with --run-long (the default run keeps "
+                                   "CI short; a shorter sibling covers the same code)")
     for item in items:
         if "long" in item.keywords:
             item.add_marker(skip)

@@ -36,24 +36,26 @@ from autopilot.run import fly
 
 
 def _clock_shift(base: str, samples: int = 30) -> float:
-    """monotonic − the run's clock (the smallest seen: the request's delay drops out)."""
-    best = np.inf
+    """monotonic − the run's clock: it lies between (sent − run time) and (answered − run
+    time) of every request; the tightest bounds over many requests, halfway."""
+    low, high = -np.inf, np.inf
     for _ in range(samples):
         before = time.monotonic()
         with urllib.request.urlopen(base + "/api/status", timeout=5) as r:
             run_time = json.loads(r.read())["time_s"]
         after = time.monotonic()
-        best = min(best, before - run_time, after - run_time)
+        low, high = max(low, before - run_time), min(high, after - run_time)
         time.sleep(0.02)
-    return float(best)
+    return float(0.5 * (low + high))
 
 
-def _viewer(base: str, fps: float, seconds: float, results) -> None:
+def _viewer(base: str, fps: float, seconds: float, results, overlay: bool = True) -> None:
     """One MJPEG viewer (in a process of its own): latency of each frame as it arrives."""
     shift = _clock_shift(base)
     latencies, sizes = [], []
     deadline = time.monotonic() + seconds
-    with urllib.request.urlopen(f"{base}/video/front.mjpg?fps={fps:g}", timeout=10) as resp:
+    url = f"{base}/video/front.mjpg?fps={fps:g}&overlay={int(overlay)}"
+    with urllib.request.urlopen(url, timeout=10) as resp:
         while time.monotonic() < deadline:
             head = b""
             while not head.endswith(b"\r\n\r\n"):
@@ -68,7 +70,8 @@ def _viewer(base: str, fps: float, seconds: float, results) -> None:
     results.put({"latency_ms": latencies, "bytes": sizes, "seconds": seconds})
 
 
-def _browser_viewer(base: str, fps: float, seconds: float, results) -> None:
+def _browser_viewer(base: str, fps: float, seconds: float, results, overlay: bool = True
+                    ) -> None:
     """The console's page in headless chromium as the viewer: latency to the drawn frame."""
     from playwright.sync_api import sync_playwright
 
@@ -79,6 +82,8 @@ def _browser_viewer(base: str, fps: float, seconds: float, results) -> None:
         page.goto(base + "/")
         page.wait_for_function("window.consoleState.hello !== null")
         page.select_option("#fps", str(int(fps)))
+        if not overlay:
+            page.uncheck("#overlay")
         start = page.evaluate("window.consoleState.frames")
         page.evaluate("window.consoleState.latencies = []")
         time.sleep(seconds)
@@ -89,7 +94,7 @@ def _browser_viewer(base: str, fps: float, seconds: float, results) -> None:
 
 
 def run_bench(window_s: float, windows: int, fps: float, browser: bool,
-              log: Callable[[str], None]) -> dict:
+              log: Callable[[str], None], overlay: bool = True) -> dict:
     # follow_ball, following for as long as the windows take
     text = (resources.missions_dir() / "follow_ball.yaml").read_text()
     follow_s = 60 + windows * 2 * (window_s + 5.0)
@@ -99,7 +104,8 @@ def run_bench(window_s: float, windows: int, fps: float, browser: bool,
                                     f"follow_ball: {{duration_s: {follow_s:.0f}}}"))
     plan = load_mission(str(mission))
     servers: list = []
-    out: dict = {"window_s": window_s, "fps": fps, "viewer": "browser" if browser else "mjpeg"}
+    out: dict = {"window_s": window_s, "fps": fps, "viewer": "browser" if browser else "mjpeg",
+                 "overlay": overlay}
 
     async def main() -> None:
         flight = asyncio.ensure_future(fly(plan, None, realtime=True, api="127.0.0.1:0",
@@ -120,14 +126,15 @@ def run_bench(window_s: float, windows: int, fps: float, browser: bool,
         rows: list[dict] = []
         latencies: list[float] = []
         sizes: list[int] = []
-        feed = server.console.feed("front")
+        feed = server.console.feed("front", overlay=overlay)
         for i in range(2 * windows):
             watching = i % 2 == 1
             results = spawn.Queue()
             viewer = None
             if watching:
                 viewer = spawn.Process(target=_browser_viewer if browser else _viewer,
-                                       args=(base, fps, window_s + 4.0, results), daemon=True)
+                                       args=(base, fps, window_s + 4.0, results, overlay),
+                                       daemon=True)
                 viewer.start()
                 await asyncio.sleep(3.0)  # (it connects, learns the clock, starts watching)
             encoded0, enc_cpu0 = feed.encoded, feed.cpu_s
@@ -179,7 +186,8 @@ def format_table(r: dict) -> str:
         f"({r['latency_frames']} frames)"
     return "\n".join([
         f"console cost, follow_ball in real time, {r['fps']:g} fps 640×480, viewer: "
-        f"{r['viewer']} ({len(r['windows']) // 2} windows of {r['window_s']:g} s each way)",
+        f"{r['viewer']}{'' if r.get('overlay', True) else ', bare frames (overlay=0)'} "
+        f"({len(r['windows']) // 2} windows of {r['window_s']:g} s each way)",
         f"  autopilot process, no viewer     {pct(r['process_core_share_no_viewer'])} of a core",
         f"  autopilot process, one viewer    {pct(r['process_core_share_one_viewer'])} of a core",
         f"  the console's cost               {pct(r['console_core_share'])} of a core "

@@ -128,14 +128,18 @@ class CameraFeed:
             self._task.cancel()
             self._task = None
 
-    def _source(self, frame):
-        """The frame the step's pipelines processed, when it is the newest or the one
-        before (its detections are drawn exactly); else the raw frame."""
-        processed = self.runtime.latest_processed.get(self.camera)
+    async def _source(self, raw):
+        """With overlays, the frame as the step's pipelines processed it (waiting the few
+        milliseconds detection takes, at most a frame period), so that the detections drawn
+        are those in that very image; bare, the frame as it came."""
+        if not self.overlay:
+            return raw
+        wait = getattr(self.runtime, "processed_frame", None)
+        if wait is None:
+            return raw
         rate = self._record.get("rate_hz") or 30.0
-        if processed is not None and 0 <= frame.time_s - processed.time_s <= 2.01 / rate:
-            return processed.frame
-        return frame
+        processed = await wait(self.camera, raw.seq, 1.0 / rate)
+        return processed.frame if processed is not None else raw
 
     async def _produce(self) -> None:
         loop = asyncio.get_running_loop()
@@ -163,7 +167,7 @@ class CameraFeed:
                         type(exc).__name__, exc)
 
     async def _encode(self, loop, raw) -> None:
-        frame = self._source(raw)
+        frame = await self._source(raw)
         records = self.runtime.overlay_records(self.camera, frame)
         records["time_s"] = frame.time_s
         records["manual"] = self.runtime.manual

@@ -6,6 +6,8 @@ from __future__ import annotations
 import asyncio
 import json
 
+import pytest
+
 from autopilot.cli import main
 from autopilot.config import load_config
 from autopilot.doctor import run_doctor
@@ -43,6 +45,7 @@ def test_doctor_passes_a_healthy_vehicle_and_camera():
     assert "FAIL" not in {c.status for c in checks.values()}
 
 
+@pytest.mark.long  # (the doctor's test above checks one camera's stream in CI)
 def test_each_camera_is_its_own_stream_the_down_camera_too():
     # follow_marker with its marker looked for by the down camera: the simulator streams both
     # cameras, each to its own port (vehicle.cameras.NAME.video), and the doctor checks the

@@ -90,6 +90,7 @@ def test_a_marker_that_is_never_seen_is_searched_for_then_the_fallback_lands():
     assert "target lost" in summary["reason"]
 
 
+@pytest.mark.long  # (the closed loops above and the bench's stress scenario cover it in CI)
 @pytest.mark.parametrize(("mission", "target", "area"),
                          [("follow_ball", "ball", "size_m"),
                           ("follow_marker", "marker", "path_size_m")])

@@ -64,6 +64,7 @@ def test_precision_landing_on_the_reported_target_through_mavsdk(no_camera_confi
     asyncio.run(main())
 
 
+@pytest.mark.long  # (the precision landing above covers the mode in CI)
 def test_no_target_climbs_to_search_then_falls_back_to_a_normal_landing(no_camera_config):
     # (a quicker descent than PX4's default, for the test's time)
     config = no_camera_config.model_copy(update={"params": {
