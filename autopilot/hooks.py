@@ -32,6 +32,7 @@ import contextlib
 import inspect
 import logging
 import math
+from collections import deque
 from collections.abc import AsyncIterator, Callable, Iterable, Mapping
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -41,6 +42,7 @@ log = logging.getLogger(__name__)
 
 KINDS = frozenset({"status", "mode", "armed", "step_started", "step_ended", "command",
                    "mission", "status_text", "console"})
+RECENT = 200  # events kept for late subscribers to look back on
 QUEUE_LENGTH = 256  # events a subscriber may be behind before it is dropped
 CALLBACK_TIMEOUT_S = 1.0  # wall clock: a callback running longer is dropped
 
@@ -164,6 +166,8 @@ class EventHub:
         self._group: asyncio.TaskGroup | None = None
         self.callback_timeout_s = callback_timeout_s
         self.emitted = 0
+        #: the newest events (a console that opens mid-flight shows what happened)
+        self.recent: deque[Event] = deque(maxlen=RECENT)
         #: (subscriber, why) of every subscriber dropped
         self.dropped: list[tuple[str, str]] = []
 
@@ -188,6 +192,7 @@ class EventHub:
     def emit(self, event: Event) -> None:
         """Hand ``event`` to every subscriber (never blocks, never raises)."""
         self.emitted += 1
+        self.recent.append(event)
         for sub in list(self._subs):
             try:
                 sub.offer(event)

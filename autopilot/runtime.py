@@ -36,6 +36,7 @@ import contextlib
 import dataclasses
 import math
 import time
+from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -239,6 +240,8 @@ class Runtime:
         self._emergency: str | None = None
         self.latest_processed: dict[str, ProcessedFrame] = {}
         self._processed_signals: dict[str, asyncio.Event] = {}
+        #: the flown track (north, east), every 10 cm or more: the console's map
+        self.track_ne_m: deque[tuple[float, float]] = deque(maxlen=4000)
         self.intent_record: dict | None = None  # the newest setpoint, as the log keeps it
         self.planned_path: tuple[int, list[list[float]]] = (0, [])
 
@@ -693,6 +696,7 @@ class Runtime:
         camera = next((p.camera for p in self.pipelines.values() if p.camera),
                       next(iter(self.vehicle.cameras), ""))
         return {"mission": self.plan.mission.name, "camera": camera, "can_fly": True,
+                "track_ne_m": list(self.track_ne_m),
                 "takes_goals": self.goals is not None,
                 "clock": "lockstep" if self.clock.lockstep else "realtime"}
 
@@ -960,6 +964,11 @@ class Runtime:
             async for state in samples:
                 previous, self._state = self._state, state
                 self._state_events(previous, state)
+                ne = (round(float(state.position_ned_m[0]), 2),
+                      round(float(state.position_ned_m[1]), 2))
+                last = self.track_ne_m[-1] if self.track_ne_m else None
+                if last is None or math.hypot(ne[0] - last[0], ne[1] - last[1]) >= 0.1:
+                    self.track_ne_m.append(ne)
                 self.photos.add_state(state)
                 for pipeline in self.pipelines.values():
                     pipeline.add_state(state)

@@ -282,6 +282,7 @@ class Console:
         When it closes (the tab, the network), its held keys are let go at once."""
         rt = self.runtime
         source = object()  # this page: its keys are its own
+        history = list(rt.events.recent)  # (taken before subscribing: none twice)
         events = rt.events.subscribe(name="console-socket", length=512)
         lock = asyncio.Lock()
 
@@ -321,6 +322,8 @@ class Console:
         tasks: list[asyncio.Future] = []
         try:
             await send(self.hello())
+            for event in history:  # what happened before the page opened
+                await send({"type": "event", **event.as_dict()})
             tasks = [asyncio.ensure_future(c) for c in (push_state(), push_events(), receive())]
             await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
         except Exception:  # the page went away, or the server is closing
