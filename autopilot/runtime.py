@@ -53,6 +53,7 @@ from autopilot.behaviors.base import (
     VehicleRequest,
 )
 from autopilot.behaviors.manual import ACTIONS, HeldKeys, ManualFlight, ManualSettings
+from autopilot.console.view import pose_record, publish_vehicle, vehicle_map, vehicle_status
 from autopilot.estimation.target import TargetEstimate
 from autopilot.flightlog import records as ch
 from autopilot.flightlog.log import FlightLog
@@ -517,15 +518,7 @@ class Runtime:
                "waiting_for_goals": self.waiting_for_goals,
                "control": "manual" if self.manual else "autopilot",
                "photos": self.photos.taken}
-        if s is None:
-            return {**out, "position_ned_m": None, "velocity_ned_m_s": None, "yaw_deg": None,
-                    "armed": None, "mode": None, "battery_fraction": None, "in_air": None}
-        battery = s.battery.remaining_fraction
-        return {**out, "position_ned_m": [float(v) for v in s.position_ned_m],
-                "velocity_ned_m_s": [float(v) for v in s.velocity_ned_m_s],
-                "yaw_deg": math.degrees(s.yaw_rad), "armed": s.armed, "mode": s.mode.value,
-                "battery_fraction": battery if math.isfinite(battery) else None,
-                "in_air": s.in_air}
+        return {**out, **vehicle_status(s)}
 
     @property
     def waiting_for_goals(self) -> bool:
@@ -659,28 +652,16 @@ class Runtime:
                        "velocity_std_m_s": np.sqrt(np.clip(np.diag(cov)[3:6], 0, None)
                                                    ).tolist()}
             break
-        s = self._state
-        pose = None
-        if s is not None:
-            pose = (np.asarray(s.position_ned_m, dtype=float), np.asarray(s.attitude_q),
-                    {"mode": s.mode.value, "battery_remaining":
-                     s.battery.remaining_fraction if math.isfinite(
-                         s.battery.remaining_fraction) else None})
-        return {"det": det, "pose": pose, "est": est, "setpoint": self.intent_record,
+        return {"det": det, "pose": pose_record(self._state), "est": est,
+                "setpoint": self.intent_record,
                 "step": self._step, "phase": self._phase}
 
     def map_snapshot(self) -> dict:
         """The console's mini-map: where the vehicle is and faces, home, the target."""
         s = self._state
-        out: dict = {"position_ne_m": None, "yaw_deg": None, "target_ne_m": None,
-                     "target_sigma_m": None, "path_id": self.planned_path[0]}
-        home = self.vehicle.home_ned_m
-        out["home_ne_m"] = [float(home[0]), float(home[1])] if home is not None else None
+        out = vehicle_map(s, self.vehicle.home_ned_m, self.planned_path[0])
         if s is None:
             return out
-        out["position_ne_m"] = [round(float(s.position_ned_m[0]), 3),
-                                round(float(s.position_ned_m[1]), 3)]
-        out["yaw_deg"] = round(math.degrees(s.yaw_rad), 1)
         if self._active:
             target = self.tracks[self._active[0]].pipeline.target(self.clock.now())
             if target is not None and not target.stale:
@@ -856,12 +837,7 @@ class Runtime:
         pub("status", f"{int(code)} {code.label}")
         pub("control", "manual" if self.manual else "autopilot")
         pub("step", f"{self._step or '-'} / {self._phase or '-'}")
-        pub("mode", s.mode.value)
-        pub("armed", s.armed)
-        pub("alt_m", round(s.altitude_m, 2), "m")
-        pub("speed_m_s", round(float(np.linalg.norm(s.velocity_ned_m_s)), 2), "m/s")
-        battery = s.battery.remaining_fraction
-        pub("battery", f"{100 * battery:.0f} %" if math.isfinite(battery) else "?")
+        publish_vehicle(self.values, s)
         if math.isfinite(self.step_progress):
             pub("progress", f"{100 * self.step_progress:.0f} %")
         if self._active:

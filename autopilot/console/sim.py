@@ -9,13 +9,11 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import math
 import time
-
-import numpy as np
 
 from autopilot import values
 from autopilot.config import AppConfig
+from autopilot.console.view import pose_record, publish_vehicle, vehicle_map, vehicle_status
 from autopilot.goals import GoalError
 from autopilot.hooks import Event, EventHub
 from drivers.base import VehicleError, VehicleState
@@ -77,14 +75,8 @@ class SimConsoleSource:
                 if previous is not None and s.armed != previous.armed:
                     name = "armed" if s.armed else "disarmed"
                     self.events.emit(Event("armed", name, s.time_s, name))
-                pub = self.values.publish
-                pub("mode", s.mode.value)
-                pub("armed", s.armed)
-                pub("alt_m", round(s.altitude_m, 2), "m")
-                pub("speed_m_s", round(float(np.linalg.norm(s.velocity_ned_m_s)), 2), "m/s")
-                battery = s.battery.remaining_fraction
-                pub("battery", f"{100 * battery:.0f} %" if math.isfinite(battery) else "?")
-                pub("failsafe", s.failsafe)
+                publish_vehicle(self.values, s)
+                self.values.publish("failsafe", s.failsafe)
 
     async def _status_texts(self) -> None:
         async with contextlib.aclosing(self.vehicle.events()) as texts:
@@ -124,35 +116,11 @@ class SimConsoleSource:
         out = {"status_code": None, "status": "simulated vehicle", "step": "", "phase": "",
                "goal_id": None, "time_s": self.clock.now(), "progress": None,
                "waiting_for_goals": False, "control": "external", "photos": 0}
-        if s is None:
-            return {**out, "position_ned_m": None, "velocity_ned_m_s": None, "yaw_deg": None,
-                    "armed": None, "mode": None, "battery_fraction": None, "in_air": None}
-        battery = s.battery.remaining_fraction
-        return {**out, "position_ned_m": [float(v) for v in s.position_ned_m],
-                "velocity_ned_m_s": [float(v) for v in s.velocity_ned_m_s],
-                "yaw_deg": math.degrees(s.yaw_rad), "armed": s.armed, "mode": s.mode.value,
-                "battery_fraction": battery if math.isfinite(battery) else None,
-                "in_air": s.in_air}
+        return {**out, **vehicle_status(s)}
 
     def overlay_records(self, camera: str, frame) -> dict:
-        s = self._state
-        pose = None
-        if s is not None:
-            battery = s.battery.remaining_fraction
-            pose = (np.asarray(s.position_ned_m, dtype=float), np.asarray(s.attitude_q),
-                    {"mode": s.mode.value,
-                     "battery_remaining": battery if math.isfinite(battery) else None})
-        return {"det": None, "pose": pose, "est": None, "setpoint": None,
+        return {"det": None, "pose": pose_record(self._state), "est": None, "setpoint": None,
                 "step": "simulated vehicle", "phase": ""}
 
     def map_snapshot(self) -> dict:
-        s = self._state
-        home = self.vehicle.home_ned_m
-        out = {"position_ne_m": None, "yaw_deg": None, "target_ne_m": None,
-               "target_sigma_m": None, "path_id": 0,
-               "home_ne_m": [float(home[0]), float(home[1])] if home is not None else None}
-        if s is not None:
-            out["position_ne_m"] = [round(float(s.position_ned_m[0]), 3),
-                                    round(float(s.position_ned_m[1]), 3)]
-            out["yaw_deg"] = round(math.degrees(s.yaw_rad), 1)
-        return out
+        return vehicle_map(self._state, self.vehicle.home_ned_m)

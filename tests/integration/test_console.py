@@ -19,43 +19,26 @@ import pytest
 from websockets.sync.client import connect
 
 from autopilot.mission import load_mission
-from autopilot.run import fly
 
-from .test_goal_api import Client
+from .test_goal_api import Client, _fly_with_client
 
 
 def _fly_console(plan, out, script):
-    servers = []
+    """A flight with the console; Python hooks (a callback and ``async for``) watch it."""
     hooked: list = []
     iterated: list = []
 
-    async def main():
-        def on_api(server):
-            servers.append(server)
-            rt = server.console.runtime
-            rt.events.on("status", lambda e: hooked.append(e.hook))
+    def on_api(server):
+        rt = server.console.runtime
+        rt.events.on("status", lambda e: hooked.append(e.hook))
 
-            async def follow_commands():
-                async for event in rt.events.subscribe("command"):
-                    iterated.append(event.hook)
-            asyncio.get_running_loop().create_task(follow_commands())
+        async def follow_commands():
+            async for event in rt.events.subscribe("command"):
+                iterated.append(event.hook)
+        asyncio.get_running_loop().create_task(follow_commands())
 
-        flight = asyncio.ensure_future(fly(plan, out, api="127.0.0.1:0", console=True,
-                                           on_api=on_api))
-        while not servers or not servers[0].started.is_set():
-            if flight.done():
-                return flight.result(), None
-            await asyncio.sleep(0.01)
-        client = Client(servers[0].bound_port)
-        try:
-            result = await asyncio.to_thread(script, client, servers[0])
-        except BaseException:
-            await asyncio.to_thread(client.call, "POST", "/api/abort")
-            await flight
-            raise
-        return await asyncio.wait_for(flight, 300), result
-
-    summary, result = asyncio.run(main())
+    summary, result = _fly_with_client(plan, out, lambda c: script(c, c.server),
+                                       console=True, on_api=on_api)
     return summary, result, hooked, iterated
 
 
@@ -352,7 +335,6 @@ def test_console_security_token_cookie_and_origins(tmp_path):
 
     token = "t0ken-for-the-console-test"
     plan = load_mission("standby")
-    servers = []
 
     def script(c: Client):
         port = int(c.base.rsplit(":", 1)[1])
@@ -384,24 +366,7 @@ def test_console_security_token_cookie_and_origins(tmp_path):
         c.call("POST", "/api/goals", {"land": {}})
         return True
 
-    async def main():
-        flight = asyncio.ensure_future(fly(plan, tmp_path / "run", api="127.0.0.1:0",
-                                           api_token=token, console=True,
-                                           on_api=servers.append))
-        while not servers or not servers[0].started.is_set():
-            if flight.done():
-                return flight.result(), False
-            await asyncio.sleep(0.01)
-        client = Client(servers[0].bound_port, token)
-        try:
-            ok = await asyncio.to_thread(script, client)
-        except BaseException:
-            await asyncio.to_thread(client.call, "POST", "/api/abort")
-            await flight
-            raise
-        return await asyncio.wait_for(flight, 300), ok
-
-    summary, ok = asyncio.run(main())
+    summary, ok = _fly_with_client(plan, tmp_path / "run", script, token=token, console=True)
     assert ok
     assert summary["status"] == "completed"
 

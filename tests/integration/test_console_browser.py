@@ -8,7 +8,6 @@ without chromium or Playwright."""
 
 from __future__ import annotations
 
-import asyncio
 import math
 import os
 import shutil
@@ -19,9 +18,8 @@ import numpy as np
 import pytest
 
 from autopilot.mission import load_mission
-from autopilot.run import fly
 
-from .test_goal_api import Client
+from .test_goal_api import Client, _fly_with_client
 
 CHROMIUM = next(
     (p for p in map(shutil.which, ("chromium", "chromium-browser", "google-chrome")) if p), None)
@@ -81,7 +79,6 @@ def test_console_in_chromium(tmp_path):
     mission.write_text(MISSION)
     plan = load_mission(str(mission))
     shots = Path(os.environ.get("AUTOPILOT_CONSOLE_SHOTS", tmp_path))
-    servers = []
 
     def script(c: Client):
         c.wait(lambda s: s["status_code"] == 13 and s["phase"] == "tracking", 120, "tracking")
@@ -140,23 +137,7 @@ def test_console_in_chromium(tmp_path):
         c.call("POST", "/api/abort")
         return True
 
-    async def main():
-        flight = asyncio.ensure_future(fly(plan, tmp_path / "run", api="127.0.0.1:0",
-                                           console=True, on_api=servers.append))
-        while not servers or not servers[0].started.is_set():
-            if flight.done():
-                return flight.result(), None
-            await asyncio.sleep(0.01)
-        client = Client(servers[0].bound_port)
-        try:
-            result = await asyncio.to_thread(script, client)
-        except BaseException:
-            await asyncio.to_thread(client.call, "POST", "/api/abort")
-            await flight
-            raise
-        return await asyncio.wait_for(flight, 300), result
-
-    summary, ok = asyncio.run(main())
+    summary, ok = _fly_with_client(plan, tmp_path / "run", script, console=True)
     assert ok
     assert summary["status"] == "aborted"  # (the abort that ended it)
     assert (shots / "console_follow_ball.png").stat().st_size > 10_000

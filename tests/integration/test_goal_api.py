@@ -54,17 +54,26 @@ class Client:
         raise AssertionError(f"timed out waiting for {what}: last status {status}")
 
 
-def _fly_with_client(plan, out, script, token=None):
+def _fly_with_client(plan, out, script, token=None, console=False, on_api=None):
+    """Fly ``plan`` with the goal API (and the console) on a free port; ``script(client)``
+    runs in a thread meanwhile (``client.server``: the server). Returns (summary, what the
+    script returned); a script that fails aborts the flight first."""
     servers = []
+
+    def take(server) -> None:
+        servers.append(server)
+        if on_api is not None:
+            on_api(server)
 
     async def main():
         flight = asyncio.ensure_future(fly(plan, out, api="127.0.0.1:0", api_token=token,
-                                           on_api=servers.append))
+                                           console=console, on_api=take))
         while not servers or not servers[0].started.is_set():
             if flight.done():
                 return flight.result(), None
             await asyncio.sleep(0.01)
         client = Client(servers[0].bound_port, token)
+        client.server = servers[0]
         try:
             result = await asyncio.to_thread(script, client)
         except BaseException:
