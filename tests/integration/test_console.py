@@ -388,3 +388,39 @@ def _open(url: str):
 def _hello(url: str, **options) -> dict:
     with connect(url, open_timeout=10, **options) as ws:
         return json.loads(ws.recv(timeout=5))
+
+
+def test_a_step_flown_by_the_vehicles_own_mode_asks_for_it_again_after_manual_flight(tmp_path):
+    """Manual flight leaves the vehicle in OFFBOARD; a hold step given back the vehicle asks
+    for HOLD again (not left in OFFBOARD without setpoints, where the vehicle's offboard-loss
+    failsafe would take over), and the mission goes on to its landing."""
+    mission = tmp_path / "hold.yaml"
+    mission.write_text("name: hold_then_land\ndescription: hold, then land\nsteps:\n"
+                       "  - takeoff: {altitude_m: 2.0}\n  - hold: {duration_s: 8}\n"
+                       "  - land: {}\nfallback: land\n")
+    plan = load_mission(str(mission))
+
+    def script(c: Client, server):
+        c.wait(lambda s: s["step"] == "hold" and s["mode"] == "hold", 60, "holding")
+        sock = Socket(server.bound_port)
+        sock.send({"type": "action", "action": "autopilot"})
+        assert sock.next("answer")["ok"]
+        c.wait(lambda s: s["control"] == "manual" and s["mode"] == "offboard", 30,
+               "manual, in OFFBOARD")
+        _hold_keys(sock, c, ["right"], lambda s: abs(s["position_ned_m"][1]) > 1.0)
+        sock.send({"type": "keys", "held": []})
+        _settled(c, "hover")
+        sock.send({"type": "action", "action": "autopilot"})
+        assert sock.next("answer")["ok"]
+        asked = sock.next("event")
+        while asked["hook"] != "before_cmd_hold":  # (not the vehicle's failsafe: the step)
+            assert asked["kind"] != "status_text" or "failsafe" not in asked["text"].lower()
+            asked = sock.next("event")
+        back = c.wait(lambda s: s["control"] == "autopilot" and s["mode"] == "hold", 30,
+                      "HOLD again")
+        assert back["step"] == "hold"
+        return True
+
+    summary, ok, _, _ = _fly_console(plan, tmp_path / "run", script)
+    assert ok
+    assert summary["status"] == "completed", summary["reason"]
