@@ -524,42 +524,83 @@ def load_yaml(path: str | Path) -> Located:
     return parse_yaml(text, source)
 
 
+MAX_YAML_DEPTH = 64  # nesting levels a configuration or mission may have
+MAX_YAML_NODES = 100_000  # values in one file, aliases expanded (a "billion laughs" stops here)
+
+
 def parse_yaml(text: str, source: str) -> Located:
     try:
         node = yaml.compose(text, Loader=yaml.SafeLoader)
-        data = yaml.safe_load(text)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         line = mark.line + 1 if mark is not None else None
         problem = getattr(exc, "problem", None) or str(exc)
         raise ConfigError([Problem(source, line, "", f"invalid YAML: {problem}")]) from None
+    except RecursionError:
+        raise ConfigError([Problem(source, None, "", "invalid YAML: nested too deeply")]) \
+            from None
     lines: dict[KeyPath, tuple[str, int | None]] = {(): (source, 1)}
     problems: list[Problem] = []
     if node is not None:
-        _walk(node, (), source, lines, problems)
+        # (before building the data: a recursive alias or an alias bomb is refused here)
+        _walk(node, (), source, lines, problems, (), [MAX_YAML_NODES])
     if problems:
         raise ConfigError(problems)
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:  # (composed above, so unlikely: a bad value, e.g. a date)
+        mark = getattr(exc, "problem_mark", None)
+        line = mark.line + 1 if mark is not None else None
+        problem = getattr(exc, "problem", None) or str(exc)
+        raise ConfigError([Problem(source, line, "", f"invalid YAML: {problem}")]) from None
+    except (ValueError, OverflowError) as exc:  # e.g. an impossible !!timestamp
+        raise ConfigError([Problem(source, None, "", f"invalid YAML value: {exc}")]) from None
     return Located({} if data is None else data, source, lines)
 
 
 def _walk(node: yaml.Node, path: KeyPath, source: str,
-          lines: dict[KeyPath, tuple[str, int | None]], problems: list[Problem]) -> None:
+          lines: dict[KeyPath, tuple[str, int | None]], problems: list[Problem],
+          stack: tuple[int, ...], budget: list[int]) -> None:
+    line = node.start_mark.line + 1
+    if id(node) in stack:
+        problems.append(Problem(source, line, _dotted(path), "an alias used inside its own "
+                                "anchor (the value would contain itself)"))
+        return
+    if len(stack) >= MAX_YAML_DEPTH:
+        problems.append(Problem(source, line, _dotted(path),
+                                f"nested more than {MAX_YAML_DEPTH} levels deep"))
+        return
+    budget[0] -= 1
+    if budget[0] < 0:
+        if budget[0] == -1:
+            problems.append(Problem(source, line, _dotted(path), f"more than {MAX_YAML_NODES} "
+                                    "values (aliases expanding?)"))
+        return
+    inner = (*stack, id(node))
     if isinstance(node, yaml.MappingNode):
         seen: set[str] = set()
         for key_node, value_node in node.value:
+            if not isinstance(key_node, yaml.ScalarNode):
+                problems.append(Problem(source, key_node.start_mark.line + 1, _dotted(path),
+                                        "a key must be a plain name, not a list or mapping"))
+                continue
             key = key_node.value
             child = (*path, key)
-            line = key_node.start_mark.line + 1
+            key_line = key_node.start_mark.line + 1
             if key in seen:
-                problems.append(Problem(source, line, _dotted(child), "duplicate key"))
+                problems.append(Problem(source, key_line, _dotted(child), "duplicate key"))
             seen.add(key)
-            lines[child] = (source, line)
-            _walk(value_node, child, source, lines, problems)
+            lines[child] = (source, key_line)
+            _walk(value_node, child, source, lines, problems, inner, budget)
+            if budget[0] < 0:
+                return
     elif isinstance(node, yaml.SequenceNode):
         for i, item in enumerate(node.value):
             child = (*path, i)
             lines[child] = (source, item.start_mark.line + 1)
-            _walk(item, child, source, lines, problems)
+            _walk(item, child, source, lines, problems, inner, budget)
+            if budget[0] < 0:
+                return
 
 
 def _dotted(path: Iterable[str | int]) -> str:

@@ -37,6 +37,17 @@ def no_camera_config(sim_config):
     return sim_config.model_copy(update={"cameras": cams})
 
 
+# -- Hypothesis: bounded in CI; `pytest --hypothesis-profile=long` runs the long fuzzing -----
+
+from hypothesis import settings as _hypothesis_settings  # noqa: E402
+
+_hypothesis_settings.register_profile("ci", max_examples=60, deadline=None, derandomize=True,
+                                      print_blob=True)
+_hypothesis_settings.register_profile("long", max_examples=3000, deadline=None,
+                                      print_blob=True)
+_hypothesis_settings.load_profile("ci")
+
+
 # -- long suites: real-time flights of external clients, soak and long profiles --------------
 
 def pytest_addoption(parser):
