@@ -341,3 +341,55 @@ def test_a_video_file_plays_through_ffmpeg_stamped_at_arrival(tmp_path):
     for frame, arrived_s in got:
         assert 0.0 <= arrived_s - (frame.time_s + 0.1) < 0.5
     assert source.timing.mode is TimeSource.ARRIVAL
+
+
+def test_garbage_in_the_stream_is_survived():
+    """RTP/H.264 garbage (Hypothesis) from the very sender the source took: random bytes, RTP
+    headers with random payloads and sequence jumps, cut and corrupted NAL units, RTCP noise,
+    oversized datagrams. The source decodes on, frames keep arriving, and what follows the
+    garbage is the stream's own picture again."""
+    import struct
+
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    port = _free_port_pair()
+    source = VideoSource(f"udp://@:{port}", _camera())
+    streams: list[_Stream] = []
+    thrown = [0]
+
+    def rtp(pt: int, seq: int, ts: int, ssrc: int, payload: bytes, marker: bool) -> bytes:
+        return struct.pack("!BBHII", 0x80, (0x80 if marker else 0) | (pt & 0x7F), seq & 0xFFFF,
+                           ts & 0xFFFFFFFF, ssrc & 0xFFFFFFFF) + payload
+
+    nal = st.one_of(
+        st.binary(max_size=1400),
+        st.builds(lambda kind, body: bytes([kind]) + body,
+                  st.sampled_from([0x65, 0x41, 0x67, 0x68, 0x7C, 0x78, 0x06, 0x1F]),
+                  st.binary(max_size=1200)))
+    datagrams = st.one_of(
+        st.binary(max_size=1500),
+        st.builds(rtp, st.sampled_from([96, 97, 0, 127]), st.integers(0, 70000),
+                  st.integers(0, 2 ** 32), st.integers(0, 2 ** 32), nal, st.booleans()),
+        st.just(b"\x80\xc8" + b"\x00" * 6),  # a cut RTCP sender report
+        st.just(b"\x80" * 9000))
+
+    @settings(deadline=None, max_examples=200, derandomize=True)
+    @given(datagrams)
+    def throw(datagram):
+        sock = streams[0].sender._sock
+        with contextlib.suppress(OSError):
+            sock.sendto(datagram, ("127.0.0.1", port))
+            thrown[0] += 1
+
+    async def start():
+        streams.append(_Stream(port).start())
+        await _until(lambda: source.sender is not None)
+        await asyncio.to_thread(throw)
+        return streams
+
+    got = asyncio.run(_receive(source, 200, start, timeout_s=40.0))
+    assert thrown[0] >= 150
+    assert len(got) == 200
+    # after the garbage, the stream's own pictures again (the square where it belongs)
+    assert all(not np.isnan(_square_x(frame.image)) for frame, _ in got[-20:])
