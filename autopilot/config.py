@@ -33,6 +33,7 @@ from drivers.sim.config import CameraConfig, SimConfig
 KeyPath = tuple[str | int, ...]
 Positive = Annotated[float, Field(gt=0)]
 NonNegative = Annotated[float, Field(ge=0)]
+FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
 ColorName = Literal[tuple(COLORS)]  # type: ignore[valid-type]
 HsvTriple = tuple[Annotated[int, Field(ge=0, le=180)], Annotated[int, Field(ge=0, le=255)],
                   Annotated[int, Field(ge=0, le=255)]]
@@ -416,6 +417,29 @@ class ConsoleKeysConfig(_Model):
         return self
 
 
+class GeofenceConfig(_Model):
+    """The autopilot's own fence, checked on every setpoint (0 / null: that limit is off)."""
+
+    max_distance_m: Annotated[float, Field(ge=0)] = 0.0  # horizontal, from home
+    max_altitude_m: Annotated[float, Field(ge=0)] = 0.0  # above home
+    polygon_m: list[tuple[FiniteFloat, FiniteFloat]] | None = None  # north, east (local)
+    lookahead_s: Annotated[float, Field(gt=0, le=10)] = 1.0  # velocity setpoints
+
+    @field_validator("polygon_m")
+    @classmethod
+    def _polygon(cls, value):
+        if value is not None:
+            from shapely.geometry import Polygon
+
+            if len(value) < 3 or not Polygon(value).is_valid or Polygon(value).area <= 0:
+                raise ValueError("a polygon needs 3 or more corners and must not cross itself")
+        return value
+
+
+class FailsafeConfig(_Model):
+    geofence: GeofenceConfig = GeofenceConfig()
+
+
 class ConsoleConfig(_Model):
     """The operator console (``--console HOST:PORT``): video, values, keyboard flying."""
 
@@ -447,6 +471,7 @@ class AppConfig(_Model):
     rover: RoverConfig
     log: LogConfig
     console: ConsoleConfig = ConsoleConfig()
+    failsafe: FailsafeConfig = FailsafeConfig()
     sim: SimConfig  # its cameras are vehicle.cameras
 
     @model_validator(mode="before")

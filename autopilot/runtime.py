@@ -54,6 +54,7 @@ from autopilot.behaviors.base import (
 )
 from autopilot.behaviors.manual import ACTIONS, HeldKeys, ManualFlight, ManualSettings
 from autopilot.console.view import pose_record, publish_vehicle, vehicle_map, vehicle_status
+from autopilot.control.geofence import FenceSettings, Geofence
 from autopilot.estimation.target import TargetEstimate
 from autopilot.flightlog import records as ch
 from autopilot.flightlog.log import FlightLog
@@ -236,6 +237,13 @@ class Runtime:
         self._manual_offboard_asked_s = -math.inf
         self._console_actions: list[str] = []
         self._console_requests: tuple[VehicleRequest, ...] = ()
+        gf = cfg.failsafe.geofence
+        #: the autopilot's own geofence, checked on every setpoint (autopilot/control/geofence)
+        self.fence = Geofence(FenceSettings(
+            gf.max_distance_m or None, gf.max_altitude_m or None,
+            tuple(tuple(p) for p in gf.polygon_m) if gf.polygon_m else None, gf.lookahead_s))
+        self._fence_breach: str | None = None
+        self._fence_handled = False
         self._control_ended = False
         self._resumed = False
         self._emergency: str | None = None
@@ -343,6 +351,25 @@ class Runtime:
                 await self._apply(out, None)
                 continue
             self._publish_values(inputs)
+            if self._fence_breach is None and self.fence.settings.active and \
+                    inputs.state.in_air:
+                where = self.fence.check_state(inputs.state, self.vehicle.home_ned_m)
+                if where is not None:
+                    self._fence_breach = f"the vehicle is {where}"
+            if self._fence_breach is not None and not self._fence_handled:
+                # geofence: no setpoint went out; the mission's fallback (hold, land) takes over
+                self._fence_handled = True
+                self.manual = False
+                self._console_actions.clear()
+                self._intent = None
+                self._event(self.clock.now(), "failsafe", f"geofence: {self._fence_breach}")
+                self.events.emit(Event("mission", "geofence", self.clock.now(),
+                                       f"geofence: {self._fence_breach}"))
+                with contextlib.suppress(VehicleError, TimeoutError):
+                    await self.clock.wait_for(self.vehicle.hold(), 2.0)
+                out = executor.abort(f"geofence: {self._fence_breach}", inputs)
+                await self._apply(out, None)
+                continue
             if self._emergency is not None:
                 await self._emergency_stop(inputs)
                 return
@@ -995,6 +1022,15 @@ class Runtime:
                 await self._send(intent)
 
     async def _send(self, intent: Intent) -> None:
+        state = self._state
+        if state is not None and self.fence.settings.active:
+            why = self.fence.check(intent.setpoint, state, self.vehicle.home_ned_m)
+            if why is not None:  # nothing goes out; the control loop hands over to the fallback
+                if self._fence_breach is None:
+                    self._fence_breach = why
+                    self._estimated.put(math.nan)
+                self._intent = None
+                return
         await self.vehicle.send_setpoint(intent.setpoint)
         now = self.clock.now()
         self._last_send_s = now

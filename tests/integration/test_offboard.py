@@ -129,3 +129,28 @@ scenario: {ball: null}
     assert second["points_ned_m"][-1] == pytest.approx([0.0, 0.0, -3.0], abs=0.12)
     statuses = [r["code"] for r in log[ch.MISSION_STATUS]]
     assert statuses[:6] == [1, 2, 4, 5, 4, 5]
+
+
+def test_a_goto_beyond_the_geofence_is_stopped_at_it_and_lands(tmp_path):
+    """failsafe.geofence (the autopilot's own, on every setpoint): a goto 30 m out with a fence
+    at 12 m sends nothing past it; the mission's fallback holds and lands inside a margin."""
+    mission = tmp_path / "far.yaml"
+    mission.write_text("name: far\ndescription: too far\nsteps:\n"
+                       "  - takeoff: {altitude_m: 3.0}\n"
+                       "  - goto: {position_m: [30, 0, 3], speed_m_s: 3}\n"
+                       "  - land: {}\nfallback: land\n")
+    plan = load_mission(str(mission), ["failsafe.geofence.max_distance_m=12"])
+    summary = asyncio.run(fly(plan, tmp_path / "run"))
+    assert summary["status"] == "aborted"
+    assert "geofence" in summary["reason"]
+    records = read_log(tmp_path / "run" / "flight.mcap")
+    truth = records[ch.GROUND_TRUTH]
+    furthest = max(math.hypot(*r["vehicle_position_ned_m"][:2]) for r in truth)
+    assert furthest < 12.0 + 1.5  # braking from 3 m/s at the fence
+    last = truth[-1]["vehicle_position_ned_m"]
+    assert last[2] > -0.3  # landed
+    targets = [r["position_ned_m"][:2] for r in records[ch.SETPOINTS]
+               if r.get("position_ned_m") is not None]
+    targets = [t for t in targets if all(v is not None and math.isfinite(v) for v in t)]
+    assert targets
+    assert max(math.hypot(*t) for t in targets) <= 12.0 + 1e-6  # none sent past the fence
