@@ -1051,8 +1051,9 @@ class Runtime:
             self.log.write(ch.SETPOINTS, now, record)
 
     def _simulator_tasks(self, tasks: asyncio.TaskGroup) -> list[asyncio.Task]:
-        """Ground truth and status messages, when the vehicle is the simulator (for the log
-        and scoring only; nothing here reaches the autopilot's decisions)."""
+        """Ground truth, when the vehicle is the simulator (for the log and scoring only;
+        nothing here reaches the autopilot's decisions), and the vehicle's status messages
+        (the simulator's, or STATUSTEXT over MAVLink: the log and the console's events)."""
         found = []
         truth = getattr(self.vehicle, "ground_truth", None)
         if callable(truth):

@@ -69,6 +69,8 @@ class MavlinkVehicle(Vehicle):
         self.rover_system_id: int | None = None
         self.rover_latency_s = 0.1
         self._rovers: Broadcast[RoverState] = Broadcast()
+        self._texts: Broadcast[tuple[float, str]] = Broadcast()
+        self._text_parts: dict[int, list[str]] = {}
 
     @property
     def global_origin(self) -> GlobalOrigin | None:
@@ -139,6 +141,26 @@ class MavlinkVehicle(Vehicle):
     def _end_telemetry(self, error: VehicleError | None) -> None:
         self._telemetry.close(error)
         self._rovers.close(error)
+        self._texts.close(error)
+
+    def events(self, buffer: int = 64) -> AsyncIterator[tuple[float, str]]:
+        """The vehicle's status messages (STATUSTEXT: mode changes, failsafes, refusals),
+        each as (arrival time, text), long ones put back together from their chunks."""
+        return self._texts.subscribe(buffer)
+
+    def _on_vehicle_text(self, msg) -> str | None:
+        """A STATUSTEXT from the vehicle: published whole (None while chunks are missing)."""
+        text = msg.text if isinstance(msg.text, str) else msg.text.decode(errors="replace")
+        text = text.rstrip("\x00")
+        ident = getattr(msg, "id", 0) or 0
+        if ident:
+            parts = self._text_parts.setdefault(ident, [])
+            parts.append(text)
+            if len(text) >= 50 and len(parts) < 20:
+                return None  # (a full chunk: more follow)
+            text = "".join(self._text_parts.pop(ident))
+        self._texts.publish((self._clock.now(), text))
+        return text
 
     @property
     def clock(self) -> MonotonicClock:

@@ -287,6 +287,8 @@ class MavsdkDriver(MavlinkVehicle):
                 self._mode = FlightMode.PRECLAND
         elif kind == "HOME_POSITION" and src == self._target:
             self._on_home_position(msg)
+        elif kind == "STATUSTEXT" and src == self._target:
+            self._on_vehicle_text(msg)
         elif kind == "GPS_GLOBAL_ORIGIN" and src == self._target:
             self._on_gps_global_origin(msg)
         elif kind == "TIMESYNC" and msg.tc1 != 0:

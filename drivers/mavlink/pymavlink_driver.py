@@ -403,6 +403,7 @@ class PymavlinkDriver(MavlinkVehicle):
     def _on_statustext(self, msg) -> None:
         text = msg.text if isinstance(msg.text, str) else msg.text.decode(errors="replace")
         self._statustext.append(text.rstrip("\x00"))
+        self._on_vehicle_text(msg)
 
     def _on_attitude_quaternion(self, msg) -> None:
         self._q = np.array([msg.q1, msg.q2, msg.q3, msg.q4])

@@ -35,6 +35,14 @@ def test_driver_flies_the_simulator_end_to_end(no_camera_config, driver_class):
         async with served(no_camera_config) as (vehicle, _face):
             driver = driver_class(CLIENT_URL)
             await driver.connect(timeout_s=10.0)
+            texts: list[str] = []
+
+            async def read_texts():  # STATUSTEXT, put back together (the console's events)
+                async with contextlib.aclosing(driver.events()) as events:
+                    async for _time_s, text in events:
+                        texts.append(text)
+
+            reader = asyncio.get_running_loop().create_task(read_texts())
             try:
                 state = driver.latest_state
                 assert state.mode is FlightMode.HOLD or state.mode is FlightMode.UNKNOWN
@@ -68,7 +76,10 @@ def test_driver_flies_the_simulator_end_to_end(no_camera_config, driver_class):
                 await driver.land()
                 await wait_for_state(driver, lambda s: not s.armed, 60.0, "landed, disarmed")
                 assert vehicle.latest_state.altitude_m < 0.3
+                assert any("offboard" in t.lower() for t in texts), texts
+                assert any("COM_OF_LOSS_T" in t for t in texts), texts  # the refusal's reason
             finally:
+                reader.cancel()
                 await driver.close()
 
     asyncio.run(main())
