@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 
 from drivers.mavlink.face import MavlinkFace
@@ -24,3 +25,23 @@ async def served(config, scenario=(), **kwargs):
     finally:
         await face.close()
         await vehicle.close()
+
+
+@contextlib.asynccontextmanager
+async def collected(stream):
+    """Every item of the async iterator ``stream`` (a driver's telemetry, its status texts),
+    appended to the list this yields while the block runs; the stream is closed after."""
+    items: list = []
+
+    async def collect() -> None:
+        async with contextlib.aclosing(stream) as source:
+            async for item in source:
+                items.append(item)
+
+    task = asyncio.ensure_future(collect())
+    try:
+        yield items
+    finally:
+        task.cancel()
+        with contextlib.suppress(asyncio.CancelledError, Exception):
+            await task

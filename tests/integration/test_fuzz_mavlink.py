@@ -19,7 +19,7 @@ from autopilot.flight_ops import wait_for_state
 from drivers.mavlink.mavsdk_driver import MavsdkDriver
 from drivers.mavlink.pymavlink_driver import PymavlinkDriver
 
-from .mavtools import CLIENT_URL, INSTANCE, served
+from .mavtools import CLIENT_URL, INSTANCE, collected, served
 
 _MAV = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
 _VALID = [
@@ -66,14 +66,8 @@ def test_garbage_at_the_face_and_the_driver_changes_nothing(no_camera_config, dr
                     rogue.sendto(datagram, target)
                     sent[0] += 1
 
-            states = []
-
-            async def watch():
-                async with contextlib.aclosing(driver.telemetry(buffer=64)) as samples:
-                    async for state in samples:
-                        states.append(state)
-
-            watcher = asyncio.ensure_future(watch())
+            watching = collected(driver.telemetry(buffer=64))
+            states = await watching.__aenter__()
             try:
                 # the garbage goes out from a thread while the loop serves both ends
                 await asyncio.to_thread(throw)
@@ -92,7 +86,7 @@ def test_garbage_at_the_face_and_the_driver_changes_nothing(no_camera_config, dr
                 await wait_for_state(driver, lambda s: not s.armed, 60.0, "landed")
                 assert face.stats.received > 0
             finally:
-                watcher.cancel()
+                await watching.__aexit__(None, None, None)
                 rogue.close()
                 await driver.close()
 

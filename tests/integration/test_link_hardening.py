@@ -23,7 +23,7 @@ from drivers.mavlink.mavsdk_driver import MavsdkDriver
 from drivers.mavlink.pymavlink_driver import PymavlinkDriver
 from drivers.mavlink.signing import Signing
 
-from .mavtools import CLIENT_URL, INSTANCE, served
+from .mavtools import CLIENT_URL, INSTANCE, collected, served
 
 CLIENT_PORT = 14540 + INSTANCE
 DRIVERS = [PymavlinkDriver, MavsdkDriver]
@@ -50,14 +50,8 @@ def test_a_second_sender_is_ignored_and_cannot_redirect_setpoints(no_camera_conf
             driver = driver_class(CLIENT_URL)
             await driver.connect(timeout_s=10.0)
             sock, mav = _rogue()
-            states = []
-
-            async def watch():
-                async with contextlib.aclosing(driver.telemetry(buffer=64)) as samples:
-                    async for state in samples:
-                        states.append(state)
-
-            watcher = asyncio.ensure_future(watch())
+            watching = collected(driver.telemetry(buffer=64))
+            states = await watching.__aenter__()
             try:
                 with caplog.at_level(logging.WARNING):
                     for _ in range(20):
@@ -81,7 +75,7 @@ def test_a_second_sender_is_ignored_and_cannot_redirect_setpoints(no_camera_conf
                 with pytest.raises(BlockingIOError):
                     sock.recv(4096)
             finally:
-                watcher.cancel()
+                await watching.__aexit__(None, None, None)
                 sock.close()
                 await driver.close()
 

@@ -18,7 +18,7 @@ from drivers.base import CommandDenied, FlightMode, Setpoint
 from drivers.mavlink.mavsdk_driver import MavsdkDriver
 from drivers.mavlink.pymavlink_driver import PymavlinkDriver
 
-from .mavtools import CLIENT_URL, served
+from .mavtools import CLIENT_URL, collected, served
 
 
 async def _fly_offboard(driver) -> None:
@@ -35,14 +35,9 @@ def test_driver_flies_the_simulator_end_to_end(no_camera_config, driver_class):
         async with served(no_camera_config) as (vehicle, _face):
             driver = driver_class(CLIENT_URL)
             await driver.connect(timeout_s=10.0)
-            texts: list[str] = []
-
-            async def read_texts():  # STATUSTEXT, put back together (the console's events)
-                async with contextlib.aclosing(driver.events()) as events:
-                    async for _time_s, text in events:
-                        texts.append(text)
-
-            reader = asyncio.get_running_loop().create_task(read_texts())
+            # STATUSTEXT, put back together (the console's events)
+            reading = collected(driver.events())
+            events = await reading.__aenter__()
             try:
                 state = driver.latest_state
                 assert state.mode is FlightMode.HOLD or state.mode is FlightMode.UNKNOWN
@@ -76,10 +71,11 @@ def test_driver_flies_the_simulator_end_to_end(no_camera_config, driver_class):
                 await driver.land()
                 await wait_for_state(driver, lambda s: not s.armed, 60.0, "landed, disarmed")
                 assert vehicle.latest_state.altitude_m < 0.3
+                texts = [text for _time_s, text in events]
                 assert any("offboard" in t.lower() for t in texts), texts
                 assert any("COM_OF_LOSS_T" in t for t in texts), texts  # the refusal's reason
             finally:
-                reader.cancel()
+                await reading.__aexit__(None, None, None)
                 await driver.close()
 
     asyncio.run(main())
