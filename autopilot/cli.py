@@ -30,6 +30,14 @@ def _add_config_options(parser: argparse.ArgumentParser) -> None:
                         "(dotted path, e.g. sim.wind.gust_mps=2); repeatable")
 
 
+def _add_fault_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--fault", dest="faults", action="append", default=[], metavar="KIND[:KEY=VALUE,...]",
+        help="inject a fault in the simulated vehicle (replaces the mission's scenario.faults; "
+        "repeatable), e.g. camera_dropout:start_s=12,duration_s=3 or link_loss:fraction=0.3; "
+        "kinds and parameters: drivers/sim/faults.py and the README")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="autopilot", description="Camera-guided quadrotor missions for PX4 / MAVLink "
@@ -89,6 +97,7 @@ def build_parser() -> argparse.ArgumentParser:
                      "mission's first camera's); default vehicle.cameras.NAME.calibration, "
                      "else the nominal pinhole (with a warning)")
     _add_config_options(run)
+    _add_fault_option(run)
 
     sim = commands.add_parser(
         "sim", help="run the simulator in real time as a MAVLink vehicle (like PX4 SITL)")
@@ -167,6 +176,7 @@ def build_parser() -> argparse.ArgumentParser:
     scorer.add_argument("--truth", required=True, metavar="FILE",
                         help="the simulator's truth.mcap")
     _add_config_options(sim)
+    _add_fault_option(sim)
 
     calibrate = commands.add_parser(
         "calibrate", help="estimate a camera's intrinsics and lens distortion from views of a "
@@ -227,6 +237,7 @@ def build_parser() -> argparse.ArgumentParser:
     trials.add_argument("--set", dest="overrides", action="append", default=[],
                         metavar="KEY=VALUE", help="override a mission or configuration key "
                         "(every run)")
+    _add_fault_option(trials)
     trials.add_argument("--vary", dest="varies", action="append", default=[],
                         metavar="KEY=LOW:HIGH|KEY=A,B,C",
                         help="draw a key's value per seed: uniformly in [LOW, HIGH], or one "
@@ -413,6 +424,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.command in ("run", "bench", "sim", "doctor", "trials"):
         configure_for_flight()
     try:
+        if getattr(args, "faults", None):
+            from drivers.sim.faults import FaultError, fault_override
+
+            try:
+                args.overrides = [*args.overrides, fault_override(args.faults)]
+            except FaultError as exc:
+                raise InputError(str(exc)) from None
         return _dispatch(args)
     except ConfigError as exc:
         print(f"error: invalid configuration:\n{exc}", file=sys.stderr)

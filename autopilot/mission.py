@@ -53,10 +53,12 @@ from autopilot.config import (
     load_yaml,
     validate,
 )
+from autopilot.perception.colors import COLORS
 from autopilot.pipeline import PipelineSpec
 from autopilot.resources import default_config_path, missions_dir
 from autopilot.steps import STEP_KINDS, StepContext, step_kind
 from drivers.base import CameraInfo, Setpoint
+from drivers.sim.faults import Fault
 
 MISSION_KEYS = ("name", "description", "steps", "fallback", "scenario", "config")
 
@@ -192,6 +194,21 @@ class Scenario(_Model):
     #: marker pads with other ids): how many
     decoys: Annotated[int, Field(ge=0, le=30)] | list[Annotated[int, Field(ge=0)]] = 0
     wind: WindScenario = WindScenario()
+    #: injected faults, each a window after the first arming (drivers/sim/faults.py)
+    faults: list[Fault] = Field(default_factory=list)
+
+    @model_validator(mode="after")
+    def _faults_apply(self) -> Scenario:
+        for i, f in enumerate(self.faults):
+            if f.kind == "decoy_crossing" and self.ball is None:
+                raise ValueError(f"faults[{i}] decoy_crossing: the scenario has no ball to cross")
+            if f.kind == "rover_stop" and self.rover is None:
+                raise ValueError(f"faults[{i}] rover_stop: the scenario has no rover")
+            color = getattr(f, "color", None)
+            if color is not None and color not in COLORS:
+                raise ValueError(f"faults[{i}] decoy_crossing: unknown color {color!r} "
+                                 f"(known: {', '.join(COLORS)})")
+        return self
 
     @model_validator(mode="after")
     def _marker_dictionary(self) -> Scenario:
@@ -337,6 +354,15 @@ def load_mission(name_or_path: str, overrides: list[str] = (),
             except ValueError as exc:
                 source, line = located.locate(("steps", i, step.name))
                 problems.append(Problem(source, line, f"steps.{i}.{step.name}", str(exc)))
+        faults = mission.scenario.faults if mission.scenario is not None else []
+        cameras = [name for name, cam in config.vehicle.cameras.items() if cam.enabled]
+        for i, fault in enumerate(faults):
+            camera = getattr(fault, "camera", None)
+            if camera is not None and camera not in cameras:
+                source, line = located.locate(("scenario", "faults", i))
+                problems.append(Problem(source, line, f"scenario.faults.{i}.camera",
+                                        f"no camera {camera!r} on the vehicle (its cameras: "
+                                        f"{', '.join(cameras) or 'none'})"))
     if problems:
         problems.sort(key=lambda p: (p.source == "--set", p.source, p.line or 0))
         raise ConfigError(problems)

@@ -48,13 +48,19 @@ def build_world(scenario: Scenario | None, sim: SimConfig, rover: RoverConfig | 
         return sim, []
     wind = sim.wind.model_copy(update={"gust_mps": scenario.wind.gust_mps,
                                        "steady_ned_m_s": scenario.wind.steady_ned_m_s})
-    sim = sim.model_copy(update={"seed": scenario.seed, "wind": wind})
+    sim = sim.model_copy(update={"seed": scenario.seed, "wind": wind,
+                                 "faults": list(scenario.faults)})
     objects: list[ScenarioObject] = []
     if scenario.ball is not None:
         path = ball_trajectory(scenario.ball, sim, scenario.seed)
         objects.append(MocapBody(BALL, [Geom("sphere", (scenario.ball.diameter_m / 2.0,),
                                              COLORS[scenario.ball.color][0])], path))
         objects += distractors(scenario, sim, path)
+        for k, fault in enumerate(f for f in scenario.faults if f.kind == "decoy_crossing"):
+            color = COLORS[fault.color or scenario.ball.color][0]
+            objects.append(MocapBody(f"decoy{k}_ball", [Geom(
+                "sphere", (scenario.ball.diameter_m / 2.0,), color, collide=False)],
+                Crossing(path, fault, sim.vehicle.initial_north_east_m)))
     if scenario.marker is not None:
         objects += marker_board(scenario, sim)
     if scenario.image is not None:
@@ -163,6 +169,30 @@ def marker_board(scenario: Scenario, sim: SimConfig) -> list[ScenarioObject]:
         seed=scenario.seed, start_delay_s=m.start_delay_s, accel_mps2=m.accel_mps2,
         origin_north_east_m=sim.vehicle.initial_north_east_m,
         heading_deg=sim.vehicle.initial_yaw_deg, name=MARKER)
+
+
+class Crossing:
+    """A decoy ball's path (fault ``decoy_crossing``): hidden under the ground outside the
+    fault's window; within it, a straight line across the line of sight from the vehicle's
+    start to where the ball is halfway through the window, ``behind_m`` beyond the ball,
+    passing that point at the window's middle."""
+
+    def __init__(self, ball: Trajectory, fault, start_north_east_m) -> None:
+        self.start, self.end = fault.start_s, fault.start_s + fault.duration_s
+        mid = 0.5 * (self.start + self.end)
+        centre = np.asarray(ball(mid)[0], dtype=float)
+        sight = centre[:2] - np.asarray(start_north_east_m, dtype=float)
+        norm = float(np.linalg.norm(sight))
+        sight = sight / norm if norm > 1e-6 else np.array([1.0, 0.0])
+        self.mid = mid
+        self.centre = centre + fault.behind_m * np.array([sight[0], sight[1], 0.0])
+        self.velocity = fault.speed_m_s * np.array([-sight[1], sight[0], 0.0])
+        self.hidden = np.array([self.centre[0], self.centre[1], 5.0])
+
+    def __call__(self, time_s: float) -> tuple[np.ndarray, np.ndarray, float]:
+        if not self.start <= time_s < self.end:
+            return self.hidden, np.zeros(3), 0.0
+        return self.centre + self.velocity * (time_s - self.mid), self.velocity, 0.0
 
 
 def ball_trajectory(ball: BallScenario, sim: SimConfig, seed: int) -> Trajectory:

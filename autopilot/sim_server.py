@@ -205,10 +205,15 @@ async def stream_video(vehicle: SimDriver, camera: str, url: str,
     executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="video-encode")
     intr = info.intrinsics
     sender: VideoSender | None = None
+    sim = vehicle.simulator
+
+    def drop() -> bool:  # a link_loss fault's video_fraction
+        return bool(sim.faults) and sim.faults.video_lost(sim.fault_time_s())
+
     try:
         sender = await loop.run_in_executor(
             executor, lambda: VideoSender(url, intr.width_px, intr.height_px, info.rate_hz,
-                                          capture_clock=vehicle.clock.now))
+                                          capture_clock=vehicle.clock.now, drop=drop))
         async with contextlib.aclosing(vehicle.frames(camera)) as frames:
             async for frame in frames:
                 await loop.run_in_executor(executor, sender.send, frame.image, frame.time_s)

@@ -669,7 +669,8 @@ class VideoSender:
                  bitrate_bps: int = 2_000_000, keyframe_interval: int = 30,
                  rtcp: bool = True, cname: str = SIM_CNAME, rtp_offset_ticks: int = 0,
                  capture_clock: Callable[[], float] | None = None,
-                 rtcp_interval_s: float = RTCP_INTERVAL_S) -> None:
+                 rtcp_interval_s: float = RTCP_INTERVAL_S,
+                 drop: Callable[[], bool] | None = None) -> None:
         import av
 
         address = _rtp_address(url)
@@ -705,6 +706,9 @@ class VideoSender:
         self.packets_sent = 0
         self.octets_sent = 0
         self.reports_sent = 0
+        #: asked for each RTP packet: True loses it (the simulator's link_loss fault)
+        self._drop = drop
+        self.packets_dropped = 0
 
     @property
     def ssrc(self) -> int:
@@ -743,6 +747,9 @@ class VideoSender:
     def _send(self, annexb: bytes, pts: int) -> None:
         timestamp = (pts + self._rtp_offset_ticks) % _TS_WRAP
         for datagram in self._rtp.packets(split_nal_units(annexb), timestamp):
+            if self._drop is not None and self._drop():
+                self.packets_dropped += 1
+                continue
             self._sendto(datagram, self._address)
             self.packets_sent += 1
             self.octets_sent += len(datagram) - 12

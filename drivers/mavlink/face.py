@@ -76,6 +76,7 @@ class FaceStats:
     setpoints: int = 0
     rejected_setpoints: int = 0
     landing_targets: int = 0
+    link_dropped: int = 0  # lost to a link_loss fault
 
 
 class _Link(asyncio.DatagramProtocol):
@@ -101,6 +102,13 @@ class _Link(asyncio.DatagramProtocol):
         self.transport = transport
 
     def datagram_received(self, data: bytes, addr) -> None:
+        fault = self.face.link_fault()
+        if fault is not None:  # the simulator's link_loss fault, on the way in
+            self.face.impaired(fault, lambda: self._parse(data, addr))
+            return
+        self._parse(data, addr)
+
+    def _parse(self, data: bytes, addr) -> None:
         try:
             messages = self._rx.parse_buffer(data) or []
         except Exception as exc:  # pymavlink raises on some corrupt (or badly signed) frames
@@ -125,7 +133,16 @@ class _Link(asyncio.DatagramProtocol):
             return
         mav = mav or self.mav
         refresh(mav)
-        self.transport.sendto(pack(mav, msg), self.peer)
+        data, peer = pack(mav, msg), self.peer
+        fault = self.face.link_fault()
+        if fault is not None:  # the simulator's link_loss fault, on the way out
+            self.face.impaired(fault, lambda: self._sendto(data, peer))
+            return
+        self.transport.sendto(data, peer)
+
+    def _sendto(self, data: bytes, peer) -> None:
+        if self.transport is not None and not self.transport.is_closing():
+            self.transport.sendto(data, peer)
 
 
 @dataclass
@@ -202,6 +219,40 @@ class MavlinkFace:
         self.missions = MissionServer(vehicle, self._send, self._spawn, self._say)
         self._reached: list[list[int]] = []  # [seq, sends left]
         self._text_id = 0
+
+    # ------------------------------------------------------------------------------------
+    # Link impairment (the simulator's link_loss fault: drivers/sim/faults.py)
+    # ------------------------------------------------------------------------------------
+
+    def link_fault(self):
+        """The simulated vehicle's active ``link_loss`` fault (None: a clean link)."""
+        try:
+            sim = self.vehicle.simulator
+        except Exception:  # not a simulator, or not connected
+            return None
+        faults = getattr(sim, "faults", None)
+        if not faults or not faults.of("link_loss"):
+            return None
+        active = faults.active("link_loss", sim.fault_time_s())
+        return active[0] if active else None
+
+    def impaired(self, fault, deliver: Callable[[], None]) -> None:
+        """One datagram across an impaired link: lost (``fraction``), delivered twice
+        (``duplicate``), held back behind later ones (``reorder``: 20–150 ms) and late
+        (``latency_s``)."""
+        rng = self.vehicle.simulator.faults.link_rng
+        if rng.random() < fault.fraction:
+            self.stats.link_dropped += 1
+            return
+        delay = fault.latency_s
+        if fault.reorder and rng.random() < fault.reorder:
+            delay += float(rng.uniform(0.02, 0.15))
+        copies = 2 if fault.duplicate and rng.random() < fault.duplicate else 1
+        for _ in range(copies):
+            if delay > 0.0:
+                asyncio.get_running_loop().call_later(delay, deliver)
+            else:
+                deliver()
 
     # ------------------------------------------------------------------------------------
     # Life cycle

@@ -12,6 +12,7 @@ from typing import Annotated
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from drivers.camera_model import distortion_problem, pinhole
+from drivers.sim.faults import Fault
 from drivers.sim.flight.params import validate_overrides
 
 Positive = Annotated[float, Field(gt=0)]
@@ -273,6 +274,8 @@ class SimConfig(_Model):
     flight_stack: FlightStackConfig
     #: the vehicle's cameras (the application fills them in from ``vehicle.cameras``)
     cameras: dict[str, CameraConfig] = Field(default_factory=dict)
+    #: injected faults (a mission's ``scenario.faults``; see drivers/sim/faults.py)
+    faults: list[Fault] = Field(default_factory=list)
 
     @field_validator("params")
     @classmethod

@@ -35,6 +35,12 @@ from drivers.base import CameraInfo, ConnectionLost, Frame, Health, Setpoint, Ve
 from drivers.geo import GlobalOrigin
 from drivers.sim.camera import CameraEffects, CameraRig, SimCamera, VehicleMotion
 from drivers.sim.config import SimConfig
+from drivers.sim.faults import (
+    FaultSchedule,
+    TimeWarp,
+    WarpedPath,
+    corrupt_image,
+)
 from drivers.sim.flight.flight_stack import FlightStack
 from drivers.sim.flight.navigator import NavEvent
 from drivers.sim.flight.params import Parameters, config_defaults
@@ -185,6 +191,28 @@ class Simulator:
                 r.position_error_m, r.position_error_time_constant_s, r.velocity_noise_m_s,
                 r.heading_noise_deg, r.heading_bias_deg, r.system_id), rng_rover)
 
+        #: injected faults (drivers/sim/faults.py), on the scenario's clock
+        self.faults = FaultSchedule(config.faults, self.seed)
+        for f in self.faults.faults:
+            camera = getattr(f, "camera", None)
+            if camera is not None and camera not in self.cameras:
+                raise ValueError(f"fault {f.kind}: no camera {camera!r} (the vehicle's cameras: "
+                                 f"{', '.join(self.cameras) or 'none'})")
+        if self.faults.of("rover_stop"):
+            if self.rover is None:
+                raise ValueError("fault rover_stop: the scenario has no rover")
+            path = self.rover.path
+            path = path.path if isinstance(path, WarpedPath) else path
+            self.rover.path = WarpedPath(path, TimeWarp(self.faults.of("rover_stop")))
+        self._fault_rng = np.random.default_rng((self.seed, 6152))
+        self._last_image: dict[str, np.ndarray] = {}
+        self._frozen: dict[str, np.ndarray] = {}
+        self._motor_scale = np.ones(len(self._act))
+        self._sagged: set[int] = set()
+        self._gps_drift = np.zeros(3)
+        self._gps_dir = np.zeros(3)
+        self._gust_state: dict[int, np.ndarray] = {}
+
         self._step = 0
         #: Scripted motion starts when the vehicle first arms (None until then), so that a
         #: scenario unfolds the same however long a client took to connect and arm.
@@ -237,7 +265,10 @@ class Simulator:
         while self._outbox and self._outbox[0][0] <= now:
             item = heapq.heappop(self._outbox)[2]
             if item.kind == "frame":
-                item = SimOutput(item.delivery_s, "frame", self._rig.finish(item.payload))
+                frame = self._rig.finish(item.payload)
+                if self.faults:
+                    frame = self._faulted_frame(frame)
+                item = SimOutput(item.delivery_s, "frame", frame)
             elif item.kind == "photo" and isinstance(item.payload, tuple):
                 meta, pending = item.payload
                 item = SimOutput(item.delivery_s, "photo", dataclasses.replace(
@@ -276,9 +307,10 @@ class Simulator:
         m, d = self.model, self.data
         k = self._step
         control = k % self._rate_div == 0
+        if self._scenario_t0 is None and self.flight.armed and \
+                (control or k >= self._next_capture):
+            self._scenario_t0 = k * self.dt
         if self._moving and (control or k >= self._next_capture):
-            if self._scenario_t0 is None and self.flight.armed:
-                self._scenario_t0 = k * self.dt
             t = self._scenario_time(k * self.dt)
             for obj in self._moving:
                 obj.update(t, d)
@@ -287,7 +319,7 @@ class Simulator:
             self._control_tick()
         omega = self._omega
         omega += self._motor_alpha * (self._omega_cmd - omega)
-        self.rotor_thrust_n = thrust = self._thrust_max * omega * omega
+        self.rotor_thrust_n = thrust = self._thrust_max * omega * omega * self._motor_scale
         d.ctrl[self._act] = thrust
         if k >= self._next_capture:
             self._captures(k)
@@ -311,7 +343,8 @@ class Simulator:
         for name, cam in self.cameras.items():
             sched = self._cam_schedules[name]
             if k >= sched.next_step:
-                if cam.active:
+                if cam.active and not (self.faults and self.faults.camera(
+                        "camera_dropout", name, self._fault_time(t))):
                     due = t + cam.latency_s
                     if motion is None:
                         motion = self._vehicle_motion()
@@ -336,6 +369,8 @@ class Simulator:
             pos, vel, q, rates = self._truth_state()
             dt_outer = self._dt_ctrl * self._outer_div
             self.estimator.step(dt_outer)
+            if self.faults:
+                self._outer_faults(dt_outer)
             thrust = self.rotor_thrust_n
             self.battery.step(dt_outer, thrust)
             wind = self.wind.step(dt_outer)
@@ -343,9 +378,11 @@ class Simulator:
             d.xfrc_applied[self._body, :3] = (f[1], f[0], -f[2])  # NED → ENU
             self._health = self.health()
             est = self.estimator.estimate(pos, vel, q, rates)
+            if self.faults:
+                est = self._faulted_estimate(est, dt_outer)
             self._est = est
             self.flight.update_outer(self.time_s, dt_outer, est, self._health,
-                                     self.rangefinder.measure(self.model, d),
+                                     self._range(),
                                      self.battery.remaining,
                                      self.rangefinder.surface_velocity(self.model, d))
             q_est, gyro = est.q_ned_frd.tolist(), est.rates_frd_rad_s.tolist()
@@ -445,13 +482,20 @@ class Simulator:
             gyro_ok="gyro" not in f,
             accel_ok="accel" not in f,
             mag_ok="mag" not in f,
-            local_position_ok=est_ok and "local_position" not in f,
+            local_position_ok=est_ok and "local_position" not in f and not self._position_lost(),
             battery_ok=self.battery.remaining > self.params["BAT_LOW_THR"],
         )
 
     def _capture_telemetry(self, t: float) -> None:
         if "telemetry" in self._failures:
             return
+        extra_s = 0.0
+        if self.faults:
+            ft = self._fault_time(t)
+            if self.faults.active("telemetry_dropout", ft) or self.faults.lost(ft):
+                return
+            extra_s = sum(f.delay_s for f in self.faults.active("telemetry_delay", ft)) + \
+                sum(f.latency_s for f in self.faults.active("link_loss", ft))
         est = self._est
         tel = self.cfg.telemetry
         state = VehicleState(
@@ -463,14 +507,14 @@ class Simulator:
             armed=self.flight.armed,
             mode=self.flight.mode,
             landed_state=self.flight.landed_state,
-            distance_to_ground_m=self.rangefinder.measure(self.model, self.data),
+            distance_to_ground_m=self._range(),
             battery=self.battery.reading(),
             health=self.health(),
             failsafe=self.flight.failsafe is not None,
         )
         jitter = tel.latency_jitter_s * float(self._rng_latency.random()) \
             if tel.latency_jitter_s else 0.0
-        delivery = max(t + tel.latency_s + jitter, self._last_tel_delivery)
+        delivery = max(t + tel.latency_s + jitter + extra_s, self._last_tel_delivery)
         self._last_tel_delivery = delivery
         self._queue(delivery, "telemetry", state)
 
@@ -488,6 +532,93 @@ class Simulator:
         )
 
     # ------------------------------------------------------------------------------------
+    # Injected faults (drivers/sim/faults.py)
+    # ------------------------------------------------------------------------------------
+
+    def _fault_time(self, time_s: float) -> float | None:
+        """Scenario time of simulator time ``time_s`` (None before the first arming)."""
+        return None if self._scenario_t0 is None else time_s - self._scenario_t0
+
+    def fault_time_s(self) -> float | None:
+        """Now on the faults' clock (seconds since the first arming; None before)."""
+        return self._fault_time(self.time_s)
+
+    def _range(self) -> float:
+        if self.faults and self.faults.active("rangefinder_dropout",
+                                              self._fault_time(self.time_s)):
+            return math.nan
+        return self.rangefinder.measure(self.model, self.data)
+
+    def _faulted_frame(self, frame: Frame) -> Frame:
+        name = frame.camera.name
+        ft = self._fault_time(frame.time_s)
+        image = frame.image
+        if self.faults.camera("camera_freeze", name, ft):
+            frozen = self._frozen.setdefault(name, self._last_image.get(name, image))
+            image = frozen
+        else:
+            self._frozen.pop(name, None)
+            self._last_image[name] = image
+        corrupt = self.faults.camera("camera_corrupt", name, ft)
+        if corrupt is not None:
+            image = corrupt_image(image, corrupt, self._fault_rng)
+        if image is frame.image:
+            return frame
+        image.flags.writeable = False
+        return dataclasses.replace(frame, image=image)
+
+    def _position_lost(self) -> bool:
+        ft = self._fault_time(self.time_s)
+        return any(ft - f.start_s >= f.invalid_after_s
+                   for f in self.faults.active("gps_loss", ft)) if self.faults else False
+
+    def _outer_faults(self, dt_s: float) -> None:
+        """The slowly varying faults, at the position-loop rate: motors, battery, wind."""
+        ft = self._fault_time(self.time_s)
+        scale = np.ones(len(self._act))
+        for f in self.faults.active("motor_failure", ft):
+            if f.motor < len(scale):
+                scale[f.motor] *= f.efficiency
+        self._motor_scale = scale
+        for f in self.faults.active("battery_sag", ft):
+            if id(f) not in self._sagged:
+                self._sagged.add(id(f))
+                self.battery.remaining = min(self.battery.remaining, f.remaining_fraction)
+        extra = np.zeros(3)
+        for f in self.faults.active("wind_step", ft):
+            angle = math.radians(f.direction_deg)
+            extra += f.speed_m_s * np.array([math.cos(angle), math.sin(angle), 0.0])
+            if f.gust_mps > 0.0:  # Gauss–Markov gusts (2 s), horizontal
+                g = self._gust_state.setdefault(id(f), np.zeros(3))
+                a = math.exp(-dt_s / 2.0)
+                g[:] = a * g + f.gust_mps * math.sqrt(1.0 - a * a) * np.array(
+                    [*self._fault_rng.standard_normal(2), 0.0])
+                extra += g
+        self.wind.extra_ned_m_s = extra
+
+    def _faulted_estimate(self, est, dt_s: float):
+        ft = self._fault_time(self.time_s)
+        offset = np.zeros(3)
+        for f in self.faults.active("ekf_glitch", ft):
+            angle = math.radians(f.direction_deg)
+            direction = np.array([math.cos(angle), math.sin(angle), 0.0])
+            offset += direction * (f.magnitude_m + f.drift_m_s * (ft - f.start_s))
+        lost = self.faults.active("gps_loss", ft)
+        if lost:
+            if not self._gps_dir.any():
+                angle = float(self._fault_rng.uniform(0.0, 2.0 * math.pi))
+                self._gps_dir = np.array([math.cos(angle), math.sin(angle), 0.0])
+            self._gps_drift = self._gps_drift + self._gps_dir * max(
+                f.drift_m_s for f in lost) * dt_s
+            offset += self._gps_drift
+        else:
+            self._gps_drift = np.zeros(3)  # position aiding back: the estimate converges
+            self._gps_dir = np.zeros(3)
+        if not offset.any():
+            return est
+        return dataclasses.replace(est, position_ned_m=est.position_ned_m + offset)
+
+    # ------------------------------------------------------------------------------------
     # Commands and inputs (raise CommandRejected to deny)
     # ------------------------------------------------------------------------------------
 
@@ -503,6 +634,8 @@ class Simulator:
         return self.params.set(name, value)
 
     def push_setpoint(self, setpoint: Setpoint) -> None:
+        if self.faults and self.faults.lost(self._fault_time(self.time_s)):
+            return  # a link_loss fault lost it on the way
         self.flight.push_setpoint(setpoint, self.time_s)
 
     def set_camera_active(self, name: str, active: bool) -> None:

@@ -22,11 +22,13 @@ class WindModel:
         sigma = cfg.gust_mps * np.array([1.0, 1.0, 0.3])
         self._gust = GaussMarkov(rng, sigma, cfg.gust_time_constant_s) if cfg.gust_mps else None
         self._steady = np.asarray(cfg.steady_ned_m_s, dtype=float)
+        #: added by the simulator's faults (wind_step)
+        self.extra_ned_m_s = np.zeros(3)
         self.velocity_ned_m_s = self._steady + (self._gust.value if self._gust else 0.0)
 
     def step(self, dt_s: float) -> np.ndarray:
         gust = self._gust.step(dt_s) if self._gust is not None else 0.0
-        self.velocity_ned_m_s = self._steady + gust
+        self.velocity_ned_m_s = self._steady + gust + self.extra_ned_m_s
         return self.velocity_ned_m_s
 
 
