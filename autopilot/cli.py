@@ -323,6 +323,26 @@ def build_parser() -> argparse.ArgumentParser:
     landing.add_argument("--set", dest="overrides", action="append", default=[],
                          metavar="KEY=VALUE", help="override a mission or configuration key")
 
+    faults_bench = benches.add_parser(
+        "faults", help="every shipped mission × every fault that applies (camera, telemetry, "
+        "link, EKF, GPS, rangefinder, motor, battery, wind, rover, decoy), several seeds each: "
+        "completed / ended safe / unsafe counts per cell and the worst seeds to replay (about "
+        "an hour for the full matrix at 2 seeds on 2 cores; --mission/--kind narrow it)")
+    faults_bench.add_argument("--json", action="store_true",
+                              help="print one JSON object on stdout")
+    faults_bench.add_argument("--seeds", type=int, default=2, metavar="N",
+                              help="seeds per cell (default 2)")
+    faults_bench.add_argument("--seed-start", type=int, default=0, metavar="S")
+    faults_bench.add_argument("--mission", dest="missions", action="append", default=None,
+                              metavar="NAME", help="only this mission (repeatable)")
+    faults_bench.add_argument("--kind", dest="kinds", action="append", default=None,
+                              metavar="KIND", help="only this fault kind or case, e.g. "
+                              "gps_loss or battery_sag/critical (repeatable)")
+    faults_bench.add_argument("--workers", type=int, default=None, metavar="N",
+                              help="parallel runs (default: one per core)")
+    faults_bench.add_argument("--set", dest="overrides", action="append", default=[],
+                              metavar="KEY=VALUE", help="override a mission or configuration key")
+
     console_bench = benches.add_parser(
         "console", help="what the operator console costs the autopilot (a real-time "
         "follow_ball, windows with and without a viewer of the front camera's MJPEG) and the "
@@ -983,6 +1003,27 @@ def _bench(args: argparse.Namespace) -> int:
         result = down.run_bench(args.bench, args.seeds, args.overrides, log, args.scenarios)
         print(json.dumps(result) if args.json else down.format_table(result))
         return EXIT_OK
+
+    if args.bench == "faults":
+        from autopilot.bench import faults
+
+        if args.seeds < 1:
+            raise InputError(f"--seeds {args.seeds}: at least 1")
+        for name in args.missions or ():
+            if name not in faults.MISSIONS:
+                raise InputError(f"--mission {name}: not in the fault bench (its missions: "
+                                 f"{', '.join(faults.MISSIONS)})")
+        known = {c.kind for c in faults.CASES} | {c.name for c in faults.CASES}
+        for kind in args.kinds or ():
+            if kind not in known:
+                raise InputError(f"--kind {kind}: no such fault case (known: "
+                                 f"{', '.join(c.name for c in faults.CASES)})")
+        if not faults.cells(args.missions, args.kinds):
+            raise InputError("no cell applies to those missions and kinds")
+        result = faults.run_bench(args.seeds, args.missions, args.kinds, args.overrides, log,
+                                  workers=args.workers, seed_start=args.seed_start)
+        print(json.dumps(result) if args.json else faults.format_table(result))
+        return EXIT_OK if result["total"]["unsafe"] == 0 else EXIT_FAILED
 
     if args.bench == "landing":
         from autopilot.bench import landing

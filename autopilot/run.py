@@ -20,6 +20,7 @@ from autopilot.flightlog import records as ch
 from autopilot.flightlog.log import FlightLog
 from autopilot.flightlog.metrics import latency_metrics
 from autopilot.flightlog.records import clean
+from autopilot.flightlog.safety import safety_metrics
 from autopilot.goals import GoalManager
 from autopilot.mission import MissionPlan
 from autopilot.process import StealMeter
@@ -255,6 +256,8 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
                     else None,
                     "cpu_steal_pct": steal.percent()},
             "latency_ms": latency_metrics(log.records),
+            **({"safety": safety} if (safety := safety_metrics(
+                log.records, plan.config.failsafe.geofence)) else {}),
         },
         "stats": vars(runtime.stats) if runtime is not None else {},
         "mission_status": int(runtime.status_code) if runtime is not None else None,
