@@ -54,6 +54,9 @@ class RuntimeConfig(_Model):
     lockstep_detection_s: Annotated[float, Field(ge=0, le=0.5)]  # modelled detection time
     shutdown_timeout_s: Positive  # bound on the safe stop (hold, land, disarm)
     progress_interval_s: Positive  # plain progress lines (not a terminal), wall seconds
+    #: the event loop not answering for this long (wall clock) is a stall: reported, and in
+    #: real time, once setpoints have lapsed, the mission's fallback takes over
+    loop_stall_s: Annotated[float, Field(gt=0, le=30)] = 0.5
 
 
 class BallPerceptionConfig(_Model):
@@ -436,8 +439,19 @@ class GeofenceConfig(_Model):
         return value
 
 
+class BatteryReserveConfig(_Model):
+    """The battery reserve for the way home (autopilot/control/battery.py)."""
+
+    reserve_fraction: Annotated[float, Field(ge=0, le=0.9)] = 0.0  # 0: off
+    action: Literal["return", "land"] = "return"  # return: the vehicle's RTL; land: here
+    speed_m_s: Annotated[float, Field(gt=0, le=30)] = 5.0  # the vehicle's return speed
+    descent_m_s: Annotated[float, Field(gt=0, le=10)] = 0.7  # its landing descent speed
+    margin: Annotated[float, Field(ge=1, le=10)] = 1.5  # on the estimated cost of getting home
+
+
 class FailsafeConfig(_Model):
     geofence: GeofenceConfig = GeofenceConfig()
+    battery: BatteryReserveConfig = BatteryReserveConfig()
 
 
 class ConsoleConfig(_Model):

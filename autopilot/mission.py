@@ -575,13 +575,32 @@ class MissionExecutor:
                             [self._event("request_refused",
                                          f"{request.kind.value} refused: {reason}")])
 
-    def abort(self, reason: str, inputs: BehaviorInputs) -> MissionOutput:
+    def abort(self, reason: str, inputs: BehaviorInputs,
+              fallback: Callable[[], Behavior] | None = None) -> MissionOutput:
+        """Stop the mission: its fallback (or ``fallback``, e.g. a return home) takes over."""
         if self._in_fallback or self._current is None:
             return self._output(None, (), [self._event(
                 "aborted", f"abort requested ({reason}): already stopping")], "")
         self._status = "aborted"
         self._failure = reason
-        return self._enter_fallback(inputs, [self._event("aborted", f"aborted: {reason}")])
+        return self._enter_fallback(inputs, [self._event("aborted", f"aborted: {reason}")],
+                                    fallback)
+
+    def fail(self, reason: str, inputs: BehaviorInputs) -> MissionOutput:
+        """The running step fails (an exception in it, or in the perception it flies on):
+        the fallback takes over, as for a step that reports its own failure."""
+        if self._in_fallback or self._current is None:
+            return self._output(None, (), [self._event(
+                "step_failed", f"failure ({reason}) while already stopping")], "")
+        name = self._current.name
+        self._status = "failed"
+        self._failure = f"{name}: {reason}"
+        return self._enter_fallback(inputs, [self._event("step_failed",
+                                                         f"step {name} failed: {reason}")])
+
+    @property
+    def in_fallback(self) -> bool:
+        return self._in_fallback
 
     @property
     def step_index(self) -> int:
@@ -642,10 +661,11 @@ class MissionExecutor:
         events.append(self._event("standby", f"{self._current.name}: waiting for goals"))
         return self._handle(self._current.activate(inputs), inputs, events)
 
-    def _enter_fallback(self, inputs: BehaviorInputs, events: list) -> MissionOutput:
+    def _enter_fallback(self, inputs: BehaviorInputs, events: list,
+                        fallback: Callable[[], Behavior] | None = None) -> MissionOutput:
         self._in_fallback = True
         self._waiting = None
-        self._current = self.fallback()
+        self._current = (fallback or self.fallback)()
         events.append(self._event("fallback_started", f"fallback {self._current.name} started"))
         return self._handle(self._current.activate(inputs), inputs, events)
 

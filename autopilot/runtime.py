@@ -34,6 +34,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import dataclasses
+import logging
 import math
 import time
 from collections import deque
@@ -52,8 +53,10 @@ from autopilot.behaviors.base import (
     RequestKind,
     VehicleRequest,
 )
+from autopilot.behaviors.flight import ReturnHome, SafeStop
 from autopilot.behaviors.manual import ACTIONS, HeldKeys, ManualFlight, ManualSettings
 from autopilot.console.view import pose_record, publish_vehicle, vehicle_map, vehicle_status
+from autopilot.control.battery import BatteryReserve, ReserveSettings
 from autopilot.control.geofence import FenceSettings, Geofence
 from autopilot.estimation.target import TargetEstimate
 from autopilot.flightlog import records as ch
@@ -74,6 +77,7 @@ from autopilot.pipeline import Pipeline, make_pipeline
 from autopilot.progress import report_progress
 from autopilot.status import MissionStatus, StatusTracker
 from autopilot.steps import step_kind
+from autopilot.watchdog import LoopWatchdog
 from drivers.base import (
     FlightMode,
     Frame,
@@ -84,6 +88,8 @@ from drivers.base import (
     VehicleState,
 )
 from drivers.slots import LatestSlot
+
+log = logging.getLogger(__name__)
 
 
 class Service(Protocol):
@@ -148,16 +154,26 @@ class RunStats:
     detections: int = 0  # pipeline detections in them
     setpoints_sent: int = 0
     frames_log_dropped: int = 0
+    loop_lag_p50_ms: float | None = None  # how late the event loop answered (wall clock)
+    loop_lag_p99_ms: float | None = None
+    loop_lag_max_ms: float | None = None
+    loop_stalls: int = 0  # the loop silent for runtime.loop_stall_s or longer
 
 
 def _detect_all(pipelines: list[Pipeline], frame: Frame, hints: list[object | None]
-                ) -> list[tuple[object | None, float]]:
-    """Each pipeline's detection in one frame, with its processing time (ms)."""
+                ) -> list[tuple[object | None, float, str | None]]:
+    """Each pipeline's detection in one frame, with its processing time (ms) and, when its
+    detector raised, what it raised (no detection then: the flight goes on without it)."""
     out = []
     for pipeline, hint in zip(pipelines, hints, strict=True):
         started = time.perf_counter()
-        det = pipeline.detect(frame.image, frame.camera, frame.time_s, hint)
-        out.append((det, (time.perf_counter() - started) * 1e3))
+        error = None
+        try:
+            det = pipeline.detect(frame.image, frame.camera, frame.time_s, hint)
+        except Exception as exc:
+            log.exception("the %s detector raised on frame %d", pipeline.name, frame.seq)
+            det, error = None, f"{type(exc).__name__}: {exc}"
+        out.append((det, (time.perf_counter() - started) * 1e3, error))
     return out
 
 
@@ -244,6 +260,15 @@ class Runtime:
             tuple(tuple(p) for p in gf.polygon_m) if gf.polygon_m else None, gf.lookahead_s))
         self._fence_breach: str | None = None
         self._fence_handled = False
+        b = cfg.failsafe.battery
+        #: the battery reserve for the way home (autopilot/control/battery.py)
+        self.battery_reserve = BatteryReserve(ReserveSettings(
+            b.reserve_fraction, b.speed_m_s, b.descent_m_s, b.margin))
+        self._battery_handled = False
+        #: a failure the step cannot fly on (its detector or estimator raised, the event loop
+        #: stalled in flight): the step fails into the fallback at the next tick
+        self._step_failure: str | None = None
+        self.watchdog = LoopWatchdog(cfg.runtime.loop_stall_s, self._on_loop_stall)
         self._control_ended = False
         self._resumed = False
         self._emergency: str | None = None
@@ -282,6 +307,7 @@ class Runtime:
             async with asyncio.TaskGroup() as tasks:
                 self._group = tasks
                 background = [
+                    tasks.create_task(self.watchdog.run(), name="loop-watchdog"),
                     *self.events.tasks(tasks),
                     tasks.create_task(self._telemetry(), name="telemetry"),
                     tasks.create_task(self._streaming(), name="setpoint-streaming"),
@@ -322,6 +348,11 @@ class Runtime:
             self.photos.close()
             self.frame_logger.close()
             self.stats.frames_log_dropped = self.frame_logger.dropped
+            dog = self.watchdog
+            self.stats.loop_lag_p50_ms = dog.lag_percentile_ms(50)
+            self.stats.loop_lag_p99_ms = dog.lag_percentile_ms(99)
+            self.stats.loop_lag_max_ms = dog.lag_percentile_ms(100)
+            self.stats.loop_stalls = len(dog.stalls_s)
         return self.status
 
     async def _control(self) -> None:
@@ -370,6 +401,18 @@ class Runtime:
                 out = executor.abort(f"geofence: {self._fence_breach}", inputs)
                 await self._apply(out, None)
                 continue
+            if (call := self._battery_call(inputs)) is not None:
+                out = call
+                await self._apply(out, None)
+                continue
+            if self._step_failure is not None:
+                why, self._step_failure = self._step_failure, None
+                self.manual = False
+                self._event(self.clock.now(), "failsafe", why)
+                self.events.emit(Event("mission", "failsafe", self.clock.now(), why))
+                out = executor.fail(why, inputs)
+                await self._apply(out, None)
+                continue
             if self._emergency is not None:
                 await self._emergency_stop(inputs)
                 return
@@ -388,7 +431,19 @@ class Runtime:
                 self._resumed = False  # a step waiting for goals waits here, not back there
                 out = executor.reactivate(inputs, "back from manual flight")
             else:
-                out = self._serve_goals(inputs) or executor.update(inputs)
+                try:
+                    out = self._serve_goals(inputs) or executor.update(inputs)
+                except Exception as exc:  # a bug in the step: it fails, the fallback flies
+                    if executor.in_fallback:
+                        raise
+                    log.exception("step %s raised", executor.step_name)
+                    why = f"the step raised {type(exc).__name__}: {exc}"
+                    self._event(self.clock.now(), "failsafe", why)
+                    self.events.emit(Event("mission", "failsafe", self.clock.now(), why))
+                    self._intent = None
+                    out = executor.fail(why, inputs)
+                    await self._apply(out, source)
+                    continue
                 if self._resumed and out.setpoint is None and inputs.state.in_air:
                     # a step flown by the vehicle's own modes (land, hold, the safe stop):
                     # it asks for its mode again (manual flight left OFFBOARD behind)
@@ -611,10 +666,53 @@ class Runtime:
             await v.hold()
         elif request.kind is RequestKind.LAND:
             await v.land()
+        elif request.kind is RequestKind.RETURN:
+            await v.return_to_launch()
         elif request.kind is RequestKind.PRECISION_LAND:
             await v.precision_land()
         elif request.kind is RequestKind.DISARM:
             await v.disarm(force=request.force)
+
+    def _fail_step(self, why: str) -> None:
+        """The running step cannot go on (its perception raised, …): it fails into the
+        fallback at the next control tick (the first reason wins)."""
+        if self._step_failure is None and self._executor is not None and \
+                not self._executor.in_fallback:
+            self._step_failure = why
+
+    def _on_loop_stall(self, seconds: float) -> None:
+        """The event loop was stalled (autopilot/watchdog.py). In real time, flying, once
+        setpoints lapsed (the vehicle's offboard failsafe acted), the step does not resume
+        blindly: it fails into the fallback."""
+        now = self.clock.now()
+        text = f"event loop stalled for {seconds:.2f} s"
+        self._event(now, "runtime", text)
+        s = self._state
+        if not self.clock.lockstep and s is not None and s.in_air and \
+                seconds > self.config.runtime.setpoint_expiry_s:
+            self._fail_step(text + " (setpoints lapsed)")
+
+    def _battery_call(self, inputs: BehaviorInputs) -> MissionOutput | None:
+        """The battery reserve (autopilot/control/battery.py): time to go home?"""
+        if self._battery_handled or not self.battery_reserve.active or \
+                self._executor is None or self._executor.in_fallback:
+            return None
+        s = inputs.state
+        battery = getattr(s, "battery", None)
+        call = self.battery_reserve.check(
+            inputs.now_s, getattr(battery, "remaining_fraction", None), s.position_ned_m,
+            self.vehicle.home_ned_m, s.in_air)
+        if call is None:
+            return None
+        self._battery_handled = True
+        self.manual = False
+        self._console_actions.clear()
+        self._intent = None
+        go_home = call.go_home and self.config.failsafe.battery.action == "return"
+        why = f"battery reserve: {call.reason}; " + ("returning home" if go_home else "landing")
+        self._event(self.clock.now(), "failsafe", why)
+        self.events.emit(Event("mission", "battery_reserve", self.clock.now(), why))
+        return self._executor.abort(why, inputs, ReturnHome if go_home else SafeStop)
 
     async def _last_resort(self) -> None:
         """The orderly stop failed or the link broke: one bounded attempt to land."""
@@ -924,15 +1022,17 @@ class Runtime:
                     _detect_all, pipelines, frame, hints, executor=self._detect_pool,
                     budget_s=budget)
                 processed = ProcessedFrame(frame.time_s, frame.seq, frame,
-                                           tuple(det for det, _ in results), tuple(hints))
+                                           tuple(det for det, _, _ in results), tuple(hints))
                 lane.frames.put(processed)
                 self.latest_processed[lane.camera] = processed
                 signal = self._processed_signals.pop(lane.camera, None)
                 if signal is not None:  # (whoever waits for this camera's next one)
                     signal.set()
                 detected = self.clock.now()
-                for pipeline, hint, (det, elapsed_ms) in zip(pipelines, hints, results,
-                                                             strict=True):
+                for pipeline, hint, (det, elapsed_ms, error) in zip(pipelines, hints, results,
+                                                                    strict=True):
+                    if error is not None:
+                        self._fail_step(f"the {pipeline.name} detector raised {error}")
                     self.stats.frames += 1
                     self.stats.detections += det is not None
                     record = pipeline.detection_record(frame.seq, frame.time_s,
@@ -952,7 +1052,13 @@ class Runtime:
                 if det is not None:
                     track.detections += 1
                     track.last_detection = det
-                    record = track.pipeline.estimate(item.time_s, item.frame.camera, det)
+                    try:
+                        record = track.pipeline.estimate(item.time_s, item.frame.camera, det)
+                    except Exception as exc:  # the step cannot fly on it: it fails
+                        log.exception("the %s estimator raised", track.pipeline.name)
+                        self._fail_step(f"the {track.pipeline.name} estimator raised "
+                                        f"{type(exc).__name__}: {exc}")
+                        continue
                     if record is not None:
                         self.log.write(ch.TARGET_ESTIMATES, item.time_s, record)
                     self._log_relative(track.pipeline)

@@ -442,6 +442,11 @@ class Vehicle(abc.ABC):
     async def send_setpoint(self, setpoint: Setpoint) -> None:
         """Send one setpoint. Never re-sent by the driver: stream it to keep OFFBOARD alive."""
 
+    async def return_to_launch(self) -> None:
+        """Return to launch (PX4 AUTO.RTL, ArduPilot RTL): home at the return altitude, then
+        land there."""
+        raise CommandDenied("return to launch", "this vehicle has no return mode")
+
     async def precision_land(self) -> None:
         """Switch to PX4's precision landing (AUTO.PRECLAND): it lands on the target that
         :meth:`send_landing_target` reports (searching for it, then falling back to a normal

@@ -30,6 +30,7 @@ class RequestKind(enum.Enum):
     PRECISION_LAND = "precision_land"  # PX4's AUTO.PRECLAND, on LANDING_TARGET
     LANDING_TARGET = "landing_target"  # report where the landing target is (not logged)
     DISARM = "disarm"  # stop the motors (``force``: in the air too, as PX4's kill)
+    RETURN = "return"  # the vehicle's return to launch (PX4 AUTO.RTL): home, then it lands
 
 
 @dataclass(frozen=True, slots=True)

@@ -119,6 +119,42 @@ class Hold(Behavior):
         return BehaviorOutput(Status.RUNNING, phase="holding")
 
 
+class ReturnHome(Behavior):
+    """A failsafe for when there is just enough left to get home (the battery reserve): the
+    vehicle's own return to launch (it climbs to its return altitude, flies home and lands), done
+    once it has landed and disarmed. A vehicle that refuses to return lands where it is."""
+
+    name = "return_home"
+
+    def __init__(self, timeout_s: float = 600.0) -> None:
+        self._timeout_s = timeout_s
+        self._start = 0.0
+
+    def activate(self, inputs: BehaviorInputs) -> BehaviorOutput:
+        self._start = inputs.now_s
+        if not inputs.state.armed and not inputs.state.in_air:
+            return BehaviorOutput(Status.SUCCEEDED, reason="already on the ground")
+        if not inputs.state.in_air:
+            return BehaviorOutput(Status.RUNNING, requests=(VehicleRequest(RequestKind.LAND),),
+                                  phase="landing")
+        return BehaviorOutput(Status.RUNNING, requests=(VehicleRequest(RequestKind.RETURN),),
+                              phase="returning")
+
+    def update(self, inputs: BehaviorInputs) -> BehaviorOutput:
+        s = inputs.state
+        if not s.armed and not s.in_air:
+            return BehaviorOutput(Status.SUCCEEDED, phase="landed")
+        if inputs.now_s - self._start > self._timeout_s:
+            return BehaviorOutput(Status.FAILED, reason="not home and landed in time")
+        return BehaviorOutput(Status.RUNNING, phase="returning")
+
+    def request_failed(self, request: VehicleRequest, reason: str) -> BehaviorOutput:
+        if request.kind is RequestKind.RETURN:
+            return BehaviorOutput(Status.RUNNING, requests=(VehicleRequest(RequestKind.LAND),),
+                                  phase="landing")
+        return BehaviorOutput(Status.FAILED, reason=f"{request.kind.value}: {reason}")
+
+
 class SafeStop(Behavior):
     """The failsafe: hold for a moment, then land and wait for the disarm. Requests that fail
     are retried by going straight to LAND."""

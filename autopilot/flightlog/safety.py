@@ -30,7 +30,8 @@ SAFE_MODES_IN_AIR = ("hold", "land", "return", "precland")
 def safety_metrics(records: Mapping[str, Sequence[Mapping]], fence=None,
                    flyaway_m: float = FLYAWAY_M) -> dict:
     """The ``safety`` metric group (empty without ground truth)."""
-    truth = [r for r in records.get(ch.GROUND_TRUTH, []) if r.get("vehicle_position_ned_m") is not None]
+    truth = [r for r in records.get(ch.GROUND_TRUTH, [])
+             if r.get("vehicle_position_ned_m") is not None]
     if not truth:
         return {}
     pos = np.array([r["vehicle_position_ned_m"] for r in truth], dtype=float)

@@ -163,6 +163,9 @@ class MavsdkDriver(MavlinkVehicle):
     async def hold(self) -> None:
         await self._act("hold", self._require_action().hold())
 
+    async def return_to_launch(self) -> None:
+        await self._act("return to launch", self._require_action().return_to_launch())
+
     async def precision_land(self) -> None:
         """AUTO.PRECLAND (MAVSDK's action has no call for it: DO_SET_MODE)."""
         await self._set_mode("precision land", FlightMode.PRECLAND)

@@ -165,6 +165,9 @@ class PymavlinkDriver(MavlinkVehicle):
     async def hold(self) -> None:
         await self._set_mode(FlightMode.HOLD)
 
+    async def return_to_launch(self) -> None:
+        await self._set_mode(FlightMode.RETURN)
+
     async def precision_land(self) -> None:
         if self.is_ardupilot:  # ArduPilot: LAND with PLND_ENABLED lands on the target
             await self._set_mode(FlightMode.LAND)

@@ -67,8 +67,10 @@ def test_missing_key_points_at_its_section(tmp_path):
     text = SHIPPED.replace("    capacity_mah: 5000\n", "")
     with pytest.raises(ConfigError) as err:
         load_config(_write(tmp_path, text))
-    assert f"config.yaml:{_line_of(text, 'battery:')}: sim.battery.capacity_mah: missing" \
-        in str(err.value)
+    sim = _line_of(text, "sim:")
+    battery = next(i for i, line in enumerate(text.splitlines(), 1)
+                   if i > sim and "battery:" in line)  # sim's, not failsafe's
+    assert f"config.yaml:{battery}: sim.battery.capacity_mah: missing" in str(err.value)
 
 
 def test_cross_field_rule(tmp_path):

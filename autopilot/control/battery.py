@@ -1,0 +1,79 @@
+"""The battery reserve for the way home (an autopilot-side failsafe, before PX4's own).
+
+Each tick it estimates what getting home and down would cost: the time to fly home
+(horizontal distance ÷ ``speed_m_s``, the vehicle's return speed) and to descend (height ÷
+``descent_m_s``), times the rate the battery has been draining (its remaining fraction over the
+last ``window_s``), times ``margin``. When what is left after that falls to
+``reserve_fraction``, the mission stops and the vehicle goes home: its return to launch (or a
+landing where it is, when it is already within ``home_radius_m`` of home, or ``action: land``).
+A battery the vehicle reports as below ``reserve_fraction`` outright (a sag) triggers it too.
+Plain class, no event loop: the runtime calls :meth:`check` on every tick.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True, slots=True)
+class ReserveSettings:
+    reserve_fraction: float  # 0: off
+    speed_m_s: float
+    descent_m_s: float
+    margin: float
+    window_s: float = 20.0
+    home_radius_m: float = 3.0
+
+
+@dataclass(frozen=True, slots=True)
+class ReserveCall:
+    """Time to go home: why, and whether home is far enough to fly there (else land)."""
+
+    reason: str
+    go_home: bool
+
+
+class BatteryReserve:
+    def __init__(self, settings: ReserveSettings) -> None:
+        self.settings = settings
+        self._history: deque[tuple[float, float]] = deque()
+        self.needed_fraction = math.nan
+        self.drain_per_s = math.nan
+
+    @property
+    def active(self) -> bool:
+        return self.settings.reserve_fraction > 0.0
+
+    def check(self, now_s: float, remaining: float, position_ned_m, home_ned_m,
+              in_air: bool) -> ReserveCall | None:
+        s = self.settings
+        if not self.active or not in_air or remaining is None or not math.isfinite(remaining):
+            return None
+        self._history.append((now_s, remaining))
+        while len(self._history) > 2 and now_s - self._history[0][0] > s.window_s:
+            self._history.popleft()
+        t0, r0 = self._history[0]
+        self.drain_per_s = max((r0 - remaining) / (now_s - t0), 0.0) if now_s - t0 >= 2.0 \
+            else math.nan
+        home = np.zeros(3) if home_ned_m is None else np.asarray(home_ned_m, dtype=float)
+        pos = np.asarray(position_ned_m, dtype=float)
+        distance = float(np.linalg.norm(pos[:2] - home[:2]))
+        height = max(float(home[2] - pos[2]), 0.0)
+        go_home = distance > s.home_radius_m
+        if remaining <= s.reserve_fraction:
+            return ReserveCall(f"battery {remaining:.0%} at or below the reserve "
+                               f"{s.reserve_fraction:.0%}", go_home)
+        if not math.isfinite(self.drain_per_s):
+            return None
+        seconds = (distance / s.speed_m_s if go_home else 0.0) + height / s.descent_m_s
+        self.needed_fraction = s.margin * self.drain_per_s * seconds
+        if remaining - self.needed_fraction <= s.reserve_fraction:
+            return ReserveCall(
+                f"battery {remaining:.0%}: getting home ({distance:.0f} m, {height:.0f} m up, "
+                f"about {seconds:.0f} s) takes ~{self.needed_fraction:.0%}, leaving less than "
+                f"the reserve {s.reserve_fraction:.0%}", go_home)
+        return None

@@ -1,0 +1,185 @@
+"""The autopilot's own failsafes in closed loop (lockstep unless said): the battery reserve
+for the way home, a detector, estimator or step that raises, and the event loop's watchdog.
+(The geofence is in test_offboard.py; the target lost, stale telemetry and a stalled control
+task in test_runtime.py.)"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import math
+import time
+
+import numpy as np
+import pytest
+
+from autopilot.control.battery import BatteryReserve, ReserveSettings
+from autopilot.flightlog import records as ch
+from autopilot.flightlog.log import read_log
+from autopilot.mission import load_mission
+from autopilot.run import fly
+from autopilot.watchdog import LoopWatchdog
+
+SHORT = ["steps.1.follow_ball.duration_s=20"]
+
+
+def _fly(overrides, out, **kwargs):
+    plan = load_mission("follow_ball", [*SHORT, *overrides])
+
+    async def main():
+        summary = await fly(plan, out, **kwargs)
+        orphans = [t for t in asyncio.all_tasks() if t is not asyncio.current_task()]
+        return summary, orphans
+
+    return asyncio.run(main())
+
+
+def _ended_down(log) -> dict:
+    last = log[ch.VEHICLE_STATE][-1]
+    assert last["armed"] is False
+    assert log[ch.GROUND_TRUTH][-1]["vehicle_position_ned_m"][2] > -0.3  # on the ground
+    return last
+
+
+# -- the battery reserve ---------------------------------------------------------------------
+
+def test_reserve_counts_the_way_home():
+    r = BatteryReserve(ReserveSettings(0.2, speed_m_s=5.0, descent_m_s=1.0, margin=1.0))
+    home = np.zeros(3)
+    # draining 1 %/s: 100 m out and 10 m up is 20 s + 10 s of flight = 30 %
+    for t in range(0, 11):
+        call = r.check(float(t), 0.9 - 0.01 * t, (100.0, 0.0, -10.0), home, True)
+        assert call is None
+    assert r.drain_per_s == pytest.approx(0.01)
+    assert r.needed_fraction == pytest.approx(0.30)
+    t, remaining = 10.0, 0.8
+    while (call := r.check(t, remaining, (100.0, 0.0, -10.0), home, True)) is None:
+        t, remaining = t + 1.0, remaining - 0.01
+    assert remaining == pytest.approx(0.5, abs=0.011)  # 0.5 - 0.3 = the reserve
+    assert call.go_home
+    assert "getting home" in call.reason
+    # near home: a landing, not a return; a sagged battery triggers at once; off when 0
+    near = BatteryReserve(ReserveSettings(0.2, 5.0, 1.0, 1.0))
+    call = near.check(0.0, 0.15, (1.0, 1.0, -3.0), home, True)
+    assert call is not None
+    assert not call.go_home
+    assert BatteryReserve(ReserveSettings(0.0, 5.0, 1.0, 1.0)).check(
+        0.0, 0.01, (1.0, 1.0, -3.0), home, True) is None
+    assert near.check(1.0, math.nan, (1.0, 1.0, -3.0), home, True) is None
+
+
+def test_battery_reserve_returns_home_and_lands(tmp_path):
+    # at 12 s the battery sags to 15 %: under the 20 % reserve, the vehicle goes home
+    summary, orphans = _fly(["failsafe.battery.reserve_fraction=0.2",
+                             'scenario.faults=[{kind: battery_sag, start_s: 12, '
+                             'remaining_fraction: 0.15}]'], tmp_path)
+    assert summary["status"] == "aborted"
+    assert "battery reserve" in summary["reason"]
+    assert orphans == []
+    log = read_log(tmp_path / "flight.mcap")
+    texts = [e["text"] for e in log[ch.MISSION_EVENTS]]
+    assert "request return" in texts
+    assert "fallback return_home started" in texts
+    _ended_down(log)
+    truth = np.array([r["vehicle_position_ned_m"] for r in log[ch.GROUND_TRUTH]])
+    far = np.linalg.norm(truth[:, :2], axis=1)
+    assert far.max() > 1.5  # it had followed away from home ...
+    assert far[-1] < 1.0  # ... and landed at home
+    assert summary["metrics"]["safety"]["ended_safe"] is True
+
+
+# -- a detector, estimator or step that raises -------------------------------------------------
+
+@pytest.mark.parametrize("where", ["detector", "estimator", "step"])
+def test_a_raising_detector_estimator_or_step_fails_into_the_fallback(where, monkeypatch,
+                                                                       tmp_path, caplog):
+    from autopilot.behaviors.follow import FollowTarget
+    from autopilot.perception.ball_pipeline import BallPipeline
+
+    def broken_after(original, time_of):
+        def wrapper(self, *args, **kwargs):
+            if time_of(self, args) > 12.0:
+                raise RuntimeError(f"broken {where}")
+            return original(self, *args, **kwargs)
+        return wrapper
+
+    if where == "detector":
+        monkeypatch.setattr(BallPipeline, "detect", broken_after(
+            BallPipeline.detect, lambda self, args: args[2]))
+    elif where == "estimator":
+        monkeypatch.setattr(BallPipeline, "estimate", broken_after(
+            BallPipeline.estimate, lambda self, args: args[0]))
+    else:
+        monkeypatch.setattr(FollowTarget, "update", broken_after(
+            FollowTarget.update, lambda self, args: args[0].now_s))
+    with caplog.at_level(logging.ERROR):
+        summary, orphans = _fly([], tmp_path)
+    assert summary["status"] == "failed"
+    assert f"RuntimeError: broken {where}" in summary["reason"]
+    assert summary["reason"].startswith("follow_ball:")
+    assert orphans == []
+    log = read_log(tmp_path / "flight.mcap")
+    texts = [e["text"] for e in log[ch.MISSION_EVENTS]]
+    failed = next(i for i, t in enumerate(texts) if t.startswith("step follow_ball failed"))
+    assert "fallback safe_stop started" in texts[failed:]
+    assert "request land" in texts[failed:]
+    _ended_down(log)
+    assert "Traceback" not in summary["reason"]
+    assert any("broken" in (r.exc_text or "") or r.exc_info for r in caplog.records)
+
+
+# -- the event loop's watchdog ---------------------------------------------------------------
+
+def test_watchdog_measures_lag_and_reports_a_stall_while_it_lasts(caplog):
+    stalls = []
+
+    async def main():
+        dog = LoopWatchdog(0.2, stalls.append, period_s=0.02)
+        task = asyncio.ensure_future(dog.run())
+        await asyncio.sleep(0.2)
+        time.sleep(0.6)  # noqa: ASYNC251 - the loop is stuck here (on purpose)
+        await asyncio.sleep(0.1)
+        task.cancel()
+        await asyncio.gather(task, return_exceptions=True)
+        return dog
+
+    with caplog.at_level(logging.WARNING, logger="autopilot.watchdog"):
+        dog = asyncio.run(main())
+    assert len(stalls) == 1
+    assert stalls[0] == pytest.approx(0.6, abs=0.15)
+    during = [r for r in caplog.records if "has not answered" in r.getMessage()]
+    assert during  # logged by the thread while the loop was stuck, with where it was
+    assert "time.sleep(0.6)" in during[0].getMessage()
+    assert dog.lag_percentile_ms(50) < 50.0
+    assert dog.lag_percentile_ms(100) > 400.0
+
+
+@pytest.mark.long
+def test_a_stalled_event_loop_in_real_time_ends_in_the_fallback(monkeypatch, tmp_path):
+    """Real time: the loop blocks for 1.5 s while following; setpoints stop, the vehicle's
+    offboard failsafe holds it; back, the autopilot does not resume the step: fallback, land."""
+    from autopilot.runtime import Runtime
+
+    original = Runtime._next_tick
+
+    async def stalling(self, period):
+        if self._step == "follow_ball" and self.clock.now() > 10.0 and \
+                not getattr(self, "_stalled", False):
+            self._stalled = True
+            time.sleep(1.5)  # noqa: ASYNC251 - a blocking call on the event loop (on purpose)
+        return await original(self, period)
+
+    monkeypatch.setattr(Runtime, "_next_tick", stalling)
+    summary, orphans = _fly([], tmp_path, realtime=True)
+    # back from the stall, the pose it has is 1.5 s old: the stale-telemetry failsafe or the
+    # stall's own (whichever the control tick meets first) stops the step
+    assert summary["status"] in ("failed", "aborted")
+    assert "event loop stalled" in summary["reason"] or "telemetry stale" in summary["reason"]
+    assert orphans == []
+    log = read_log(tmp_path / "flight.mcap")
+    texts = [e["text"] for e in log[ch.MISSION_EVENTS]]
+    stalled = next(i for i, t in enumerate(texts) if t.startswith("event loop stalled for 1."))
+    assert "fallback safe_stop started" in texts[stalled:]
+    modes = [s["mode"] for s in log[ch.VEHICLE_STATE] if s["time_s"] > 10.0]
+    assert "hold" in modes  # the vehicle's own offboard-loss failsafe
+    _ended_down(log)
