@@ -240,6 +240,7 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
         await vehicle.close()
         log.close()
 
+    records = await asyncio.to_thread(log.all_records)  # (from the file: bounded memory)
     summary = {
         "status": status,
         "reason": reason,
@@ -251,13 +252,13 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
         "sim_time_s": sim_time,
         "wall_time_s": wall_time,
         "metrics": {
-            **mission_metrics(log.records),
+            **mission_metrics(records),
             "sim": {"real_time_factor": sim_time / wall_time if sim_time and wall_time > 0
                     else None,
                     "cpu_steal_pct": steal.percent()},
-            "latency_ms": latency_metrics(log.records),
+            "latency_ms": latency_metrics(records),
             **({"safety": safety} if (safety := safety_metrics(
-                log.records, plan.config.failsafe.geofence)) else {}),
+                records, plan.config.failsafe.geofence)) else {}),
         },
         "stats": vars(runtime.stats) if runtime is not None else {},
         "mission_status": int(runtime.status_code) if runtime is not None else None,

@@ -1,5 +1,7 @@
 """The flight log: every record goes to ``flight.mcap`` as it happens (so a run that crashes
-still leaves a readable log) and stays in memory for the end-of-run metrics.
+still leaves a readable log). Memory stays bounded however long the flight: records stream to
+the file and are not kept (the end-of-run metrics read them back from it: :meth:`FlightLog.
+all_records`); only a log without a file (tests), or one whose file failed, keeps them in memory.
 
 One channel per stream, JSON-encoded with a JSON Schema per channel (``jsonschema`` encoding),
 which Foxglove Studio and PlotJuggler open. Camera frames go to one channel per camera as
@@ -43,12 +45,14 @@ WAKE_S = 0.25
 
 
 class FlightLog:
-    """Records in memory at once; to the file through a writer thread (encoding, chunking,
-    compression and disk writes stay off the event loop). A write error stops the file, not
-    the flight: it is kept in :attr:`error` and the records stay in memory."""
+    """Records to the file through a writer thread (encoding, chunking, compression and disk
+    writes stay off the event loop); in memory only without a file. A write error stops the
+    file, not the flight: it is kept in :attr:`error`, and the records from then on stay in
+    memory (``keep``: keep every record in memory too)."""
 
-    def __init__(self, path: Path | None) -> None:
+    def __init__(self, path: Path | None, *, keep: bool = False) -> None:
         self.records: dict[str, list[dict]] = defaultdict(list)
+        self.keep = keep or path is None
         self.path = path
         self.images_written = 0
         self.images_dropped = 0
@@ -67,9 +71,29 @@ class FlightLog:
             self._thread.start()
 
     def write(self, topic: str, time_s: float, record: dict) -> None:
-        self.records[topic].append(record)
         if self._queue is not None:
             self._put(topic, time_s, encode(record), None)
+            if self.keep:
+                self.records[topic].append(record)
+        else:  # no file, or it failed
+            self.records[topic].append(record)
+
+    def all_records(self) -> dict[str, list[dict]]:
+        """Every record of the flight, after :meth:`close`: read back from the file (as
+        :func:`read_log` gives them: plain numbers, NaN as null), then those kept in memory
+        after a write error; without a file, the ones in memory."""
+        if self.path is None or self.keep:
+            return self.records
+        records: dict[str, list[dict]] = defaultdict(list)
+        if self.path.exists():
+            try:
+                for topic, items in read_log(self.path).items():
+                    records[topic].extend(items)
+            except Exception:  # a file cut short by the error: what is in memory still counts
+                pass
+        for topic, items in self.records.items():
+            records[topic].extend(items)
+        return records
 
     def write_image(self, camera: str, time_s: float, jpeg: bytes) -> None:
         """A camera frame (JPEG bytes) captured at ``time_s``, as ``foxglove.CompressedImage``."""

@@ -1,5 +1,6 @@
 """Camera frames in the flight log: which are logged, how they are stored and read back."""
 
+import time
 from pathlib import Path
 
 import numpy as np
@@ -70,6 +71,24 @@ def test_a_full_disk_stops_the_file_not_the_flight():
     for k in range(2000):
         log.write(ch.MISSION_EVENTS, 0.01 * k, {"time_s": 0.01 * k, "step": "", "text": "x" * 64})
         log.write_image("front", 0.01 * k, b"\xff" * 1000)
-    log.close()
+    deadline = time.monotonic() + 10.0
+    while log.error is None and time.monotonic() < deadline:
+        time.sleep(0.05)
     assert isinstance(log.error, OSError)
-    assert len(log.records[ch.MISSION_EVENTS]) == 2000  # the metrics still have them
+    for k in range(10):  # from then on the records stay in memory: the metrics have them
+        log.write(ch.MISSION_EVENTS, 30.0 + k, {"time_s": 30.0 + k, "step": "", "text": "y"})
+    log.close()
+    kept = log.all_records()[ch.MISSION_EVENTS]
+    assert [r["text"] for r in kept[-10:]] == ["y"] * 10
+    assert len(kept) <= 2010
+
+
+def test_records_stream_to_the_file_not_to_memory(tmp_path):
+    log = FlightLog(tmp_path / "flight.mcap")
+    for k in range(5000):
+        log.write(ch.MISSION_EVENTS, 0.01 * k, {"time_s": 0.01 * k, "step": "", "text": "x"})
+    assert sum(len(v) for v in log.records.values()) == 0  # bounded: nothing kept
+    log.close()
+    again = log.all_records()[ch.MISSION_EVENTS]
+    assert len(again) == 5000
+    assert again[-1]["time_s"] == pytest.approx(49.99)
