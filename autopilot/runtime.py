@@ -268,7 +268,8 @@ class Runtime:
         #: a failure the step cannot fly on (its detector or estimator raised, the event loop
         #: stalled in flight): the step fails into the fallback at the next tick
         self._step_failure: str | None = None
-        self.watchdog = LoopWatchdog(cfg.runtime.loop_stall_s, self._on_loop_stall)
+        self.watchdog = LoopWatchdog(cfg.runtime.loop_stall_s, self._on_loop_stall,
+                                     quiet=self.clock.lockstep)
         self._control_ended = False
         self._resumed = False
         self._emergency: str | None = None
@@ -686,7 +687,8 @@ class Runtime:
         blindly: it fails into the fallback."""
         now = self.clock.now()
         text = f"event loop stalled for {seconds:.2f} s"
-        self._event(now, "runtime", text)
+        if not self.clock.lockstep:  # (lockstep: simulated time waited; nothing to tell)
+            self._event(now, "runtime", text)
         s = self._state
         if not self.clock.lockstep and s is not None and s.in_air and \
                 seconds > self.config.runtime.setpoint_expiry_s:

@@ -31,8 +31,11 @@ log = logging.getLogger(__name__)
 
 class LoopWatchdog:
     def __init__(self, stall_s: float, on_stall: Callable[[float], None] | None = None, *,
-                 period_s: float = 0.05, history: int = 72000) -> None:
+                 period_s: float = 0.05, history: int = 72000, quiet: bool = False) -> None:
         self.stall_s = stall_s
+        #: stalls logged at debug level only (lockstep: simulated time waits for the loop, so
+        #: a stall costs the flight nothing)
+        self._level = logging.DEBUG if quiet else logging.WARNING
         self.on_stall = on_stall
         self.period_s = period_s
         #: the loop's lag at each beat (s), the newest ``history`` (an hour at 20 Hz)
@@ -65,7 +68,7 @@ class LoopWatchdog:
                 self._beat = now
                 if lag >= self.stall_s:
                     self.stalls_s.append(lag)
-                    log.warning("the event loop was stalled for %.2f s", lag)
+                    log.log(self._level, "the event loop was stalled for %.2f s", lag)
                     if self.on_stall is not None:
                         self.on_stall(lag)
         finally:
@@ -83,5 +86,6 @@ class LoopWatchdog:
                 reported = silent
                 frame = sys._current_frames().get(self._loop_thread)
                 where = "".join(traceback.format_stack(frame, limit=6)) if frame else "?"
-                log.error("the event loop has not answered for %.1f s (setpoints stopped: the "
-                          "vehicle's offboard failsafe takes over); it is at:\n%s", silent, where)
+                log.log(self._level + 10, "the event loop has not answered for %.1f s "
+                        "(setpoints stopped: the vehicle's offboard failsafe takes over); it is "
+                        "at:\n%s", silent, where)
