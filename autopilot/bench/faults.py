@@ -20,23 +20,29 @@ worst seeds (unsafe first, then safe) with the command that replays each.
 from __future__ import annotations
 
 import json
+import os
+import shlex
+import time
 from collections.abc import Callable, Sequence
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass
+from multiprocessing import get_context
 
 from autopilot.flightlog.safety import outcome
-from autopilot.trials import Criterion, run_trials
+from autopilot.trials import run_trial, trial_overrides
 
 #: the fence every bench run flies with (the autopilot's own failsafe, judged on the truth)
 FENCE = ("failsafe.geofence.max_distance_m=80", "failsafe.geofence.max_altitude_m=30")
-#: mission → (when its main step is well under way, s after arming; the cameras its steps use)
-MISSIONS: dict[str, tuple[float, tuple[str, ...]]] = {
-    "follow_ball": (10.0, ("front",)),
-    "follow_marker": (10.0, ("front",)),
-    "hover_image": (10.0, ("down",)),
-    "land_pad": (6.0, ("down",)),
-    "land_on_rover": (7.0, ("down",)),
-    "orbit": (7.0, ("down",)),
-    "survey": (10.0, ("down",)),
+#: mission → (when its main step is well under way, s after arming; the cameras its steps
+#: use; overrides that keep it short: a follow or hover step lasts 20 s past the fault's start)
+MISSIONS: dict[str, tuple[float, tuple[str, ...], tuple[str, ...]]] = {
+    "follow_ball": (10.0, ("front",), ("steps.1.follow_ball.duration_s=26",)),
+    "follow_marker": (10.0, ("front",), ("steps.1.follow_marker.duration_s=26",)),
+    "hover_image": (10.0, ("down",), ("steps.1.hover_image.duration_s=26",)),
+    "land_pad": (6.0, ("down",), ()),
+    "land_on_rover": (7.0, ("down",), ()),
+    "orbit": (7.0, ("down",), ()),
+    "survey": (10.0, ("down",), ()),
 }
 
 
@@ -88,7 +94,7 @@ def cells(missions: Sequence[str] | None = None, kinds: Sequence[str] | None = N
           ) -> list[tuple[str, FaultCase, dict]]:
     """(mission, case, fault) for every cell that applies."""
     out = []
-    for mission, (start_s, cameras) in MISSIONS.items():
+    for mission, (start_s, cameras, _) in MISSIONS.items():
         if missions and mission not in missions:
             continue
         for case in CASES:
@@ -104,34 +110,68 @@ def run_bench(seeds: int = 2, missions: Sequence[str] | None = None,
               kinds: Sequence[str] | None = None, overrides: Sequence[str] = (),
               progress: Callable[[str], None] | None = None, workers: int | None = None,
               seed_start: int = 0) -> dict:
-    rows = []
+    """Every (cell, seed) run is one :func:`autopilot.trials.run_trial` (a whole lockstep
+    ``autopilot run`` in a worker process), all in one pool so that both cores stay busy."""
+    from autopilot.mission import load_mission
+
     plan = cells(missions, kinds)
-    for n, (mission, case, fault) in enumerate(plan, 1):
-        items = [*FENCE, *overrides, "scenario.faults=" + json.dumps([fault])]
-        result = run_trials(mission, seeds, seed_start=seed_start, overrides=items,
-                            criteria=[Criterion("completed")], workers=workers)
+    jobs = []
+    for index, (mission, _case, fault) in enumerate(plan):
+        items = [*FENCE, *MISSIONS[mission][2], *overrides,
+                 "scenario.faults=" + json.dumps([fault], separators=(",", ":"))]
+        for seed in range(seed_start, seed_start + seeds):
+            seeded, _ = trial_overrides(items, (), seed)
+            load_mission(mission, seeded)  # nothing flies on an invalid mission
+            jobs.append((index, mission, seed, seeded))
+    started = time.perf_counter()
+    results: dict[int, list[dict]] = {i: [] for i in range(len(plan))}
+    workers = max(1, min(workers or os.cpu_count() or 1, len(jobs)))
+    done = 0
+    with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
+        pending = {pool.submit(run_trial, mission, seeded, seed): (index, seed, seeded)
+                   for index, mission, seed, seeded in jobs}
+        while pending:
+            finished, _ = wait(pending, return_when=FIRST_COMPLETED)
+            for future in finished:
+                index, seed, seeded = pending.pop(future)
+                run = future.result()
+                run["overrides"] = seeded
+                results[index].append(run)
+                done += 1
+                if progress is not None and len(results[index]) == seeds:
+                    mission, case, _ = plan[index]
+                    kinds_ = [outcome(r["status"], r["metrics"])[0] for r in results[index]]
+                    progress(f"[{done}/{len(jobs)} runs, {time.perf_counter() - started:.0f} s]"
+                             f" {mission} × {case.name}: {kinds_.count('completed')} completed, "
+                             f"{kinds_.count('safe')} safe, {kinds_.count('unsafe')} unsafe")
+    rows = []
+    for index, (mission, case, fault) in enumerate(plan):
         counts = {"completed": 0, "safe": 0, "unsafe": 0}
         worst = []
-        for run in result.runs:
+        for run in sorted(results[index], key=lambda r: r["seed"]):
             kind, why = outcome(run["status"], run["metrics"])
             counts[kind] += 1
             if kind != "completed":
                 worst.append({"seed": run["seed"], "outcome": kind,
                               "why": why or run.get("reason", ""),
                               "reason": run.get("reason", ""),
-                              "replay": result.replay_command(run)})
+                              "replay": replay_command(mission, run["overrides"])})
         worst.sort(key=lambda w: (w["outcome"] != "unsafe", w["seed"]))
-        row = {"mission": mission, "fault": case.name, **counts, "runs": len(result.runs),
-               "completed_share": counts["completed"] / max(len(result.runs), 1),
-               "worst": worst[:3], "fault_spec": fault, "wall_s": round(result.wall_s, 1)}
-        rows.append(row)
-        if progress is not None:
-            progress(f"[{n}/{len(plan)}] {mission} × {case.name}: {counts['completed']} "
-                     f"completed, {counts['safe']} safe, {counts['unsafe']} unsafe "
-                     f"({result.wall_s:.0f} s)")
+        n = len(results[index])
+        rows.append({"mission": mission, "fault": case.name, **counts, "runs": n,
+                     "completed_share": counts["completed"] / max(n, 1),
+                     "worst": worst[:3], "fault_spec": fault})
     total = {k: sum(r[k] for r in rows) for k in ("completed", "safe", "unsafe", "runs")}
     return {"seeds": seeds, "seed_start": seed_start, "fence": list(FENCE), "cells": rows,
-            "total": total}
+            "total": total, "wall_s": round(time.perf_counter() - started, 1),
+            "workers": workers}
+
+
+def replay_command(mission: str, overrides: Sequence[str]) -> str:
+    words = ["autopilot", "run", "--mission", mission]
+    for item in overrides:
+        words += ["--set", item]
+    return " ".join(shlex.quote(w) for w in words)
 
 
 def format_table(result: dict) -> str:

@@ -39,6 +39,10 @@ async def cancel_all(tasks: Iterable[asyncio.Task]) -> None:
             await task
 
 
+#: a stamped message this much older than the newest: the vehicle rebooted (its boot clock
+#: started over), not a late one
+REBOOT_S = 5.0
+
 class MavlinkVehicle(Vehicle):
     """Base of the MAVLink drivers (the rest of :class:`Vehicle` is theirs)."""
 
@@ -53,6 +57,10 @@ class MavlinkVehicle(Vehicle):
         self._q = np.array([1.0, 0.0, 0.0, 0.0])
         self._rates = np.zeros(3)
         self._attitude_vehicle_s = math.nan  # capture time (boot clock) of _q and _rates
+        #: the newest capture time (boot clock) of each stamped message: a copy or an older
+        #: one that arrives late (a link that duplicates or reorders) is dropped
+        self._newest_s: dict[str, float] = {}
+        self.out_of_order_dropped = 0
         self._landed = LandedState.UNKNOWN
         self._range_m = math.nan
         self._battery = Battery(math.nan, math.nan, math.nan)
@@ -122,9 +130,23 @@ class MavlinkVehicle(Vehicle):
             heading_rad=math.remainder(heading, 2.0 * math.pi) if math.isfinite(heading)
             else math.nan, system_id=msg.get_srcSystem()))
 
+    def _newer(self, kind: str, vehicle_s: float) -> bool:
+        """Is this ``kind`` of message, captured at ``vehicle_s`` (boot clock), newer than
+        the last one taken? (Much older — by more than :data:`REBOOT_S` — is a vehicle that
+        rebooted: taken, and the clock starts over.)"""
+        last = self._newest_s.get(kind, -math.inf)
+        if last - REBOOT_S <= vehicle_s <= last:
+            self.out_of_order_dropped += 1
+            return False
+        self._newest_s[kind] = vehicle_s
+        return True
+
     def _publish_position(self, vehicle_s: float, position_ned_m, velocity_ned_m_s) -> None:
         """A LOCAL_POSITION_NED stamped ``vehicle_s`` (boot time) arrived: publish a sample
-        made of it and the newest of everything else."""
+        made of it and the newest of everything else (not if it is a copy, or older than one
+        published already)."""
+        if not self._newer("position", vehicle_s):
+            return
         self._boot.observe(vehicle_s, self._clock.now())
         attitude_s = self._boot.to_local(self._attitude_vehicle_s) \
             if math.isfinite(self._attitude_vehicle_s) else -math.inf

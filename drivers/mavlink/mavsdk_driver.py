@@ -279,7 +279,8 @@ class MavsdkDriver(MavlinkVehicle):
             self._last_sample_s = self._clock.now()
             self._publish_position(msg.time_boot_ms / 1000.0, (msg.x, msg.y, msg.z),
                                    (msg.vx, msg.vy, msg.vz))
-        elif kind == "ATTITUDE_QUATERNION" and src == self._target:
+        elif kind == "ATTITUDE_QUATERNION" and src == self._target and \
+                self._newer("attitude", msg.time_boot_ms / 1000.0):
             self._q = np.array([msg.q1, msg.q2, msg.q3, msg.q4])
             self._rates = np.array([msg.rollspeed, msg.pitchspeed, msg.yawspeed])
             self._attitude_vehicle_s = msg.time_boot_ms / 1000.0

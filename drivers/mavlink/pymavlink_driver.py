@@ -320,13 +320,16 @@ class PymavlinkDriver(MavlinkVehicle):
             await asyncio.sleep(px4.timesync_period_s(count))
 
     async def _watchdog(self) -> None:
-        """The link is lost when heartbeats stop for ``heartbeat_timeout_s``."""
+        """The link is lost when nothing from the vehicle (heartbeats, telemetry) arrives
+        for ``heartbeat_timeout_s``: a lossy link that drops three heartbeats in a row (at
+        30 % loss, every minute or so) but passes its telemetry is not lost."""
         while True:
             await asyncio.sleep(0.25)
             if self._heard.is_set() and \
                     self._clock.now() - self._last_heartbeat_s > self.heartbeat_timeout_s:
                 self._closed_error = ConnectionLost(
-                    f"no heartbeat from the vehicle for {self.heartbeat_timeout_s:g} s")
+                    f"nothing from the vehicle (no heartbeat, no telemetry) for "
+                    f"{self.heartbeat_timeout_s:g} s")
                 self._end_telemetry(self._closed_error)
                 for future in (*self._acks.values(), *self._params.values()):
                     if not future.done():
@@ -369,6 +372,7 @@ class PymavlinkDriver(MavlinkVehicle):
             if self._target is not None and kind not in _ANYONE:
                 self._ignore(src)
             return
+        self._last_heartbeat_s = self._clock.now()  # (anything from the vehicle will do)
         handler = _HANDLERS.get(kind)
         if handler is not None:
             handler(self, msg)
@@ -409,6 +413,8 @@ class PymavlinkDriver(MavlinkVehicle):
         self._on_vehicle_text(msg)
 
     def _on_attitude_quaternion(self, msg) -> None:
+        if not self._newer("attitude", msg.time_boot_ms / 1000.0):
+            return
         self._q = np.array([msg.q1, msg.q2, msg.q3, msg.q4])
         self._rates = np.array([msg.rollspeed, msg.pitchspeed, msg.yawspeed])
         self._attitude_vehicle_s = msg.time_boot_ms / 1000.0
@@ -416,6 +422,8 @@ class PymavlinkDriver(MavlinkVehicle):
     def _on_attitude(self, msg) -> None:
         if self.is_px4:
             return  # PX4 sends the quaternion; ATTITUDE is derived from it
+        if not self._newer("attitude", msg.time_boot_ms / 1000.0):
+            return
         self._q = quat_from_euler(msg.roll, msg.pitch, msg.yaw)
         self._rates = np.array([msg.rollspeed, msg.pitchspeed, msg.yawspeed])
         self._attitude_vehicle_s = msg.time_boot_ms / 1000.0

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import itertools
 import logging
 import socket
 import threading
@@ -17,7 +18,7 @@ import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
 from autopilot.flight_ops import wait_for_state
-from drivers.base import CommandTimeout, ConnectionLost, Setpoint
+from drivers.base import CommandDenied, CommandTimeout, ConnectionLost, Setpoint
 from drivers.mavlink.link import LinkError, TimesyncRequests, UrlError
 from drivers.mavlink.mavsdk_driver import MavsdkDriver
 from drivers.mavlink.pymavlink_driver import PymavlinkDriver
@@ -205,5 +206,58 @@ def test_signing_with_a_wrong_key_or_none_is_refused(no_camera_config, driver_cl
             assert face.stats.bad_signature > 0
             assert face.stats.commands == 0
             assert not vehicle.latest_state.armed
+
+    asyncio.run(main())
+
+
+@pytest.mark.parametrize("driver_class", [
+    PymavlinkDriver, pytest.param(MavsdkDriver, marks=pytest.mark.long)])
+def test_a_lossy_link_still_flies(no_camera_config, driver_class):
+    """The simulator's link_loss fault on its MAVLink face (from the arming on): 30 % of the
+    datagrams lost each way, 10 % duplicated, 10 % reordered, 50 ms more latency. The driver
+    keeps its telemetry (fewer samples, none out of order), and its commands (retried) still
+    take the vehicle up and back down."""
+    from autopilot.flight_ops import wait_for_state
+    from drivers.base import FlightMode
+
+    config = type(no_camera_config).model_validate({**no_camera_config.model_dump(), "faults": [
+        {"kind": "link_loss", "fraction": 0.3, "duplicate": 0.1, "reorder": 0.1,
+         "latency_s": 0.05}]})
+    driver = None
+
+    async def until(command, done, what: str) -> int:
+        """A command sent again (as a mission step would) until the telemetry shows it done:
+        at 30 % loss each way a command and its answer both get through half the time."""
+        for attempt in range(1, 9):
+            with contextlib.suppress(CommandTimeout, CommandDenied):
+                await command()
+            with contextlib.suppress(TimeoutError):
+                await wait_for_state(driver, done, 3.0, what)
+                return attempt
+        raise AssertionError(f"{what}: not done after 8 attempts")
+
+    async def main():
+        nonlocal driver
+        async with served(config) as (_vehicle, face):
+            driver = driver_class(CLIENT_URL)
+            await driver.connect(timeout_s=10.0)
+            try:
+                await wait_for_state(driver, lambda s: s.health.armable, 15.0, "armable")
+                await until(driver.arm, lambda s: s.armed, "armed")
+                async with collected(driver.telemetry(buffer=256)) as states:
+                    await until(lambda: driver.takeoff(2.0),
+                                lambda s: s.mode is FlightMode.TAKEOFF or
+                                -s.position_ned_m[2] > 0.5, "taking off")
+                    await wait_for_state(driver, lambda s: -s.position_ned_m[2] > 1.7, 30.0,
+                                         "climbed")
+                    await until(driver.land, lambda s: s.mode is FlightMode.LAND, "landing")
+                    await wait_for_state(driver, lambda s: not s.armed, 40.0, "landed")
+                assert -states[-1].position_ned_m[2] < 0.3
+                assert face.stats.link_dropped > 50
+                stamps = [s.time_s for s in states]
+                assert len(stamps) > 20
+                assert all(b >= a for a, b in itertools.pairwise(stamps))  # reordered: dropped
+            finally:
+                await driver.close()
 
     asyncio.run(main())
