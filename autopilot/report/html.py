@@ -58,7 +58,7 @@ def render(records, complete: bool, summary: dict | None, title: str = "flight",
     banner = "" if complete else (
         "<p class='cut'>This log was cut short (the run did not close it, e.g. it crashed): "
         "the plots show what was written before the cut.</p>")
-    table = _metrics_table(summary)
+    table = _faults_table(records) + _metrics_table(summary)
     if video:  # beside the page, not inside it: a video is too big to embed
         table += (f"<h2>Onboard video</h2><video controls width='640' src='{html.escape(video)}'>"
                   f"</video><p><a href='{html.escape(video)}'>{html.escape(video)}</a></p>")
@@ -68,6 +68,32 @@ def render(records, complete: bool, summary: dict | None, title: str = "flight",
             "td,th{padding:2px 8px;text-align:left}</style></head><body>"
             f"<h1>Flight report: {html.escape(title)}</h1>{banner}{table}"
             + "".join(sections) + _channels_table(channels) + "</body></html>")
+
+
+def _faults_table(records) -> str:
+    """The faults the simulator injected (a faults run: ``scenario.faults``), each with its
+    window on the log's clock (a fault's ``start_s`` counts from the first arming)."""
+    plan = (records.get(ch.MISSION_PLAN) or [{}])[0]
+    faults = ((plan.get("scenario") or {}).get("faults")) or []
+    if not faults:
+        return ""
+    armed = next((s["time_s"] for s in records.get(ch.VEHICLE_STATE, []) if s.get("armed")),
+                 None)
+    rows = []
+    for f in faults:
+        start = f.get("start_s") or 0.0
+        end = None if f.get("duration_s") is None else start + f["duration_s"]
+        if armed is not None:
+            window = f"{armed + start:.1f} s – " + ("end" if end is None else
+                                                      f"{armed + end:.1f} s")
+        else:
+            window = "never (the vehicle did not arm)"
+        params = ", ".join(f"{k}={v}" for k, v in f.items()
+                           if k not in ("kind", "start_s", "duration_s") and v is not None)
+        rows.append(f"<tr><td>{html.escape(str(f.get('kind')))}</td><td>{window}</td>"
+                    f"<td>{html.escape(params)}</td></tr>")
+    return ("<h2>Injected faults</h2><table id='faults'><tr><th>kind</th><th>when (log time)"
+            "</th><th>parameters</th></tr>" + "".join(rows) + "</table>")
 
 
 def _channels_table(channels: Sequence[ChannelInfo]) -> str:

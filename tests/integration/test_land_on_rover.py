@@ -48,6 +48,7 @@ def test_lands_on_the_moving_deck_within_5_cm(tmp_path):
     assert again["metrics"]["relative"]["within_2sigma"] >= 0.9
 
 
+@pytest.mark.long  # (the landing with the tag runs in CI; this is the same loop, UWB alone)
 def test_uwb_only_lands_on_the_deck():
     plan = load_mission("land_on_rover", ["steps.1.land_on_rover.use_marker=false",
                                           "scenario.seed=4"])
@@ -116,6 +117,7 @@ def test_bad_trial_options_are_refused_clearly():
 
 @pytest.mark.skipif(importlib.util.find_spec("ray") is None,
                     reason="Ray is not installed (pip install -e '.[test,cluster]')")
+@pytest.mark.long  # (starting Ray takes its time; the local trials above run in CI)
 def test_trials_on_a_local_ray_instance_give_the_same_table(tmp_path):
     mission = tmp_path / "hop.yaml"
     mission.write_text(HOP)

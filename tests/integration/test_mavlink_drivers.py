@@ -29,7 +29,10 @@ async def _fly_offboard(driver) -> None:
                          and s.altitude_m > 2.7, 30.0, "takeoff to 3 m")
 
 
-@pytest.mark.parametrize("driver_class", [PymavlinkDriver, MavsdkDriver])
+@pytest.mark.parametrize("driver_class", [
+    PymavlinkDriver,
+    # (MAVSDK's own examples and the link tests fly the MAVSDK driver in CI)
+    pytest.param(MavsdkDriver, marks=pytest.mark.long)])
 def test_driver_flies_the_simulator_end_to_end(no_camera_config, driver_class):
     async def main():
         async with served(no_camera_config) as (vehicle, _face):

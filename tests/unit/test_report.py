@@ -122,3 +122,18 @@ def test_a_cut_log_still_gives_a_report_that_says_so(tmp_path):
     assert "cut short" in cut
     assert cut.count("<img") >= 3  # what the first half of the log holds
     assert "follow.detection_rate" in cut
+
+
+def test_a_faults_run_lists_its_faults_on_the_log_clock():
+    from autopilot.report.html import _faults_table
+
+    records = {ch.MISSION_PLAN: [{"scenario": {"faults": [
+        {"kind": "camera_dropout", "start_s": 2.0, "duration_s": 3.0, "camera": "front"},
+        {"kind": "battery_sag", "start_s": 4.0, "duration_s": None,
+         "remaining_fraction": 0.12}]}}],
+        ch.VEHICLE_STATE: [{"time_s": 1.0, "armed": False}, {"time_s": 1.5, "armed": True}]}
+    table = _faults_table(records)
+    assert "<h2>Injected faults</h2>" in table
+    assert "camera_dropout</td><td>3.5 s – 6.5 s</td><td>camera=front" in table
+    assert "battery_sag</td><td>5.5 s – end</td><td>remaining_fraction=0.12" in table
+    assert _faults_table({ch.MISSION_PLAN: [{"scenario": {"faults": []}}]}) == ""
