@@ -393,3 +393,29 @@ def test_garbage_in_the_stream_is_survived():
     assert len(got) == 200
     # after the garbage, the stream's own pictures again (the square where it belongs)
     assert all(not np.isnan(_square_x(frame.image)) for frame, _ in got[-20:])
+
+
+def test_lost_rtp_packets_are_not_sent():
+    """The simulator's link_loss fault (``video_fraction``) loses RTP packets at the sender:
+    each one it is asked about and told to drop never reaches the wire."""
+    port = _free_port_pair()
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as listener:
+        listener.bind(("127.0.0.1", port))
+        listener.settimeout(0.2)
+        decisions = iter([False, True] * 10_000)  # every second packet lost
+        sender = VideoSender(f"udp://127.0.0.1:{port}", W, H, RATE_HZ, rtcp=False,
+                             drop=lambda: next(decisions))
+        try:
+            for k in range(10):
+                sender.send(_image(k), 1.0 + k / RATE_HZ)
+            received = 0
+            with contextlib.suppress(TimeoutError):
+                while True:
+                    listener.recv(65536)
+                    received += 1
+        finally:
+            sender.close()
+    assert sender.packets_dropped > 0
+    assert received == sender.packets_sent
+    assert sender.packets_sent == sender.packets_dropped or \
+        abs(sender.packets_sent - sender.packets_dropped) <= 1
