@@ -134,7 +134,11 @@ def run_bench(seeds: int = 2, missions: Sequence[str] | None = None,
             finished, _ = wait(pending, return_when=FIRST_COMPLETED)
             for future in finished:
                 index, seed, seeded = pending.pop(future)
-                run = future.result()
+                try:
+                    run = future.result()
+                except Exception as exc:  # a worker that died (a crash in MuJoCo, memory)
+                    run = {"seed": seed, "status": "error", "metrics": {},
+                           "reason": f"{type(exc).__name__}: {exc}"}
                 run["overrides"] = seeded
                 results[index].append(run)
                 done += 1

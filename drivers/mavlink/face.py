@@ -260,6 +260,8 @@ class MavlinkFace:
 
     async def start(self) -> None:
         loop = asyncio.get_running_loop()
+        with contextlib.suppress(Exception):  # a simulated vehicle: link_loss acts here only
+            self.vehicle.simulator.link_faults_in_face = True
         for name, (port, peer) in self.ports.items():
             link = _Link(name, self, peer)
             try:

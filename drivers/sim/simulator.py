@@ -205,6 +205,9 @@ class Simulator:
             path = path.path if isinstance(path, WarpedPath) else path
             self.rover.path = WarpedPath(path, TimeWarp(self.faults.of("rover_stop")))
         self._fault_rng = np.random.default_rng((self.seed, 6152))
+        #: set by the MAVLink face, which applies link_loss to its datagrams itself (the
+        #: simulator then does not lose telemetry and setpoints a second time)
+        self.link_faults_in_face = False
         self._last_image: dict[str, np.ndarray] = {}
         self._frozen: dict[str, np.ndarray] = {}
         self._motor_scale = np.ones(len(self._act))
@@ -492,10 +495,11 @@ class Simulator:
         extra_s = 0.0
         if self.faults:
             ft = self._fault_time(t)
-            if self.faults.active("telemetry_dropout", ft) or self.faults.lost(ft):
+            link = not self.link_faults_in_face
+            if self.faults.active("telemetry_dropout", ft) or (link and self.faults.lost(ft)):
                 return
             extra_s = sum(f.delay_s for f in self.faults.active("telemetry_delay", ft)) + \
-                sum(f.latency_s for f in self.faults.active("link_loss", ft))
+                (sum(f.latency_s for f in self.faults.active("link_loss", ft)) if link else 0.0)
         est = self._est
         tel = self.cfg.telemetry
         state = VehicleState(
@@ -634,7 +638,8 @@ class Simulator:
         return self.params.set(name, value)
 
     def push_setpoint(self, setpoint: Setpoint) -> None:
-        if self.faults and self.faults.lost(self._fault_time(self.time_s)):
+        if self.faults and not self.link_faults_in_face and \
+                self.faults.lost(self._fault_time(self.time_s)):
             return  # a link_loss fault lost it on the way
         self.flight.push_setpoint(setpoint, self.time_s)
 
