@@ -15,6 +15,26 @@ from drivers.sim.driver import SimDriver
 GROUND_Z = -0.095  # local NED z of the body origin resting on its skids
 
 
+#: follow_ball with a 20 s following step: the short closed loop most runtime tests fly
+SHORT_FOLLOW = ["steps.1.follow_ball.duration_s=20"]
+
+
+def fly_short(overrides, out=None, **kwargs):
+    """A short follow_ball through :func:`autopilot.run.fly` on the lockstep clock: its summary
+    and the tasks it left behind (there should be none)."""
+    from autopilot.mission import load_mission
+    from autopilot.run import fly
+
+    plan = load_mission("follow_ball", [*SHORT_FOLLOW, *overrides])
+
+    async def main():
+        summary = await fly(plan, out, **kwargs)
+        orphans = [t for t in asyncio.all_tasks() if t is not asyncio.current_task()]
+        return summary, orphans
+
+    return asyncio.run(main())
+
+
 def run(coro):
     return asyncio.run(coro)
 

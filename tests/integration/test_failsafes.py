@@ -16,22 +16,11 @@ import pytest
 from autopilot.control.battery import BatteryReserve, ReserveSettings
 from autopilot.flightlog import records as ch
 from autopilot.flightlog.log import read_log
-from autopilot.mission import load_mission
-from autopilot.run import fly
 from autopilot.watchdog import LoopWatchdog
 
-SHORT = ["steps.1.follow_ball.duration_s=20"]
+from .simtools import fly_short
 
-
-def _fly(overrides, out, **kwargs):
-    plan = load_mission("follow_ball", [*SHORT, *overrides])
-
-    async def main():
-        summary = await fly(plan, out, **kwargs)
-        orphans = [t for t in asyncio.all_tasks() if t is not asyncio.current_task()]
-        return summary, orphans
-
-    return asyncio.run(main())
+_fly = fly_short
 
 
 def _ended_down(log) -> dict:

@@ -10,22 +10,12 @@ from mcap.reader import make_reader
 
 from autopilot.flightlog import records as ch
 from autopilot.mission import load_mission
-from autopilot.run import fly
 from autopilot.runtime import Runtime
 from drivers.base import FlightMode
 
-SHORT = ["steps.1.follow_ball.duration_s=20"]
+from .simtools import fly_short
 
-
-def _fly(overrides, out=None, **kwargs):
-    plan = load_mission("follow_ball", [*SHORT, *overrides])
-
-    async def main():
-        summary = await fly(plan, out, **kwargs)
-        orphans = [t for t in asyncio.all_tasks() if t is not asyncio.current_task()]
-        return summary, orphans
-
-    return asyncio.run(main())
+_fly = fly_short
 
 
 def test_follow_ball_closed_loop(tmp_path):
