@@ -119,6 +119,12 @@ class Hold(Behavior):
         return BehaviorOutput(Status.RUNNING, phase="holding")
 
 
+def _land_now() -> BehaviorOutput:
+    """A failsafe's answer that lands the vehicle where it is (the vehicle's LAND mode)."""
+    return BehaviorOutput(Status.RUNNING, requests=(VehicleRequest(RequestKind.LAND),),
+                          phase="landing")
+
+
 class ReturnHome(Behavior):
     """A failsafe for when there is just enough left to get home (the battery reserve): the
     vehicle's own return to launch (it climbs to its return altitude, flies home and lands), done
@@ -135,8 +141,7 @@ class ReturnHome(Behavior):
         if not inputs.state.armed and not inputs.state.in_air:
             return BehaviorOutput(Status.SUCCEEDED, reason="already on the ground")
         if not inputs.state.in_air:
-            return BehaviorOutput(Status.RUNNING, requests=(VehicleRequest(RequestKind.LAND),),
-                                  phase="landing")
+            return _land_now()
         return BehaviorOutput(Status.RUNNING, requests=(VehicleRequest(RequestKind.RETURN),),
                               phase="returning")
 
@@ -150,8 +155,7 @@ class ReturnHome(Behavior):
 
     def request_failed(self, request: VehicleRequest, reason: str) -> BehaviorOutput:
         if request.kind is RequestKind.RETURN:
-            return BehaviorOutput(Status.RUNNING, requests=(VehicleRequest(RequestKind.LAND),),
-                                  phase="landing")
+            return _land_now()
         return BehaviorOutput(Status.FAILED, reason=f"{request.kind.value}: {reason}")
 
 
@@ -173,8 +177,7 @@ class SafeStop(Behavior):
             return BehaviorOutput(Status.SUCCEEDED, reason="already on the ground")
         if not inputs.state.in_air:  # armed on the ground: just land (disarms)
             self._landing = True
-            return BehaviorOutput(Status.RUNNING, requests=(VehicleRequest(RequestKind.LAND),),
-                                  phase="landing")
+            return _land_now()
         return BehaviorOutput(Status.RUNNING, requests=(VehicleRequest(RequestKind.HOLD),),
                               phase="holding")
 
@@ -186,13 +189,11 @@ class SafeStop(Behavior):
             return BehaviorOutput(Status.FAILED, reason="not landed in time")
         if not self._landing and inputs.now_s - self._start >= self._hold_s:
             self._landing = True
-            return BehaviorOutput(Status.RUNNING, requests=(VehicleRequest(RequestKind.LAND),),
-                                  phase="landing")
+            return _land_now()
         return BehaviorOutput(Status.RUNNING, phase="landing" if self._landing else "holding")
 
     def request_failed(self, request: VehicleRequest, reason: str) -> BehaviorOutput:
         if request.kind is RequestKind.HOLD:
             self._landing = True
-            return BehaviorOutput(Status.RUNNING, requests=(VehicleRequest(RequestKind.LAND),),
-                                  phase="landing")
+            return _land_now()
         return BehaviorOutput(Status.FAILED, reason=f"{request.kind.value}: {reason}")
