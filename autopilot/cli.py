@@ -686,6 +686,10 @@ def _run(args: argparse.Namespace) -> int:
             check_listen(host, port)
         except ApiSetupError as exc:
             raise InputError(str(exc)) from None
+    if args.faults and plan.config.driver != "sim":
+        raise InputError(f"--fault acts on the simulated vehicle, not on a vehicle flown through "
+                         f"--driver {plan.config.driver}: give it to 'autopilot sim --fault ...' "
+                         "(the MAVLink vehicle it simulates), or fly --driver sim")
     out = Path(args.out) if args.out else default_out_dir(plan)
     if plan.config.driver != "sim":
         _check_network_exposure("--connect", args.connect or plan.config.link.connect,

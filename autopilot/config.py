@@ -447,6 +447,9 @@ class BatteryReserveConfig(_Model):
     speed_m_s: Annotated[float, Field(gt=0, le=30)] = 5.0  # the vehicle's return speed
     descent_m_s: Annotated[float, Field(gt=0, le=10)] = 0.7  # its landing descent speed
     margin: Annotated[float, Field(ge=1, le=10)] = 1.5  # on the estimated cost of getting home
+    #: the vehicle's RTL_RETURN_ALT (it climbs there first) and climb speed (MPC_Z_V_AUTO_UP)
+    return_altitude_m: Annotated[float, Field(ge=0, le=500)] = 60.0
+    climb_m_s: Annotated[float, Field(gt=0, le=20)] = 3.0
 
 
 class FailsafeConfig(_Model):

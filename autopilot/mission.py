@@ -363,6 +363,16 @@ def load_mission(name_or_path: str, overrides: list[str] = (),
                 problems.append(Problem(source, line, f"scenario.faults.{i}.camera",
                                         f"no camera {camera!r} on the vehicle (its cameras: "
                                         f"{', '.join(cameras) or 'none'})"))
+            if fault.kind == "motor_failure":
+                from drivers.sim.model import rotor_count
+
+                rotors = rotor_count(config.sim.vehicle.model)
+                if fault.motor >= rotors:
+                    source, line = located.locate(("scenario", "faults", i))
+                    problems.append(Problem(
+                        source, line, f"scenario.faults.{i}.motor",
+                        f"no motor {fault.motor}: the vehicle ({config.sim.vehicle.model}) has "
+                        f"{rotors}, numbered 0 to {rotors - 1} in PX4's order"))
     if problems:
         problems.sort(key=lambda p: (p.source == "--set", p.source, p.line or 0))
         raise ConfigError(problems)

@@ -81,6 +81,7 @@ from autopilot.watchdog import LoopWatchdog
 from drivers.base import (
     FlightMode,
     Frame,
+    LandedState,
     LandingTarget,
     Setpoint,
     Vehicle,
@@ -90,6 +91,10 @@ from drivers.base import (
 from drivers.slots import LatestSlot
 
 log = logging.getLogger(__name__)
+
+#: a step's phases that are already the way down (the battery reserve does not interrupt them)
+LANDING_PHASES = frozenset({"landing", "descending", "committed", "touching down",
+                            "precision landing"})
 
 
 class Service(Protocol):
@@ -263,7 +268,8 @@ class Runtime:
         b = cfg.failsafe.battery
         #: the battery reserve for the way home (autopilot/control/battery.py)
         self.battery_reserve = BatteryReserve(ReserveSettings(
-            b.reserve_fraction, b.speed_m_s, b.descent_m_s, b.margin))
+            b.reserve_fraction, b.speed_m_s, b.descent_m_s, b.margin,
+            return_altitude_m=b.return_altitude_m, climb_m_s=b.climb_m_s))
         self._battery_handled = False
         #: a failure the step cannot fly on (its detector or estimator raised, the event loop
         #: stalled in flight): the step fails into the fallback at the next tick
@@ -397,6 +403,15 @@ class Runtime:
                 self._event(self.clock.now(), "failsafe", f"geofence: {self._fence_breach}")
                 self.events.emit(Event("mission", "geofence", self.clock.now(),
                                        f"geofence: {self._fence_breach}"))
+                if executor.in_fallback:
+                    # the fallback is already taking the vehicle down or home (the vehicle's
+                    # return climbing above the ceiling, a landing blown outside): it lands
+                    # where it is now; a hold would stop the fallback, not end the flight
+                    self._event(self.clock.now(), "failsafe",
+                                "geofence during the fallback: landing where it is")
+                    with contextlib.suppress(VehicleError, TimeoutError):
+                        await self.clock.wait_for(self.vehicle.land(), 2.0)
+                    continue
                 with contextlib.suppress(VehicleError, TimeoutError):
                     await self.clock.wait_for(self.vehicle.hold(), 2.0)
                 out = executor.abort(f"geofence: {self._fence_breach}", inputs)
@@ -682,17 +697,17 @@ class Runtime:
             self._step_failure = why
 
     def _on_loop_stall(self, seconds: float) -> None:
-        """The event loop was stalled (autopilot/watchdog.py). In real time, flying, once
-        setpoints lapsed (the vehicle's offboard failsafe acted), the step does not resume
-        blindly: it fails into the fallback."""
-        now = self.clock.now()
+        """The event loop was stalled for ``runtime.loop_stall_s`` or more (the one threshold:
+        autopilot/watchdog.py). In real time, flying, the step does not resume blindly on what
+        it saw before the stall (its setpoints lapsed meanwhile, and PX4's offboard-loss
+        failsafe may have acted): it fails into the fallback."""
+        if self.clock.lockstep:  # simulated time waited for the loop: the flight lost nothing
+            return
         text = f"event loop stalled for {seconds:.2f} s"
-        if not self.clock.lockstep:  # (lockstep: simulated time waited; nothing to tell)
-            self._event(now, "runtime", text)
+        self._event(self.clock.now(), "runtime", text)
         s = self._state
-        if not self.clock.lockstep and s is not None and s.in_air and \
-                seconds > self.config.runtime.setpoint_expiry_s:
-            self._fail_step(text + " (setpoints lapsed)")
+        if s is not None and s.in_air:
+            self._fail_step(text)
 
     def _battery_call(self, inputs: BehaviorInputs) -> MissionOutput | None:
         """The battery reserve (autopilot/control/battery.py): time to go home?"""
@@ -700,6 +715,9 @@ class Runtime:
                 self._executor is None or self._executor.in_fallback:
             return None
         s = inputs.state
+        if s.mode in (FlightMode.LAND, FlightMode.PRECLAND) or \
+                s.landed_state is LandedState.LANDING or self._phase in LANDING_PHASES:
+            return None  # already on the cheapest way down: a landing is not interrupted
         battery = getattr(s, "battery", None)
         call = self.battery_reserve.check(
             inputs.now_s, getattr(battery, "remaining_fraction", None), s.position_ned_m,

@@ -128,20 +128,29 @@ def _land_now() -> BehaviorOutput:
 class ReturnHome(Behavior):
     """A failsafe for when there is just enough left to get home (the battery reserve): the
     vehicle's own return to launch (it climbs to its return altitude, flies home and lands), done
-    once it has landed and disarmed. A vehicle that refuses to return lands where it is."""
+    once it has landed and disarmed. A vehicle that refuses to return lands where it is; so
+    does one that does not take up its return within ``engage_s``, or leaves it (a mode other
+    than return or landing, e.g. a hold the geofence commanded) for ``engage_s``: once, it
+    does not fight a mode changed again after that (the pilot's)."""
 
     name = "return_home"
+    RETURN_MODES = (FlightMode.RETURN, FlightMode.LAND, FlightMode.PRECLAND)
 
-    def __init__(self, timeout_s: float = 600.0) -> None:
+    def __init__(self, timeout_s: float = 600.0, engage_s: float = 5.0) -> None:
         self._timeout_s = timeout_s
+        self._engage_s = engage_s
         self._start = 0.0
+        self._off_since: float | None = None
+        self._landing = False
 
     def activate(self, inputs: BehaviorInputs) -> BehaviorOutput:
         self._start = inputs.now_s
+        self._off_since = inputs.now_s  # until the vehicle is seen returning
+        self._landing = False
         if not inputs.state.armed and not inputs.state.in_air:
             return BehaviorOutput(Status.SUCCEEDED, reason="already on the ground")
         if not inputs.state.in_air:
-            return _land_now()
+            return self._land()
         return BehaviorOutput(Status.RUNNING, requests=(VehicleRequest(RequestKind.RETURN),),
                               phase="returning")
 
@@ -151,12 +160,24 @@ class ReturnHome(Behavior):
             return BehaviorOutput(Status.SUCCEEDED, phase="landed")
         if inputs.now_s - self._start > self._timeout_s:
             return BehaviorOutput(Status.FAILED, reason="not home and landed in time")
-        return BehaviorOutput(Status.RUNNING, phase="returning")
+        phase = "landing" if self._landing else "returning"
+        if self._landing or not s.in_air or s.mode in self.RETURN_MODES:
+            self._off_since = None
+            return BehaviorOutput(Status.RUNNING, phase=phase)
+        if self._off_since is None:
+            self._off_since = inputs.now_s
+        if inputs.now_s - self._off_since >= self._engage_s:
+            return self._land()
+        return BehaviorOutput(Status.RUNNING, phase=phase)
 
     def request_failed(self, request: VehicleRequest, reason: str) -> BehaviorOutput:
         if request.kind is RequestKind.RETURN:
-            return _land_now()
+            return self._land()
         return BehaviorOutput(Status.FAILED, reason=f"{request.kind.value}: {reason}")
+
+    def _land(self) -> BehaviorOutput:
+        self._landing = True
+        return _land_now()
 
 
 class SafeStop(Behavior):

@@ -1,9 +1,11 @@
 """The battery reserve for the way home (an autopilot-side failsafe, before PX4's own).
 
-Each tick it estimates what getting home and down would cost: the time to fly home
-(horizontal distance ÷ ``speed_m_s``, the vehicle's return speed) and to descend (height ÷
-``descent_m_s``), times the rate the battery has been draining (its remaining fraction over the
-last ``window_s``), times ``margin``. When what is left after that falls to
+Each tick it estimates what getting home and down would cost: the time to climb to the
+vehicle's return altitude (``return_altitude_m`` − height, ÷ ``climb_m_s``: PX4's RTL climbs to
+RTL_RETURN_ALT before it turns home), to fly home (horizontal distance ÷ ``speed_m_s``, the
+vehicle's return speed) and to descend from there (÷ ``descent_m_s``), times the rate the
+battery has been draining (its remaining fraction over the last ``window_s``), times
+``margin``. When what is left after that falls to
 ``reserve_fraction``, the mission stops and the vehicle goes home: its return to launch (or a
 landing where it is, when it is already within ``home_radius_m`` of home, or ``action: land``).
 A battery the vehicle reports as below ``reserve_fraction`` outright (a sag) triggers it too.
@@ -27,6 +29,8 @@ class ReserveSettings:
     margin: float
     window_s: float = 20.0
     home_radius_m: float = 3.0
+    return_altitude_m: float = 0.0  # the vehicle's RTL_RETURN_ALT (0: returns at its height)
+    climb_m_s: float = 3.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -69,11 +73,14 @@ class BatteryReserve:
                                f"{s.reserve_fraction:.0%}", go_home)
         if not math.isfinite(self.drain_per_s):
             return None
-        seconds = (distance / s.speed_m_s if go_home else 0.0) + height / s.descent_m_s
+        climb = max(s.return_altitude_m - height, 0.0) if go_home else 0.0
+        seconds = climb / s.climb_m_s + (distance / s.speed_m_s if go_home else 0.0) + \
+            (height + climb) / s.descent_m_s
         self.needed_fraction = s.margin * self.drain_per_s * seconds
         if remaining - self.needed_fraction <= s.reserve_fraction:
             return ReserveCall(
-                f"battery {remaining:.0%}: getting home ({distance:.0f} m, {height:.0f} m up, "
-                f"about {seconds:.0f} s) takes ~{self.needed_fraction:.0%}, leaving less than "
-                f"the reserve {s.reserve_fraction:.0%}", go_home)
+                f"battery {remaining:.0%}: getting home ({distance:.0f} m, {height:.0f} m up"
+                + (f", {climb:.0f} m climb" if climb else "")
+                + f", about {seconds:.0f} s) takes ~{self.needed_fraction:.0%}, leaving less "
+                f"than the reserve {s.reserve_fraction:.0%}", go_home)
         return None

@@ -12,7 +12,9 @@ Log time is the run's clock (simulated seconds in lockstep), in nanoseconds.
 
 from __future__ import annotations
 
+import contextlib
 import json
+import logging
 import struct
 import threading
 from collections import defaultdict, deque
@@ -26,6 +28,8 @@ from mcap.writer import Writer
 
 from autopilot.flightlog import records as ch
 from autopilot.flightlog.records import SCHEMAS
+
+log = logging.getLogger(__name__)
 
 CHUNK_SIZE_B = 64 * 1024
 
@@ -119,6 +123,7 @@ class FlightLog:
         from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
         from mcap_protobuf.schema import register_schema
 
+        batch: deque = deque()
         try:
             # small chunks: a run that crashes loses at most the unfinished chunk (about a
             # second of records), not the megabyte a default chunk holds
@@ -136,7 +141,9 @@ class FlightLog:
                 self._wake.wait(WAKE_S)
                 self._wake.clear()
                 closing = self._closing  # read first: what was written before close() is taken
-                for topic, ns, data, camera in self._take_all():
+                batch = self._take_all()
+                while batch:
+                    topic, ns, data, camera = batch[0]
                     if camera is None and topic not in channels:  # a channel met late
                         schema = SCHEMAS.get(topic) or {"title": topic, "type": "object"}
                         schema_id = writer.register_schema(
@@ -157,21 +164,37 @@ class FlightLog:
                     sequence += 1
                     writer.add_message(channels[topic], log_time=ns, publish_time=ns,
                                        sequence=sequence, data=data)
+                    batch.popleft()
                 if closing:
                     break
             writer.finish()
         except Exception as exc:  # e.g. the disk is full: the flight goes on without the file
             self.error = exc
-            self._queue = None
+            q, self._queue = self._queue, None  # from now on records stay in memory
+            kept = self._keep_unwritten([*batch, *(q or ())])
+            log.warning("flight log %s: writing failed (%s: %s); the flight goes on, its "
+                        "records in memory from now on (%d unwritten ones kept)", self.path,
+                        type(exc).__name__, exc, kept)
         finally:
             try:
                 file.close()  # flushes: may fail the same way
             except OSError as exc:
                 self.error = self.error or exc
 
-    def _take_all(self) -> list:
+    def _keep_unwritten(self, items) -> int:
+        """Records queued for the file when it failed: into memory (camera frames are not
+        kept; the file was their only place)."""
+        kept = 0
+        for topic, _ns, data, camera in items:
+            if camera is None and not self.keep:
+                with contextlib.suppress(ValueError):
+                    self.records[topic].append(orjson.loads(data))
+                    kept += 1
+        return kept
+
+    def _take_all(self) -> deque:
         q = self._queue
-        items = []
+        items: deque = deque()
         while q:
             items.append(q.popleft())
         with self._lock:

@@ -142,7 +142,8 @@ SCHEMAS: dict[str, dict] = {
                          step_index=_INT, goal_id={"type": ["string", "null"]}),
     GROUND_TRUTH: _obj("GroundTruth", time_s=_NUM, vehicle_position_ned_m=_vec(3),
                        vehicle_velocity_ned_m_s=_vec(3), vehicle_attitude_q=_vec(4),
-                       wind_ned_m_s=_vec(3), bodies={"type": "object"}),
+                       wind_ned_m_s=_vec(3), bodies={"type": "object"},
+                       armed={"type": ["boolean", "null"]}, mode={"type": ["string", "null"]}),
 }
 
 
@@ -220,6 +221,7 @@ def ground_truth_record(gt) -> dict:
                           "velocity_ned_m_s": b.velocity_ned_m_s,
                           "attitude_q": b.attitude_q}
                    for name, b in gt.bodies.items() if name != "ground"},
+        "armed": getattr(gt, "armed", None), "mode": getattr(gt, "mode", None),
     }
 
 

@@ -8,7 +8,8 @@ was it left — the figures ``autopilot bench faults`` sorts runs by.
 * **fence breach**: outside the configured ``failsafe.geofence`` (the truth, not the estimate)
   by more than :data:`FENCE_MARGIN_M`;
 * **ended safe**: at the end of the log disarmed, on the ground, or in the air in a mode the
-  vehicle flies by itself to a safe end (hold, land, return, precision landing).
+  vehicle flies by itself to a safe end (hold, land, return, precision landing) — as the
+  simulated flight stack had it, not as the last telemetry said.
 """
 
 from __future__ import annotations
@@ -47,11 +48,14 @@ def safety_metrics(records: Mapping[str, Sequence[Mapping]], fence=None,
     impact = float(np.max(vel[near, 2])) if near.any() else 0.0
     crashed = bool(tilt_deg.max() > CRASH_TILT_DEG or impact > CRASH_SPEED_M_S)
     breached = _fence_breached(pos, home, fence)
+    # the end state from the simulator's own flight stack where the log has it; else (older
+    # logs) from the last telemetry, which a dropout or a lost link may have left behind
+    end = truth[-1]
     states = records.get(ch.VEHICLE_STATE, [])
-    last = states[-1] if states else {}
+    last = end if end.get("armed") is not None else (states[-1] if states else {})
     armed = bool(last.get("armed", False))
     on_ground = last.get("landed_state") == "on_ground" or height[-1] < 0.3
-    mode = str(last.get("mode", ""))
+    mode = str(last.get("mode") or "")
     ended_safe = (not armed) or on_ground or mode in SAFE_MODES_IN_AIR
     return {
         "crashed": crashed,

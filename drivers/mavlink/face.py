@@ -219,6 +219,7 @@ class MavlinkFace:
         self.missions = MissionServer(vehicle, self._send, self._spawn, self._say)
         self._reached: list[list[int]] = []  # [seq, sends left]
         self._text_id = 0
+        self._delayed: list[asyncio.TimerHandle] = []  # datagrams held back (link_loss)
 
     # ------------------------------------------------------------------------------------
     # Link impairment (the simulator's link_loss fault: drivers/sim/faults.py)
@@ -250,7 +251,11 @@ class MavlinkFace:
         copies = 2 if fault.duplicate and rng.random() < fault.duplicate else 1
         for _ in range(copies):
             if delay > 0.0:
-                asyncio.get_running_loop().call_later(delay, deliver)
+                loop = asyncio.get_running_loop()
+                if len(self._delayed) > 256:  # forget the ones delivered already
+                    now = loop.time()
+                    self._delayed = [h for h in self._delayed if h.when() > now]
+                self._delayed.append(loop.call_later(delay, deliver))
             else:
                 deliver()
 
@@ -287,6 +292,9 @@ class MavlinkFace:
     async def close(self) -> None:
         await cancel_all(self._tasks)
         self._tasks = []
+        for handle in self._delayed:  # datagrams the impaired link still held back
+            handle.cancel()
+        self._delayed = []
         for link in self.links.values():
             if link.transport is not None:
                 link.transport.close()

@@ -30,14 +30,16 @@ gps_loss               the position estimate dead-reckons: it drifts ``drift_m_s
                        ``EKF2_NOAID_TOUT``) the vehicle reports no local position (PX4 then lands)
 rangefinder_dropout    the downward rangefinder reads nothing (NaN)
 motor_failure          motor ``motor`` (0) gives ``efficiency`` (0.6) of its thrust (an ESC or
-                       propeller failing partly)
+                       propeller failing partly); counted from 0 in PX4's quad-X order (PX4's
+                       motor 1 is 0): 0 front-right, 1 rear-left, 2 front-left, 3 rear-right
 battery_sag            the battery's remaining charge drops to ``remaining_fraction`` (0.12: under
                        PX4's BAT_LOW_THR 0.15; 0.06 is under BAT_CRIT_THR 0.07) and drains on from
                        there (charge does not come back: ``duration_s`` is ignored)
 wind_step              a steady wind of ``speed_m_s`` (8) blowing towards ``direction_deg`` (90:
                        east), with gusts of ``gust_mps`` (0) RMS on top, up to 10 m/s and beyond
 rover_stop             the rover (land_on_rover) stops dead (``mode: stop``) or drives back along
-                       its path (``mode: reverse``), then drives on
+                       its path (``mode: reverse``; no further than where it started), then
+                       drives on
 decoy_crossing         a second ball like the followed one (or of ``color``) crosses behind it,
                        ``behind_m`` (1.5) further from the vehicle's start, at ``speed_m_s`` (1.0),
                        passing behind the ball halfway through the window
@@ -256,27 +258,33 @@ class FaultSchedule:
 
 class TimeWarp:
     """A scripted path's clock under ``rover_stop`` faults: stopped (time stands still) or
-    reversed (time runs back) within each window, running on afterwards; ``rate`` is
-    d(warped)/dt, which scales the path's velocity (and its square the acceleration)."""
+    reversed (time runs back, no further than the path's start, where the rover waits) within
+    each window, running on afterwards; ``rate`` is d(warped)/dt, which scales the path's
+    velocity (and its square the acceleration). Where windows overlap, the one that started
+    first acts; a later one acts on what is left of its window."""
 
     def __init__(self, faults: Sequence[RoverStop]) -> None:
         self.faults = sorted(faults, key=lambda f: f.start_s)
 
     def __call__(self, t: float) -> tuple[float, float]:
-        warped, rate = t, 1.0
-        lost = 0.0
+        warped, cursor = 0.0, 0.0  # path time reached at scenario time ``cursor``
         for f in self.faults:
-            if t < f.start_s:
+            start = max(f.start_s, cursor)
+            if t < start:
                 break
-            span = min(t, f.end_s) - f.start_s
-            if f.mode == "stop":
-                lost += span
-            else:
-                lost += 2.0 * span
+            warped += start - cursor  # driving normally up to the window
+            cursor = start
+            if f.end_s <= cursor:
+                continue
+            span = min(t, f.end_s) - cursor
+            rate = 0.0 if f.mode == "stop" else -1.0
+            warped += rate * span
+            if warped < 0.0:  # reversed all the way to the start: it waits there
+                warped, rate = 0.0, 0.0
+            cursor += span
             if t < f.end_s:
-                rate = 0.0 if f.mode == "stop" else -1.0
-        warped = t - lost
-        return warped, rate
+                return warped, rate
+        return warped + (t - cursor), 1.0
 
 
 class WarpedPath:

@@ -62,6 +62,13 @@ def camera_intrinsics(cfg: CameraConfig) -> CameraIntrinsics:
     return pinhole(cfg.width_px, cfg.height_px, cfg.hfov_deg, distortion)
 
 
+def rotor_count(model_file: str) -> int:
+    """How many rotors the airframe ``model_file`` (in sim_models/) has: its site actuators."""
+    model = mujoco.MjModel.from_xml_path(str(sim_model_path(model_file)))
+    return int(sum(model.actuator_trntype[i] == mujoco.mjtTrn.mjTRN_SITE
+                   for i in range(model.nu)))
+
+
 def build_model(cfg: SimConfig, scenario: Sequence[ScenarioObject] = ()) -> BuiltModel:
     spec = mujoco.MjSpec.from_file(str(sim_model_path(cfg.world)))
     spec.option.timestep = 1.0 / cfg.physics_rate_hz

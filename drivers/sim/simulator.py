@@ -98,6 +98,8 @@ class GroundTruth:
     rotor_thrust_n: np.ndarray
     wind_ned_m_s: np.ndarray
     bodies: dict[str, BodyTruth] = field(default_factory=dict)
+    armed: bool | None = None  # the flight stack's own state (not as telemetry last told it)
+    mode: str | None = None
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -198,6 +200,9 @@ class Simulator:
             if camera is not None and camera not in self.cameras:
                 raise ValueError(f"fault {f.kind}: no camera {camera!r} (the vehicle's cameras: "
                                  f"{', '.join(self.cameras) or 'none'})")
+            if f.kind == "motor_failure" and f.motor >= len(self._act):
+                raise ValueError(f"fault motor_failure: no motor {f.motor} (the vehicle has "
+                                 f"{len(self._act)}: 0 to {len(self._act) - 1})")
         if self.faults.of("rover_stop"):
             if self.rover is None:
                 raise ValueError("fault rover_stop: the scenario has no rover")
@@ -533,6 +538,7 @@ class Simulator:
             wind_ned_m_s=self.wind.velocity_ned_m_s.copy(),
             bodies={obj.name: obj.truth(self._scenario_time(t), self.data)
                     for obj in self.scenario},
+            armed=bool(self.flight.armed), mode=self.flight.mode.value,
         )
 
     # ------------------------------------------------------------------------------------
@@ -581,8 +587,7 @@ class Simulator:
         ft = self._fault_time(self.time_s)
         scale = np.ones(len(self._act))
         for f in self.faults.active("motor_failure", ft):
-            if f.motor < len(scale):
-                scale[f.motor] *= f.efficiency
+            scale[f.motor] *= f.efficiency
         self._motor_scale = scale
         for f in self.faults.active("battery_sag", ft):
             if id(f) not in self._sagged:

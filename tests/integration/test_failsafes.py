@@ -55,6 +55,12 @@ def test_reserve_counts_the_way_home():
     assert BatteryReserve(ReserveSettings(0.0, 5.0, 1.0, 1.0)).check(
         0.0, 0.01, (1.0, 1.0, -3.0), home, True) is None
     assert near.check(1.0, math.nan, (1.0, 1.0, -3.0), home, True) is None
+    # a return that climbs to RTL_RETURN_ALT first (40 m at 3 m/s: 10 s up, 40 s down)
+    up = BatteryReserve(ReserveSettings(0.2, 5.0, 1.0, 1.0, return_altitude_m=40.0,
+                                        climb_m_s=3.0))
+    for t in range(0, 11):
+        up.check(float(t), 0.95 - 0.01 * t, (100.0, 0.0, -10.0), home, True)
+    assert up.needed_fraction == pytest.approx(0.70)
 
 
 def test_battery_reserve_returns_home_and_lands(tmp_path):
@@ -72,9 +78,34 @@ def test_battery_reserve_returns_home_and_lands(tmp_path):
     _ended_down(log)
     truth = np.array([r["vehicle_position_ned_m"] for r in log[ch.GROUND_TRUTH]])
     far = np.linalg.norm(truth[:, :2], axis=1)
-    assert far.max() > 1.5  # it had followed away from home ...
+    assert far.max() > 3.0  # it had followed away from home (beyond the 3 m home radius) ...
     assert far[-1] < 1.0  # ... and landed at home
     assert summary["metrics"]["safety"]["ended_safe"] is True
+
+
+def test_a_return_that_climbs_into_the_fence_ceiling_lands_where_it_is(tmp_path):
+    # the vehicle's RTL climbs to RTL_RETURN_ALT (20 m), the autopilot's fence stops at 6 m:
+    # the breach during the fallback lands the vehicle where it is (not a hold, not home)
+    summary, orphans = _fly(["failsafe.battery.reserve_fraction=0.2",
+                             "failsafe.geofence.max_altitude_m=6",
+                             "sim.params={RTL_RETURN_ALT: 20}",
+                             'scenario.faults=[{kind: battery_sag, start_s: 12, '
+                             'remaining_fraction: 0.15}]'], tmp_path)
+    assert summary["status"] == "aborted"
+    assert orphans == []
+    log = read_log(tmp_path / "flight.mcap")
+    texts = [e["text"] for e in log[ch.MISSION_EVENTS]]
+    assert "fallback return_home started" in texts
+    assert any("geofence during the fallback: landing where it is" in t for t in texts)
+    _ended_down(log)
+    truth = np.array([r["vehicle_position_ned_m"] for r in log[ch.GROUND_TRUTH]])
+    assert -truth[:, 2].min() < 6.0 + 2.0  # stopped within the fence's margin
+    modes = [r["mode"] for r in log[ch.VEHICLE_STATE] if r["armed"]]
+    assert modes[modes.index("return"):][-1] == "land"
+    assert "hold" not in modes[modes.index("return"):]  # the fence did not stop the fallback
+    safety = summary["metrics"]["safety"]
+    assert safety["ended_safe"] is True
+    assert safety["fence_breached"] is False
 
 
 # -- a detector, estimator or step that raises -------------------------------------------------

@@ -57,6 +57,17 @@ def test_parse_fault_and_override():
             parse_fault(bad)
 
 
+def test_the_command_line_refuses_a_fault_it_cannot_inject(capsys):
+    from autopilot.cli import main
+
+    # a vehicle flown over MAVLink is not ours to break: autopilot sim --fault is
+    assert main(["run", "--mission", "follow_ball", "--driver", "pymavlink",
+                 "--fault", "gps_loss"]) == 2
+    assert "autopilot sim --fault" in capsys.readouterr().err
+    assert main(["run", "--mission", "follow_ball", "--fault", "nope"]) == 2
+    assert "unknown kind 'nope'" in capsys.readouterr().err
+
+
 def test_mission_faults_are_validated_with_the_mission():
     plan = load_mission("follow_ball", [
         'scenario.faults=[{kind: camera_freeze, camera: front, start_s: 3}]'])
@@ -67,6 +78,9 @@ def test_mission_faults_are_validated_with_the_mission():
         load_mission("follow_ball", ['scenario.faults=[{kind: rover_stop}]'])
     with pytest.raises(Exception, match="start_s"):
         load_mission("follow_ball", ['scenario.faults=[{kind: gps_loss, start_s: -1}]'])
+    with pytest.raises(Exception, match=r"scenario.faults.0.motor.*no motor 4: .* has 4"):
+        load_mission("follow_ball", ['scenario.faults=[{kind: motor_failure, motor: 4}]'])
+    load_mission("follow_ball", ['scenario.faults=[{kind: motor_failure, motor: 3}]'])
 
 
 def test_time_warp_stops_and_reverses():
@@ -77,7 +91,19 @@ def test_time_warp_stops_and_reverses():
     back = TimeWarp([RoverStopFault(kind="rover_stop", start_s=2.0, duration_s=3.0,
                                     mode="reverse")])
     assert back(3.0) == (1.0, -1.0)
-    assert back(5.5) == (-0.5, 1.0)  # back 3 s of path, then on again
+    assert back(4.5) == (0.0, 0.0)  # back to where it started (2 s of path): it waits there
+    assert back(5.5) == (0.5, 1.0)  # then on again
+    late = TimeWarp([RoverStopFault(kind="rover_stop", start_s=10.0, duration_s=3.0,
+                                    mode="reverse")])
+    assert late(12.0) == (8.0, -1.0)
+    assert late(14.0) == (8.0, 1.0)  # back 3 s, on 1 s
+    # overlapping windows: the stop (2–5 s) acts, then what is left of the reverse (5–6 s)
+    both = TimeWarp([RoverStopFault(kind="rover_stop", start_s=4.0, duration_s=2.0,
+                                    mode="reverse"),
+                     RoverStopFault(kind="rover_stop", start_s=2.0, duration_s=3.0)])
+    assert both(4.5) == (2.0, 0.0)
+    assert both(5.5) == (1.5, -1.0)
+    assert both(8.0) == (3.0, 1.0)
 
 
 def test_camera_dropout_freeze_and_corrupt(sim_config):

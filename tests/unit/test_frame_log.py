@@ -66,7 +66,7 @@ def test_records_come_back_as_the_messages_they_were_made_from():
 
 
 @pytest.mark.skipif(not Path("/dev/full").exists(), reason="needs /dev/full")
-def test_a_full_disk_stops_the_file_not_the_flight():
+def test_a_full_disk_stops_the_file_not_the_flight(caplog):
     log = FlightLog(Path("/dev/full"))  # every write fails with ENOSPC
     for k in range(2000):
         log.write(ch.MISSION_EVENTS, 0.01 * k, {"time_s": 0.01 * k, "step": "", "text": "x" * 64})
@@ -81,6 +81,9 @@ def test_a_full_disk_stops_the_file_not_the_flight():
     kept = log.all_records()[ch.MISSION_EVENTS]
     assert [r["text"] for r in kept[-10:]] == ["y"] * 10
     assert len(kept) <= 2010
+    # what was still queued for the file when it failed is kept too, and the failure said
+    assert len(kept) > 1000
+    assert any("writing failed" in r.getMessage() for r in caplog.records)
 
 
 def test_records_stream_to_the_file_not_to_memory(tmp_path):
