@@ -8,9 +8,11 @@ test_fuzz_inputs.py`` runs many more examples."""
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import math
 import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -46,20 +48,22 @@ FUZZ = settings(deadline=None, suppress_health_check=[HealthCheck.too_slow,
                                                       HealthCheck.function_scoped_fixture])
 
 
-def _write(text: str) -> Path:
-    folder = Path(tempfile.mkdtemp(prefix="fuzz-"))
-    path = folder / "mission.yaml"
-    path.write_text(text, encoding="utf-8", errors="surrogatepass")
-    return path
+@contextlib.contextmanager
+def _written(text: str) -> Iterator[Path]:
+    """``text`` as a mission file in a folder of its own, removed afterwards."""
+    with tempfile.TemporaryDirectory(prefix="fuzz-") as folder:
+        path = Path(folder) / "mission.yaml"
+        path.write_text(text, encoding="utf-8", errors="surrogatepass")
+        yield path
 
 
 def _load_mission_text(text: str):
     """A plan, or the ConfigError that names the problem; anything else fails the test."""
-    path = _write(text)
-    try:
-        return load_mission(str(path))
-    except ConfigError as exc:
-        error = exc
+    with _written(text) as path:
+        try:
+            return load_mission(str(path))
+        except ConfigError as exc:
+            error = exc
     assert error.problems, "a ConfigError must name at least one problem"
     for problem in error.problems:
         assert str(problem)  # printable, with its source
@@ -133,13 +137,13 @@ _CONFIG = yaml.safe_load(default_config_path().read_text())
 def test_a_configuration_with_one_value_changed(data, value):
     paths = [p for p in _paths(_CONFIG) if p]
     path = data.draw(st.sampled_from(paths))
-    path_file = _write(_dump(_replace(_CONFIG, path, value)))
-    try:
-        load_config(path_file)
-    except ConfigError as exc:
-        error = exc
-    else:
-        return
+    with _written(_dump(_replace(_CONFIG, path, value))) as path_file:
+        try:
+            load_config(path_file)
+        except ConfigError as exc:
+            error = exc
+        else:
+            return
     assert error.problems
 
 
