@@ -6,6 +6,7 @@ import asyncio
 import contextlib
 import dataclasses
 import datetime as dt
+import gc
 import json
 import math
 import signal
@@ -23,7 +24,7 @@ from autopilot.flightlog.records import clean
 from autopilot.flightlog.safety import safety_metrics
 from autopilot.goals import GoalManager
 from autopilot.mission import MissionPlan
-from autopilot.process import StealMeter
+from autopilot.process import StealMeter, release_freed_memory
 from autopilot.runtime import Runtime
 from autopilot.steps.metrics import mission_metrics
 from drivers.base import CameraUnavailable, Vehicle
@@ -285,4 +286,9 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
     summary = clean(summary)
     if out_dir is not None:
         (out_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    del records, log, vehicle
+    runtime = None  # (the signal handler's too)
+    await asyncio.sleep(0)  # (the loop's handle that woke this task still holds the records)
+    gc.collect()
+    release_freed_memory()  # what the flight freed goes back to the system, not to the next
     return summary
