@@ -75,8 +75,7 @@ class FlightLog:
             self._thread.start()
 
     def write(self, topic: str, time_s: float, record: dict) -> None:
-        if self._queue is not None:
-            self._put(topic, time_s, encode(record), None)
+        if self._queue is not None and self._put(topic, time_s, encode(record), None):
             if self.keep:
                 self.records[topic].append(record)
         else:  # no file, or it failed
@@ -109,15 +108,18 @@ class FlightLog:
         self._put(ch.camera_image_topic(camera), time_s, jpeg, camera)
         self.images_written += 1
 
-    def _put(self, topic: str, time_s: float, data: bytes, camera: str | None) -> None:
-        q = self._queue  # None once the writer has failed
-        if q is not None:
-            with self._lock:
-                self._pending_b += len(data)
-                pending = self._pending_b
+    def _put(self, topic: str, time_s: float, data: bytes, camera: str | None) -> bool:
+        """Queue for the file; False once the writer has failed (the caller keeps it)."""
+        with self._lock:  # (the writer's failure swaps the queue out under it: order holds)
+            q = self._queue
+            if q is None:
+                return False
+            self._pending_b += len(data)
+            pending = self._pending_b
             q.append((topic, max(0, round(time_s * 1e9)), data, camera))
-            if pending >= WAKE_B:
-                self._wake.set()
+        if pending >= WAKE_B:
+            self._wake.set()
+        return True
 
     def _write_all(self, file: IO[bytes]) -> None:
         from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
@@ -169,9 +171,10 @@ class FlightLog:
                     break
             writer.finish()
         except Exception as exc:  # e.g. the disk is full: the flight goes on without the file
+            with self._lock:  # from now on records stay in memory, after the unwritten ones
+                q, self._queue = self._queue, None
+                kept = self._keep_unwritten([*batch, *(q or ())])
             self.error = exc
-            q, self._queue = self._queue, None  # from now on records stay in memory
-            kept = self._keep_unwritten([*batch, *(q or ())])
             log.warning("flight log %s: writing failed (%s: %s); the flight goes on, its "
                         "records in memory from now on (%d unwritten ones kept)", self.path,
                         type(exc).__name__, exc, kept)
