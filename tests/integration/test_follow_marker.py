@@ -63,11 +63,16 @@ def test_replay_reproduces_the_marker_flight(marker_flight):
     assert est_again["ticks"] == est_flown["ticks"]
     assert est_again["rms_position_error_m"] == pytest.approx(
         est_flown["rms_position_error_m"], rel=0.01)
-    # another marker id: the pipeline ignores the followed one
+
+
+@pytest.mark.long  # (test_replay.py replays with overrides in CI; this is the marker's own)
+def test_a_replay_looking_for_another_marker_sees_nothing(marker_flight):
+    run_dir, _summary = marker_flight
     blind = replay(run_dir, ["perception.marker.id=7"])
     assert blind["metrics"]["follow"]["detection_rate"] == 0.0
 
 
+@pytest.mark.long  # (test_video.py and test_report_browser.py cover reports and videos in CI)
 def test_report_and_video_of_the_marker_flight(marker_flight, tmp_path):
     run_dir, summary = marker_flight
     page = write_report(run_dir).read_text()

@@ -76,9 +76,21 @@ def _check(code: int, out: str, *expected: str) -> None:
         assert text in out, f"{text!r} not in the example's output:\n{out[-3000:]}"
 
 
-def test_takeoff_and_land(no_camera_config):
+LOSSY = [{"kind": "link_loss", "fraction": 0.1, "duplicate": 0.05, "reorder": 0.05,
+          "latency_s": 0.03}]
+
+
+@pytest.mark.parametrize("faults", [
+    pytest.param([], id="clean"),
+    # MAVSDK over a link that loses 10 % each way, duplicates, reorders and delays (the
+    # simulator's link_loss fault on its face): its retransmissions carry the example through
+    pytest.param(LOSSY, id="lossy-link", marks=pytest.mark.long)])
+def test_takeoff_and_land(no_camera_config, faults):
+    config = type(no_camera_config).model_validate(
+        {**no_camera_config.model_dump(), "faults": faults})
+
     async def main():
-        async with served(no_camera_config) as (vehicle, _face):
+        async with served(config) as (vehicle, face):
             track = _Track(vehicle)
             code, out = await _run_example("takeoff_and_land.py", 90.0)
             _check(code, out, "-- Global position estimate OK", "-- Home at 488.",
@@ -90,6 +102,7 @@ def test_takeoff_and_land(no_camera_config):
             assert FlightMode.TAKEOFF in track.modes()
             assert FlightMode.LAND in track.modes()
             assert vehicle.latest_state.altitude_m < 0.3
+            assert (face.stats.link_dropped > 0) == bool(faults)
 
     asyncio.run(main())
 

@@ -1,6 +1,7 @@
 """Whole missions through the runtime, on the simulator's lockstep clock."""
 
 import asyncio
+import functools
 import json
 import os
 import signal
@@ -8,6 +9,7 @@ import signal
 import pytest
 from mcap.reader import make_reader
 
+from autopilot.behaviors.flight import SafeStop
 from autopilot.flightlog import records as ch
 from autopilot.mission import load_mission
 from autopilot.runtime import Runtime
@@ -174,6 +176,9 @@ def test_stale_telemetry_stops_setpoints_holds_and_lands(monkeypatch, tmp_path):
     async def stop_telemetry(runtime, probe, _task):
         await runtime.clock.sleep_until(12.0)  # following by then
         probe.seen["step"] = runtime._step
+        # blind, the safe stop cannot see the landing end: it gives up after its timeout
+        # (60 s); 15 s here is plenty for the 2 m down, and keeps the test short
+        runtime._executor.fallback = functools.partial(SafeStop, timeout_s=15.0)
         await runtime.vehicle.inject_failure("telemetry")
         probe.seen["stopped_s"] = runtime.clock.now()
 
