@@ -172,8 +172,10 @@ class FlightLog:
             writer.finish()
         except Exception as exc:  # e.g. the disk is full: the flight goes on without the file
             with self._lock:  # from now on records stay in memory, after the unwritten ones
-                q, self._queue = self._queue, None
-                kept = self._keep_unwritten([*batch, *(q or ())])
+                # (kept before the queue is swapped out: a write that saw the queue waits on
+                # the lock, then finds it gone and appends after them)
+                kept = self._keep_unwritten([*batch, *(self._queue or ())])
+                self._queue = None
             self.error = exc
             log.warning("flight log %s: writing failed (%s: %s); the flight goes on, its "
                         "records in memory from now on (%d unwritten ones kept)", self.path,
