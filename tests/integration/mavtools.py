@@ -11,6 +11,11 @@ from drivers.sim.driver import SimDriver
 INSTANCE = 7  # ports 14587 / 18577 and client port 14547: clear of a running SITL
 CLIENT_URL = f"udpin://127.0.0.1:{14540 + INSTANCE}"
 
+#: the simulator's link_loss fault for an external client's test (from the arming on): 10 % of
+#: the datagrams lost each way, some duplicated, reordered and late
+LOSSY_LINK = [{"kind": "link_loss", "fraction": 0.1, "duplicate": 0.05, "reorder": 0.05,
+               "latency_s": 0.03}]
+
 
 @contextlib.asynccontextmanager
 async def served(config, scenario=(), **kwargs):

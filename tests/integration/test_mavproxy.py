@@ -22,7 +22,7 @@ from drivers.base import FlightMode
 from drivers.sim.flight.navigator import MissionState
 
 from ..conftest import sim_with
-from .mavtools import INSTANCE, served
+from .mavtools import INSTANCE, LOSSY_LINK, served
 
 MAVPROXY = shutil.which("mavproxy.py")
 GCS_PORT = 14557 + INSTANCE  # where mavtools' face sends its ground-station link
@@ -59,19 +59,13 @@ async def _wait(predicate, timeout_s: float, what: str) -> None:
         raise AssertionError(f"timed out after {timeout_s:g} s waiting for {what}") from None
 
 
-#: the simulator's link_loss fault (from the arming on): 10 % lost each way, some duplicated,
-#: reordered and late; MAVProxy's commands are sent again, as a user would
-LOSSY = [{"kind": "link_loss", "fraction": 0.1, "duplicate": 0.05, "reorder": 0.05,
-          "latency_s": 0.03}]
-
-
 @pytest.mark.skipif(MAVPROXY is None, reason="MAVProxy is not installed (pip install -e .[test])")
 @pytest.mark.parametrize(("mission", "commands", "last", "altitude_m", "rtl_alt_m", "faults"), [
     pytest.param(SHORT_MISSION, [16, 22, 206, 16, 206], (47.397850, 8.545594), 4.0, 6.0, [],
                  id="one-waypoint"),
     pytest.param(MISSION, [16, 22, 16, 206, 16, 16, 206], (47.397742, 8.545860), 10.0, 15.0,
                  [], id="square", marks=pytest.mark.long),
-    pytest.param(SHORT_MISSION, [16, 22, 206, 16, 206], (47.397850, 8.545594), 4.0, 6.0, LOSSY,
+    pytest.param(SHORT_MISSION, [16, 22, 206, 16, 206], (47.397850, 8.545594), 4.0, 6.0, LOSSY_LINK,
                  id="one-waypoint-lossy-link", marks=pytest.mark.long),
 ])
 def test_mavproxy_loads_a_wpl_mission_flies_it_and_returns_home(

@@ -22,7 +22,7 @@ from autopilot.flight_ops import wait_for_state
 from drivers.base import FlightMode
 
 from ..conftest import sim_with
-from .mavtools import CLIENT_URL, served
+from .mavtools import CLIENT_URL, LOSSY_LINK, served
 
 EXAMPLES = Path(__file__).parent / "mavsdk_examples"
 
@@ -76,15 +76,11 @@ def _check(code: int, out: str, *expected: str) -> None:
         assert text in out, f"{text!r} not in the example's output:\n{out[-3000:]}"
 
 
-LOSSY = [{"kind": "link_loss", "fraction": 0.1, "duplicate": 0.05, "reorder": 0.05,
-          "latency_s": 0.03}]
-
-
 @pytest.mark.parametrize("faults", [
     pytest.param([], id="clean"),
     # MAVSDK over a link that loses 10 % each way, duplicates, reorders and delays (the
     # simulator's link_loss fault on its face): its retransmissions carry the example through
-    pytest.param(LOSSY, id="lossy-link", marks=pytest.mark.long)])
+    pytest.param(LOSSY_LINK, id="lossy-link", marks=pytest.mark.long)])
 def test_takeoff_and_land(no_camera_config, faults):
     config = type(no_camera_config).model_validate(
         {**no_camera_config.model_dump(), "faults": faults})
