@@ -58,6 +58,14 @@ class RuntimeConfig(_Model):
     #: real time, once setpoints have lapsed, the mission's fallback takes over
     loop_stall_s: Annotated[float, Field(gt=0, le=30)] = 0.5
 
+    @model_validator(mode="after")
+    def _stall_outlasts_setpoints(self) -> RuntimeConfig:
+        if self.loop_stall_s < self.setpoint_expiry_s:
+            raise ValueError(
+                f"loop_stall_s ({self.loop_stall_s:g}) must be at least setpoint_expiry_s "
+                f"({self.setpoint_expiry_s:g}): a stall is when the setpoints have lapsed")
+        return self
+
 
 class BallPerceptionConfig(_Model):
     camera: str
@@ -445,7 +453,10 @@ class BatteryReserveConfig(_Model):
     reserve_fraction: Annotated[float, Field(ge=0, le=0.9)] = 0.0  # 0: off
     action: Literal["return", "land"] = "return"  # return: the vehicle's RTL; land: here
     speed_m_s: Annotated[float, Field(gt=0, le=30)] = 5.0  # the vehicle's return speed
-    descent_m_s: Annotated[float, Field(gt=0, le=10)] = 0.7  # its landing descent speed
+    descent_m_s: Annotated[float, Field(gt=0, le=10)] = 0.7  # its landing speed (MPC_LAND_SPEED)
+    #: its descent above ``slow_below_m`` (MPC_Z_V_AUTO_DN above MPC_LAND_ALT1)
+    fast_descent_m_s: Annotated[float, Field(gt=0, le=20)] = 1.5
+    slow_below_m: Annotated[float, Field(ge=0, le=500)] = 10.0
     margin: Annotated[float, Field(ge=1, le=10)] = 1.5  # on the estimated cost of getting home
     #: the vehicle's RTL_RETURN_ALT (it climbs there first) and climb speed (MPC_Z_V_AUTO_UP)
     return_altitude_m: Annotated[float, Field(ge=0, le=500)] = 60.0

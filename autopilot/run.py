@@ -287,7 +287,9 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
     if out_dir is not None:
         (out_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     del records, log, vehicle
-    runtime = None  # (the signal handler's too)
+    # everything that holds the runtime, its frames or the vehicle (the signal handler's
+    # closure too), so that the collection below frees them before the heap is trimmed
+    runtime = server = goals = setups = sources = None
     await asyncio.sleep(0)  # (the loop's handle that woke this task still holds the records)
     gc.collect()
     release_freed_memory()  # what the flight freed goes back to the system, not to the next

@@ -95,6 +95,9 @@ log = logging.getLogger(__name__)
 #: a step's phases that are already the way down (the battery reserve does not interrupt them)
 LANDING_PHASES = frozenset({"landing", "descending", "committed", "touching down",
                             "precision landing"})
+#: a landing a failsafe asked for and the vehicle refused (or did not answer within 2 s) is
+#: asked for again this long after (s)
+LAND_RETRY_S = 1.0
 
 
 class Service(Protocol):
@@ -265,11 +268,15 @@ class Runtime:
             tuple(tuple(p) for p in gf.polygon_m) if gf.polygon_m else None, gf.lookahead_s))
         self._fence_breach: str | None = None
         self._fence_handled = False
+        #: when to ask again for a landing the vehicle refused (:meth:`_land_where_it_is`)
+        self._land_retry_s: float | None = None
         b = cfg.failsafe.battery
         #: the battery reserve for the way home (autopilot/control/battery.py)
         self.battery_reserve = BatteryReserve(ReserveSettings(
             b.reserve_fraction, b.speed_m_s, b.descent_m_s, b.margin,
-            return_altitude_m=b.return_altitude_m, climb_m_s=b.climb_m_s))
+            return_altitude_m=b.return_altitude_m, climb_m_s=b.climb_m_s,
+            fast_descent_m_s=b.fast_descent_m_s, slow_below_m=b.slow_below_m,
+            land_here=b.action == "land"))
         self._battery_handled = False
         #: a failure the step cannot fly on (its detector or estimator raised, the event loop
         #: stalled in flight): the step fails into the fallback at the next tick
@@ -383,11 +390,19 @@ class Runtime:
                 self._console_actions.clear()
                 self._event(self.clock.now(), "runtime",
                             f"telemetry stale: {stale}; setpoints stopped")
+                if executor.in_fallback:
+                    # already coming down or home: a vehicle flying its own return or landing
+                    # goes on with it (a hold would stop it); otherwise it lands where it is
+                    if inputs.state.mode not in ReturnHome.RETURN_MODES:
+                        await self._land_where_it_is()
+                    continue
                 with contextlib.suppress(VehicleError, TimeoutError):
                     await self.clock.wait_for(self.vehicle.hold(), 2.0)
                 out = executor.abort(f"telemetry stale: {stale}", inputs)
                 await self._apply(out, None)
                 continue
+            if self._land_retry_s is not None and self.clock.now() >= self._land_retry_s:
+                await self._land_where_it_is()
             self._publish_values(inputs)
             if self._fence_breach is None and self.fence.settings.active and \
                     inputs.state.in_air:
@@ -409,8 +424,7 @@ class Runtime:
                     # where it is now; a hold would stop the fallback, not end the flight
                     self._event(self.clock.now(), "failsafe",
                                 "geofence during the fallback: landing where it is")
-                    with contextlib.suppress(VehicleError, TimeoutError):
-                        await self.clock.wait_for(self.vehicle.land(), 2.0)
+                    await self._land_where_it_is()
                     continue
                 with contextlib.suppress(VehicleError, TimeoutError):
                     await self.clock.wait_for(self.vehicle.hold(), 2.0)
@@ -1216,6 +1230,17 @@ class Runtime:
         except TimeoutError:
             return None
         return None if math.isnan(source) else source
+
+    async def _land_where_it_is(self) -> None:
+        """Land now (a failsafe during the fallback); a land the vehicle refuses or does not
+        answer is asked for again every ``LAND_RETRY_S`` until it takes it."""
+        try:
+            await self.clock.wait_for(self.vehicle.land(), 2.0)
+        except (VehicleError, TimeoutError) as exc:
+            self._event(self.clock.now(), "runtime", f"land refused ({exc}): asking again")
+            self._land_retry_s = self.clock.now() + LAND_RETRY_S
+        else:
+            self._land_retry_s = None
 
     def _telemetry_stale(self) -> str | None:
         """Why the newest pose is too old to fly on (None: it is fresh): position or attitude

@@ -142,14 +142,19 @@ class ReturnHome(Behavior):
         self._start = 0.0
         self._off_since: float | None = None
         self._landing = False
+        self._activated = False
 
     def activate(self, inputs: BehaviorInputs) -> BehaviorOutput:
-        self._start = inputs.now_s
+        """Start returning; activated again (back from manual flight), it goes on where it was:
+        a landing it had decided on stays a landing, and its timeout keeps running."""
+        again = self._activated
+        self._activated = True
+        if not again:
+            self._start = inputs.now_s
         self._off_since = inputs.now_s  # until the vehicle is seen returning
-        self._landing = False
         if not inputs.state.armed and not inputs.state.in_air:
             return BehaviorOutput(Status.SUCCEEDED, reason="already on the ground")
-        if not inputs.state.in_air:
+        if self._landing or not inputs.state.in_air:
             return self._land()
         return BehaviorOutput(Status.RUNNING, requests=(VehicleRequest(RequestKind.RETURN),),
                               phase="returning")

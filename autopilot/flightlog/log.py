@@ -100,13 +100,17 @@ class FlightLog:
 
     def write_image(self, camera: str, time_s: float, jpeg: bytes) -> None:
         """A camera frame (JPEG bytes) captured at ``time_s``, as ``foxglove.CompressedImage``."""
-        if self._queue is None:
+        if self._queue is None:  # no file (a run without a log folder), or it failed
+            if self.error is not None:
+                self.images_dropped += 1
             return
         if self._pending_b > MAX_PENDING_B:
             self.images_dropped += 1
             return
-        self._put(ch.camera_image_topic(camera), time_s, jpeg, camera)
-        self.images_written += 1
+        if self._put(ch.camera_image_topic(camera), time_s, jpeg, camera):
+            self.images_written += 1
+        else:  # the writer failed: frames are not kept in memory (records are)
+            self.images_dropped += 1
 
     def _put(self, topic: str, time_s: float, data: bytes, camera: str | None) -> bool:
         """Queue for the file; False once the writer has failed (the caller keeps it)."""

@@ -143,7 +143,8 @@ SCHEMAS: dict[str, dict] = {
     GROUND_TRUTH: _obj("GroundTruth", time_s=_NUM, vehicle_position_ned_m=_vec(3),
                        vehicle_velocity_ned_m_s=_vec(3), vehicle_attitude_q=_vec(4),
                        wind_ned_m_s=_vec(3), bodies={"type": "object"},
-                       armed={"type": ["boolean", "null"]}, mode={"type": ["string", "null"]}),
+                       armed={"type": ["boolean", "null"]}, mode={"type": ["string", "null"]},
+                       landed_state={"type": ["string", "null"]}),
 }
 
 
@@ -222,6 +223,7 @@ def ground_truth_record(gt) -> dict:
                           "attitude_q": b.attitude_q}
                    for name, b in gt.bodies.items() if name != "ground"},
         "armed": getattr(gt, "armed", None), "mode": getattr(gt, "mode", None),
+        "landed_state": getattr(gt, "landed_state", None),
     }
 
 

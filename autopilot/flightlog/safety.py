@@ -7,7 +7,8 @@ was it left — the figures ``autopilot bench faults`` sorts runs by.
 * **flyaway**: farther than ``flyaway_m`` horizontally from where it started;
 * **fence breach**: outside the configured ``failsafe.geofence`` (the truth, not the estimate)
   by more than :data:`FENCE_MARGIN_M`;
-* **ended safe**: at the end of the log disarmed, on the ground, or in the air in a mode the
+* **ended safe**: at the end of the log disarmed, on the ground (the flight stack's land detector:
+  on a raised deck or pad too), or in the air in a mode the
   vehicle flies by itself to a safe end (hold, land, return, precision landing) — as the
   simulated flight stack had it, not as the last telemetry said.
 """
@@ -54,6 +55,8 @@ def safety_metrics(records: Mapping[str, Sequence[Mapping]], fence=None,
     states = records.get(ch.VEHICLE_STATE, [])
     last = end if end.get("armed") is not None else (states[-1] if states else {})
     armed = bool(last.get("armed", False))
+    # the land detector's verdict (on a raised deck or pad too), or within 0.3 m of the
+    # ground it started from
     on_ground = last.get("landed_state") == "on_ground" or height[-1] < 0.3
     mode = str(last.get("mode") or "")
     ended_safe = (not armed) or on_ground or mode in SAFE_MODES_IN_AIR

@@ -100,6 +100,7 @@ class GroundTruth:
     bodies: dict[str, BodyTruth] = field(default_factory=dict)
     armed: bool | None = None  # the flight stack's own state (not as telemetry last told it)
     mode: str | None = None
+    landed_state: str | None = None  # its land detector's (on_ground on a deck or a pad too)
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -539,6 +540,7 @@ class Simulator:
             bodies={obj.name: obj.truth(self._scenario_time(t), self.data)
                     for obj in self.scenario},
             armed=bool(self.flight.armed), mode=self.flight.mode.value,
+            landed_state=self.flight.landed_state.value,
         )
 
     # ------------------------------------------------------------------------------------

@@ -16,7 +16,10 @@ import pytest
 from autopilot.control.battery import BatteryReserve, ReserveSettings
 from autopilot.flightlog import records as ch
 from autopilot.flightlog.log import read_log
+from autopilot.runtime import LAND_RETRY_S
 from autopilot.watchdog import LoopWatchdog
+from drivers.base import CommandDenied
+from drivers.sim.driver import SimDriver
 
 from .simtools import fly_short
 
@@ -61,6 +64,23 @@ def test_reserve_counts_the_way_home():
     for t in range(0, 11):
         up.check(float(t), 0.95 - 0.01 * t, (100.0, 0.0, -10.0), home, True)
     assert up.needed_fraction == pytest.approx(0.70)
+    # PX4's landing descends at MPC_Z_V_AUTO_DN (2 m/s here) down to MPC_LAND_ALT1 (10 m),
+    # then at the landing speed (1 m/s): 40 m is 15 s + 10 s, not 40 s
+    fast = BatteryReserve(ReserveSettings(0.2, 5.0, 1.0, 1.0, return_altitude_m=40.0,
+                                          climb_m_s=3.0, fast_descent_m_s=2.0,
+                                          slow_below_m=10.0))
+    for t in range(0, 11):
+        fast.check(float(t), 0.95 - 0.01 * t, (100.0, 0.0, -10.0), home, True)
+    assert fast.needed_fraction == pytest.approx(0.55)
+    # action land: it lands where it is, so the way home and the climb are not counted
+    here = BatteryReserve(ReserveSettings(0.2, 5.0, 1.0, 1.0, return_altitude_m=40.0,
+                                          climb_m_s=3.0, land_here=True))
+    for t in range(0, 11):
+        call = here.check(float(t), 0.95 - 0.01 * t, (100.0, 0.0, -10.0), home, True)
+    assert here.needed_fraction == pytest.approx(0.10)
+    call = here.check(11.0, 0.15, (100.0, 0.0, -10.0), home, True)
+    assert call is not None
+    assert not call.go_home
 
 
 def test_battery_reserve_returns_home_and_lands(tmp_path):
@@ -83,9 +103,20 @@ def test_battery_reserve_returns_home_and_lands(tmp_path):
     assert summary["metrics"]["safety"]["ended_safe"] is True
 
 
-def test_a_return_that_climbs_into_the_fence_ceiling_lands_where_it_is(tmp_path):
+def test_a_return_that_climbs_into_the_fence_ceiling_lands_where_it_is(monkeypatch, tmp_path):
     # the vehicle's RTL climbs to RTL_RETURN_ALT (20 m), the autopilot's fence stops at 6 m:
-    # the breach during the fallback lands the vehicle where it is (not a hold, not home)
+    # the breach during the fallback lands the vehicle where it is (not a hold, not home);
+    # the vehicle refuses that first land (a busy flight stack): asked again, it lands
+    land = SimDriver.land
+    refused: list[int] = []
+
+    async def refuse_once(driver):
+        if not refused:
+            refused.append(1)
+            raise CommandDenied("land", "temporarily rejected (test)")
+        await land(driver)
+
+    monkeypatch.setattr(SimDriver, "land", refuse_once)
     summary, orphans = _fly(["failsafe.battery.reserve_fraction=0.2",
                              "failsafe.geofence.max_altitude_m=6",
                              "sim.params={RTL_RETURN_ALT: 20}",
@@ -97,9 +128,12 @@ def test_a_return_that_climbs_into_the_fence_ceiling_lands_where_it_is(tmp_path)
     texts = [e["text"] for e in log[ch.MISSION_EVENTS]]
     assert "fallback return_home started" in texts
     assert any("geofence during the fallback: landing where it is" in t for t in texts)
+    assert refused
+    assert any(t.startswith("land refused") for t in texts)
     _ended_down(log)
     truth = np.array([r["vehicle_position_ned_m"] for r in log[ch.GROUND_TRUTH]])
-    assert -truth[:, 2].min() < 6.0 + 2.0  # stopped within the fence's margin
+    # stopped within the fence's margin, plus the climb (3 m/s) until the land asked again
+    assert -truth[:, 2].min() < 6.0 + 2.0 + 3.0 * LAND_RETRY_S
     modes = [r["mode"] for r in log[ch.VEHICLE_STATE] if r["armed"]]
     assert modes[modes.index("return"):][-1] == "land"
     assert "hold" not in modes[modes.index("return"):]  # the fence did not stop the fallback

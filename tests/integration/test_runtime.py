@@ -110,6 +110,48 @@ class _Probe:
         monkeypatch.setattr(Runtime, "run", run)
 
 
+@pytest.mark.long
+def test_stale_telemetry_during_the_return_home_does_not_stop_it(monkeypatch, tmp_path):
+    """The battery reserve sent the vehicle home (its own RTL); then its telemetry stops. A hold
+    would stop the return and leave it hovering blind: the runtime stops its setpoints and lets
+    the vehicle's return go on to the landing."""
+    import autopilot.runtime as rt
+
+    class ShortReturn(rt.ReturnHome):  # blind, the return cannot see its end: 60 s, not 600
+        def __init__(self) -> None:
+            super().__init__(timeout_s=60.0)
+
+    monkeypatch.setattr(rt, "ReturnHome", ShortReturn)
+
+    async def stop_telemetry_on_the_way_home(runtime, probe, _task):
+        while not runtime._executor.in_fallback:
+            await runtime.clock.sleep(0.1)
+        await runtime.clock.sleep(1.0)
+        probe.seen["stopped_s"] = runtime.clock.now()
+        await runtime.vehicle.inject_failure("telemetry")
+
+    probe = _Probe(monkeypatch, stop_telemetry_on_the_way_home)
+    summary, orphans = _fly(["failsafe.battery.reserve_fraction=0.2",
+                             "sim.params={RTL_RETURN_ALT: 5}",
+                             "scenario.faults=[{kind: battery_sag, start_s: 12, "
+                             "remaining_fraction: 0.15}]"], tmp_path)
+    assert orphans == []
+    from autopilot.flightlog.log import read_log
+
+    log = read_log(tmp_path / "flight.mcap")
+    events = [(e["time_s"], e["text"]) for e in log[ch.MISSION_EVENTS]]
+    assert "fallback return_home started" in [text for _, text in events]
+    stale_at = next(t for t, text in events if text.startswith("telemetry stale"))
+    assert stale_at > probe.seen["stopped_s"]
+    assert not [text for t, text in events if t >= stale_at and text.startswith("request")]
+    # the simulated flight stack's own record: it returned and landed, never held
+    after = [r for r in log[ch.GROUND_TRUTH] if r["time_s"] >= stale_at]
+    assert {r["mode"] for r in after if r["armed"]} <= {"return", "land"}
+    assert after[-1]["armed"] is False
+    assert after[-1]["vehicle_position_ned_m"][2] > -0.3
+    assert summary["metrics"]["safety"]["ended_safe"] is True
+
+
 def test_ctrl_c_in_flight_lands_and_disarms(monkeypatch, tmp_path):
     async def interrupt(runtime, probe, _task):
         await runtime.clock.sleep_until(15.0)  # following by then

@@ -80,6 +80,12 @@ def test_cross_field_rule(tmp_path):
     assert "physics_rate_hz (600) must be an integer multiple" in str(err.value)
 
 
+def test_a_loop_stall_shorter_than_a_setpoints_life_is_refused():
+    with pytest.raises(ConfigError, match=r"runtime: .*loop_stall_s \(0.1\) must be at least "
+                                          r"setpoint_expiry_s"):
+        load_config(overrides=["runtime.loop_stall_s=0.1", "runtime.setpoint_expiry_s=0.3"])
+
+
 def test_duplicate_key(tmp_path):
     text = SHIPPED.replace("driver: sim", "driver: sim\ndriver: mavsdk", 1)
     with pytest.raises(ConfigError, match=r"config.yaml:\d+: driver: duplicate key"):

@@ -60,3 +60,20 @@ def test_a_refused_return_lands_and_a_timeout_fails():
     ground = ReturnHome().activate(BehaviorInputs(
         now_s=0.0, state=vehicle_state(0.0, armed=False, in_air=False)))
     assert ground.status is Status.SUCCEEDED
+
+
+def test_back_from_manual_flight_a_landing_stays_a_landing_and_the_clock_runs_on():
+    step = ReturnHome(timeout_s=100.0, engage_s=3.0)
+    step.activate(BehaviorInputs(now_s=0.0, state=vehicle_state(0.0)))
+    assert _kinds(step.request_failed(VehicleRequest(RequestKind.RETURN), "denied")) == \
+        [RequestKind.LAND]
+    # the pilot flew for a while, then gave the vehicle back: it lands, it does not return
+    again = step.activate(BehaviorInputs(now_s=60.0, state=vehicle_state(60.0)))
+    assert _kinds(again) == [RequestKind.LAND]
+    assert again.phase == "landing"
+    assert _tick(step, 101.0, FlightMode.LAND).status is Status.FAILED
+    # a return not yet given up on asks for the return again
+    fresh = ReturnHome(engage_s=3.0)
+    fresh.activate(BehaviorInputs(now_s=0.0, state=vehicle_state(0.0)))
+    assert _kinds(fresh.activate(BehaviorInputs(now_s=9.0, state=vehicle_state(9.0)))) == \
+        [RequestKind.RETURN]

@@ -75,8 +75,12 @@ def test_a_full_disk_stops_the_file_not_the_flight(caplog):
     while log.error is None and time.monotonic() < deadline:
         time.sleep(0.05)
     assert isinstance(log.error, OSError)
+    written = log.images_written
     for k in range(10):  # from then on the records stay in memory: the metrics have them
         log.write(ch.MISSION_EVENTS, 30.0 + k, {"time_s": 30.0 + k, "step": "", "text": "y"})
+        log.write_image("front", 30.0 + k, b"\xff" * 1000)  # ... frames are dropped
+    assert log.images_written == written
+    assert log.images_dropped >= 10
     log.close()
     kept = log.all_records()[ch.MISSION_EVENTS]
     assert [r["text"] for r in kept[-10:]] == ["y"] * 10

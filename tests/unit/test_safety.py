@@ -34,6 +34,17 @@ def test_the_end_state_is_the_flight_stacks_not_the_last_telemetry() -> None:
     assert safety_metrics(records)["ended_safe"] is True
 
 
+def test_armed_on_a_raised_deck_is_on_the_ground_by_the_land_detector() -> None:
+    # touched down on the rover's deck (0.6 m up), still armed in offboard for a moment
+    landed = _truth(9, 0.6, True, "offboard")
+    records = {ch.GROUND_TRUTH: [_truth(0, 0.0, False, "hold"), landed]}
+    assert safety_metrics(records)["ended_safe"] is False  # (no land detector: flying)
+    records[ch.GROUND_TRUTH][-1] = {**landed, "landed_state": "on_ground"}
+    assert safety_metrics(records)["ended_safe"] is True
+    records[ch.GROUND_TRUTH][-1] = {**landed, "landed_state": "in_air"}
+    assert safety_metrics(records)["ended_safe"] is False
+
+
 def test_older_logs_without_the_truths_mode_use_the_telemetry() -> None:
     records = {ch.GROUND_TRUTH: [_truth(0, 0.0, None, None), _truth(5, 10.0, None, None)],
                ch.VEHICLE_STATE: [_state(True, "offboard")]}
