@@ -18,6 +18,15 @@ def _autopilot(*args: str, env: dict | None = None, timeout_s: float = 120.0):
                           text=True, timeout=timeout_s, env={**os.environ, **(env or {})})
 
 
+def _in_process(capsys, *args: str) -> subprocess.CompletedProcess:
+    """The command line's ``main`` in this process (for refusals before anything starts: the
+    tests that look at a whole process's output run it as one)."""
+    from autopilot.cli import main
+
+    code = main(list(args))
+    return subprocess.CompletedProcess(list(args), code, "", capsys.readouterr().err)
+
+
 def _one_error_line(result) -> str:
     assert "Traceback" not in result.stderr, result.stderr
     errors = [line for line in result.stderr.splitlines() if line.startswith("error:")]
@@ -48,13 +57,15 @@ def test_no_vehicle(driver, tmp_path):
     ("--video", "bogus://x", "expected udp://HOST:PORT"),
     ("--video", "udp://127.0.0.1", "RTP video needs a port"),
 ])
-def test_malformed_urls_are_refused_before_anything_opens(option, value, expected, tmp_path):
-    result = _autopilot("run", "--mission", "follow_ball", "--driver", "pymavlink", option,
-                        value, "--out", str(tmp_path))
+def test_malformed_urls_are_refused_before_anything_opens(option, value, expected, tmp_path,
+                                                          capsys):
+    result = _in_process(capsys, "run", "--mission", "follow_ball", "--driver", "pymavlink",
+                         option, value, "--out", str(tmp_path))
     assert result.returncode == 2
     line = _one_error_line(result)
     assert "command line" in result.stderr
     assert expected in result.stderr, line
+    assert not (tmp_path / "flight.mcap").exists()
 
 
 def test_port_already_in_use(tmp_path):
@@ -66,24 +77,24 @@ def test_port_already_in_use(tmp_path):
     assert "address already in use" in _one_error_line(result)
 
 
-def test_network_link_needs_a_key_or_insecure(tmp_path):
-    result = _autopilot("run", "--mission", "follow_ball", "--driver", "pymavlink",
-                        "--connect", "udpin://0.0.0.0:14549", "--out", str(tmp_path))
+def test_network_link_needs_a_key_or_insecure(tmp_path, capsys):
+    result = _in_process(capsys, "run", "--mission", "follow_ball", "--driver", "pymavlink",
+                         "--connect", "udpin://0.0.0.0:14549", "--out", str(tmp_path))
     assert result.returncode == 2
     assert "--signing-key" in _one_error_line(result) or "--signing-key" in result.stderr
-    result = _autopilot("sim", "--bind", "0.0.0.0")
+    result = _in_process(capsys, "sim", "--bind", "0.0.0.0")
     assert result.returncode == 2
     assert "--insecure" in result.stderr
 
 
-def test_signing_key_file_problems(tmp_path):
+def test_signing_key_file_problems(tmp_path, capsys):
     empty = tmp_path / "empty.key"
     empty.write_text("")
-    result = _autopilot("run", "--mission", "follow_ball", "--driver", "pymavlink",
-                        "--signing-key", str(empty), "--out", str(tmp_path))
+    result = _in_process(capsys, "run", "--mission", "follow_ball", "--driver", "pymavlink",
+                         "--signing-key", str(empty), "--out", str(tmp_path))
     assert result.returncode == 2
     assert "the signing key file is empty" in result.stderr
-    result = _autopilot("sim", "--signing-key", str(tmp_path / "missing.key"))
+    result = _in_process(capsys, "sim", "--signing-key", str(tmp_path / "missing.key"))
     assert result.returncode == 2
     assert "cannot read the signing key" in result.stderr
 

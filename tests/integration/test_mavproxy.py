@@ -39,13 +39,13 @@ MISSION = """QGC WPL 110
 6\t0\t3\t206\t0\t0\t0\t0\t0\t0\t0\t1
 """
 
-#: the short version: home, a takeoff to 4 m, one waypoint 12 m north at 4 m with a camera
-#: trigger distance on the way, and the trigger off
+#: the short version: home, a takeoff to 3 m, one waypoint 8 m north at 3 m (no hold) with a
+#: camera trigger distance on the way, and the trigger off
 SHORT_MISSION = """QGC WPL 110
 0\t1\t0\t16\t0\t0\t0\t0\t47.397742\t8.545594\t488.000000\t1
-1\t0\t3\t22\t0\t0\t0\t0\t0\t0\t4.000000\t1
+1\t0\t3\t22\t0\t0\t0\t0\t0\t0\t3.000000\t1
 2\t0\t3\t206\t5\t0\t1\t0\t0\t0\t0\t1
-3\t0\t3\t16\t0\t2\t0\t0\t47.397850\t8.545594\t4.000000\t1
+3\t0\t3\t16\t0\t0\t0\t0\t47.397814\t8.545594\t3.000000\t1
 4\t0\t3\t206\t0\t0\t0\t0\t0\t0\t0\t1
 """
 
@@ -61,11 +61,11 @@ async def _wait(predicate, timeout_s: float, what: str) -> None:
 
 @pytest.mark.skipif(MAVPROXY is None, reason="MAVProxy is not installed (pip install -e .[test])")
 @pytest.mark.parametrize(("mission", "commands", "last", "altitude_m", "rtl_alt_m", "faults"), [
-    pytest.param(SHORT_MISSION, [16, 22, 206, 16, 206], (47.397850, 8.545594), 4.0, 6.0, [],
+    pytest.param(SHORT_MISSION, [16, 22, 206, 16, 206], (47.397814, 8.545594), 3.0, 3.0, [],
                  id="one-waypoint"),
     pytest.param(MISSION, [16, 22, 16, 206, 16, 16, 206], (47.397742, 8.545860), 10.0, 15.0,
                  [], id="square", marks=pytest.mark.long),
-    pytest.param(SHORT_MISSION, [16, 22, 206, 16, 206], (47.397850, 8.545594), 4.0, 6.0, LOSSY_LINK,
+    pytest.param(SHORT_MISSION, [16, 22, 206, 16, 206], (47.397814, 8.545594), 3.0, 3.0, LOSSY_LINK,
                  id="one-waypoint-lossy-link", marks=pytest.mark.long),
 ])
 def test_mavproxy_loads_a_wpl_mission_flies_it_and_returns_home(

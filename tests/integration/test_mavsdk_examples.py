@@ -77,7 +77,9 @@ def _check(code: int, out: str, *expected: str) -> None:
 
 
 @pytest.mark.parametrize("faults", [
-    pytest.param([], id="clean"),
+    # (long: the simulator's face flying MAVSDK through connect, arm, takeoff, offboard, land
+    # and disarm is in the default run, test_mavlink_face.py)
+    pytest.param([], id="clean", marks=pytest.mark.long),
     # MAVSDK over a link that loses 10 % each way, duplicates, reorders and delays (the
     # simulator's link_loss fault on its face): its retransmissions carry the example through
     pytest.param(LOSSY_LINK, id="lossy-link", marks=pytest.mark.long)])
