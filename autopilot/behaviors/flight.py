@@ -139,17 +139,14 @@ class ReturnHome(Behavior):
     def __init__(self, timeout_s: float = 600.0, engage_s: float = 5.0) -> None:
         self._timeout_s = timeout_s
         self._engage_s = engage_s
-        self._start = 0.0
+        self._start: float | None = None  # when first activated
         self._off_since: float | None = None
         self._landing = False
-        self._activated = False
 
     def activate(self, inputs: BehaviorInputs) -> BehaviorOutput:
         """Start returning; activated again (back from manual flight), it goes on where it was:
         a landing it had decided on stays a landing, and its timeout keeps running."""
-        again = self._activated
-        self._activated = True
-        if not again:
+        if self._start is None:
             self._start = inputs.now_s
         self._off_since = inputs.now_s  # until the vehicle is seen returning
         if not inputs.state.armed and not inputs.state.in_air:
@@ -163,7 +160,7 @@ class ReturnHome(Behavior):
         s = inputs.state
         if not s.armed and not s.in_air:
             return BehaviorOutput(Status.SUCCEEDED, phase="landed")
-        if inputs.now_s - self._start > self._timeout_s:
+        if self._start is not None and inputs.now_s - self._start > self._timeout_s:
             return BehaviorOutput(Status.FAILED, reason="not home and landed in time")
         phase = "landing" if self._landing else "returning"
         if self._landing or not s.in_air or s.mode in self.RETURN_MODES:
