@@ -14,6 +14,7 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
+from autopilot import values
 from autopilot.api import ApiServer, parse_address
 from autopilot.cameras import camera_setups, parse_camera_options
 from autopilot.config import ConfigError, Problem
@@ -283,14 +284,20 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
         summary["stats"]["frames_logged"] = log.images_written
         summary["stats"]["frames_log_dropped"] += log.images_dropped
     summary["stats"] = {k: v for k, v in summary["stats"].items() if not isinstance(v, list)}
-    summary = clean(summary)
+    text = json.dumps(clean(summary), indent=2) + "\n"
     if out_dir is not None:
-        (out_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
-    del records, log, vehicle
+        (out_dir / "summary.json").write_text(text)
+    del records, log, vehicle, summary
     # everything that holds the runtime, its frames or the vehicle (the signal handler's
     # closure too), so that the collection below frees them before the heap is trimmed
     runtime = server = goals = setups = sources = None
     await asyncio.sleep(0)  # (the loop's handle that woke this task still holds the records)
+    values.board().clear()  # the flight's last values (status, battery, ...) die with it
     gc.collect()
+    # What outlives the flight is made again now that the flight's objects are freed: built
+    # while they were alive, the summary's objects sat among them in Python's 1 MB object
+    # arenas, and an arena is given back only when all of it is free: each flight's summary
+    # (and what a caller keeps of it) would keep some of them for good.
+    summary = json.loads(text)
     release_freed_memory()  # what the flight freed goes back to the system, not to the next
     return summary
