@@ -9,6 +9,7 @@ import signal
 import pytest
 from mcap.reader import make_reader
 
+from autopilot import values
 from autopilot.behaviors.flight import SafeStop
 from autopilot.flightlog import records as ch
 from autopilot.mission import load_mission
@@ -49,6 +50,11 @@ def test_follow_ball_closed_loop(tmp_path):
     for key in ("status", "mission", "driver", "sim_time_s", "wall_time_s"):
         assert key in on_disk
     assert on_disk["metrics"]["sim"]["real_time_factor"] > 0
+    # what fly() returns is what it wrote (made again from it once the flight's objects are
+    # freed, so that nothing the caller keeps pins the memory the flight used), and the
+    # flight's debug values went with it
+    assert summary == on_disk
+    assert values.board().snapshot() == {}
 
     with open(tmp_path / "flight.mcap", "rb") as f:
         reader = make_reader(f)
