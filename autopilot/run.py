@@ -14,7 +14,6 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
-from autopilot import values
 from autopilot.api import ApiServer, parse_address
 from autopilot.cameras import camera_setups, parse_camera_options
 from autopilot.config import ConfigError, Problem
@@ -292,7 +291,6 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
     # closure too), so that the collection below frees them before the heap is trimmed
     runtime = server = goals = setups = sources = None
     await asyncio.sleep(0)  # (the loop's handle that woke this task still holds the records)
-    values.board().clear()  # the flight's last values (status, battery, ...) die with it
     gc.collect()
     # What outlives the flight is made again now that the flight's objects are freed: built
     # while they were alive, the summary's objects sat among them in Python's 1 MB object

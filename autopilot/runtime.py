@@ -357,6 +357,7 @@ class Runtime:
             await self._last_resort()
         finally:
             self._group = None
+            self.values.clear()  # the run's last values (status, battery, ...) end with it
             self.events.close()
             self._detect_pool.shutdown(wait=True, cancel_futures=True)
             self.photos.close()

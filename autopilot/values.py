@@ -9,8 +9,8 @@ newest of each (``tgt.x::10``)::
 There is one board per process, as there is one logging tree: publishing is a dictionary
 write under a lock (safe from executor threads, never blocking the control loop), and a
 publisher needs no handle on the runtime. The runtime clears the board when a run starts and
-publishes its own values (status, mode, battery, altitude, detection score). Values are
-numbers, booleans or short strings; anything else is shown as its ``str``.
+when it ends, and publishes its own values (status, mode, battery, altitude, detection score).
+Values are numbers, booleans or short strings; anything else is shown as its ``str``.
 """
 
 from __future__ import annotations
