@@ -153,6 +153,15 @@ def logged_cameras(plan: MissionPlan, video_camera: str,
     return rates
 
 
+def flight_metrics(records: Mapping[str, Sequence[Mapping]], fence) -> dict:
+    """The end-of-run metrics of a flight's records: the mission's (per step), the latency
+    and the safety groups. Given a closed log's :meth:`FlightLog.read_back`, they read the
+    file as they use it: what they hold is columns of the numbers they score, not the
+    flight's records."""
+    return {"mission": mission_metrics(records), "latency_ms": latency_metrics(records),
+            "safety": safety_metrics(records, fence)}
+
+
 async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False,
               progress: Callable[[str], None] | None = None,
               handle_signals: bool = False, connect: str | None = None,
@@ -241,7 +250,8 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
         await vehicle.close()
         log.close()
 
-    records = await asyncio.to_thread(log.all_records)  # (from the file: bounded memory)
+    records = await asyncio.to_thread(log.read_back)  # (from the file, as they are used)
+    metrics = await asyncio.to_thread(flight_metrics, records, plan.config.failsafe.geofence)
     summary = {
         "status": status,
         "reason": reason,
@@ -253,13 +263,12 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
         "sim_time_s": sim_time,
         "wall_time_s": wall_time,
         "metrics": {
-            **mission_metrics(records),
+            **metrics["mission"],
             "sim": {"real_time_factor": sim_time / wall_time if sim_time and wall_time > 0
                     else None,
                     "cpu_steal_pct": steal.percent()},
-            "latency_ms": latency_metrics(records),
-            **({"safety": safety} if (safety := safety_metrics(
-                records, plan.config.failsafe.geofence)) else {}),
+            "latency_ms": metrics["latency_ms"],
+            **({"safety": metrics["safety"]} if metrics["safety"] else {}),
         },
         "stats": vars(runtime.stats) if runtime is not None else {},
         "mission_status": int(runtime.status_code) if runtime is not None else None,
@@ -286,7 +295,7 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
     text = json.dumps(clean(summary), indent=2) + "\n"
     if out_dir is not None:
         (out_dir / "summary.json").write_text(text)
-    del records, log, vehicle, summary
+    del records, metrics, log, vehicle, summary
     # everything that holds the runtime, its frames or the vehicle (the signal handler's
     # closure too), so that the collection below frees them before the heap is trimmed
     runtime = server = goals = setups = sources = None

@@ -1,7 +1,9 @@
 """The flight log: every record goes to ``flight.mcap`` as it happens (so a run that crashes
 still leaves a readable log). Memory stays bounded however long the flight: records stream to
-the file and are not kept (the end-of-run metrics read them back from it: :meth:`FlightLog.
-all_records`); only a log without a file (tests), or one whose file failed, keeps them in memory.
+the file and are not kept; only a log without a file (tests), or one whose file failed, keeps
+them in memory. The end-of-run metrics read them back from the file as they use them
+(:meth:`FlightLog.read_back`, :class:`StoredLog`): a channel's records one at a time, never
+the whole flight's records at once.
 
 One channel per stream, JSON-encoded with a JSON Schema per channel (``jsonschema`` encoding),
 which Foxglove Studio and PlotJuggler open. Camera frames go to one channel per camera as
@@ -13,12 +15,13 @@ Log time is the run's clock (simulated seconds in lockstep), in nanoseconds.
 from __future__ import annotations
 
 import contextlib
+import io
 import json
 import logging
 import struct
 import threading
 from collections import defaultdict, deque
-from collections.abc import Iterator
+from collections.abc import Container, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import IO
@@ -97,6 +100,17 @@ class FlightLog:
         for topic, items in self.records.items():
             records[topic].extend(items)
         return records
+
+    def read_back(self) -> Mapping[str, Sequence[Mapping]]:
+        """The flight's records after :meth:`close`, for the end-of-run metrics: from the file
+        as they are used (:class:`StoredLog`: memory independent of the flight's length);
+        a log kept in memory (no file, ``keep``, or a write error) as :meth:`all_records`."""
+        if self.path is None or self.keep or self.error is not None or self.records:
+            return self.all_records()
+        try:
+            return StoredLog(self.path)
+        except (OSError, ValueError):  # the file went wrong after all: what can be read of it
+            return self.all_records()
 
     def write_image(self, camera: str, time_s: float, jpeg: bytes) -> None:
         """A camera frame (JPEG bytes) captured at ``time_s``, as ``foxglove.CompressedImage``."""
@@ -227,20 +241,126 @@ def read_log(path: Path) -> dict[str, list[dict]]:
 
 def read_log_checked(path: Path) -> tuple[dict[str, list[dict]], bool]:
     """:func:`read_log`, and whether the log was complete (closed properly: it has its footer)."""
-    from mcap.records import Channel, Footer, Message
+    from mcap.records import Channel
 
     records: dict[str, list[dict]] = defaultdict(list)
     topics: dict[int, str] = {}
-    complete = False
-    for record in _stream(path):
+    complete: list[bool] = []
+    for record in _messages(path, topics, complete):
         if isinstance(record, Channel):
             if record.message_encoding == "json":
                 topics[record.id] = record.topic
-        elif isinstance(record, Message) and record.channel_id in topics:
-            records[topics[record.channel_id]].append(json.loads(record.data))
-        elif isinstance(record, Footer):
-            complete = True
-    return records, complete
+        elif record[0] in topics:
+            records[topics[record[0]]].append(json.loads(record[1]))
+    return records, bool(complete)
+
+
+class StoredLog(Mapping):
+    """A flight log's records by channel (as :func:`read_log` gives them), read from its file as
+    they are used: a channel with few records (the plan, events, camera info, photos, …) is
+    read once and kept; a long one (telemetry, ground truth, detections, setpoints) is a
+    :class:`StoredChannel`, read from the file again each time it is iterated, one record at a
+    time. Memory is that of the short channels, whatever the flight's length; what a user keeps
+    of the records is up to it (the metrics keep columns of the numbers they score).
+
+    :attr:`derived` holds what users compute once per log (the ground truth's columns)."""
+
+    #: channels with more records than this are read from the file when used, not kept
+    KEEP_MAX = 256
+
+    def __init__(self, path: Path) -> None:
+        from mcap.records import Channel
+
+        self.path = path
+        self.derived: dict = {}
+        self._channels: dict[str, StoredChannel | list[dict]] = {}
+        ids: dict[int, str] = {}
+        counts: dict[str, int] = defaultdict(int)
+        kept: dict[str, list[dict] | None] = {}
+        first: dict[str, bytes] = {}
+        last: dict[str, bytes] = {}
+        for record in _messages(path, ids):
+            if isinstance(record, Channel):
+                if record.message_encoding == "json":
+                    ids[record.id] = record.topic
+                    kept.setdefault(record.topic, [])
+                continue
+            topic = ids.get(record[0])
+            if topic is None:
+                continue
+            data = record[1]
+            counts[topic] += 1
+            last[topic] = data
+            first.setdefault(topic, data)
+            items = kept.get(topic)
+            if items is not None:
+                if len(items) < self.KEEP_MAX:
+                    items.append(orjson.loads(data))
+                else:
+                    kept[topic] = None  # a long channel: read when used
+        for topic in dict.fromkeys(ids.values()):
+            if not counts[topic]:  # (as read_log: only channels with records)
+                continue
+            items = kept[topic]
+            if items is not None:
+                self._channels[topic] = items
+            else:
+                self._channels[topic] = StoredChannel(
+                    path, {i for i, t in ids.items() if t == topic}, counts[topic],
+                    orjson.loads(first[topic]), orjson.loads(last[topic]))
+
+    def __getitem__(self, topic: str) -> Sequence[Mapping]:
+        return self._channels[topic]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._channels)
+
+    def __len__(self) -> int:
+        return len(self._channels)
+
+
+class StoredChannel(Sequence):
+    """One channel's records in a flight log file: iterating reads them from the file, one at a
+    time (each iteration reads the file again); its length, first and last record are known
+    without reading. Other indices and slices read the file up to them."""
+
+    def __init__(self, path: Path, channel_ids: set[int], count: int, first: dict,
+                 last: dict) -> None:
+        self.path = path
+        self._ids = channel_ids
+        self._count = count
+        self._first = first
+        self._last = last
+
+    def __len__(self) -> int:
+        return self._count
+
+    def __iter__(self) -> Iterator[dict]:
+        ids = self._ids
+        for record in _messages(self.path, ids):
+            if type(record) is tuple:
+                yield orjson.loads(record[1])
+
+    def __reversed__(self) -> Iterator[dict]:
+        return reversed(list(self))
+
+    def __getitem__(self, index):
+        n = self._count
+        if isinstance(index, slice):
+            wanted = range(n)[index]
+            if not wanted:
+                return []
+            if len(wanted) == 1:
+                return [self[wanted[0]]]
+            picked = set(wanted)
+            found = {i: r for i, r in enumerate(self) if i in picked}
+            return [found[i] for i in wanted]
+        i = range(n)[index]  # (an IndexError as a list's)
+        if i == 0:
+            return self._first
+        if i == n - 1:
+            return self._last
+        return next(r for k, r in enumerate(self) if k == i)
 
 
 @dataclass(frozen=True, slots=True)
@@ -293,6 +413,95 @@ def read_images(path: Path, camera: str | None = None) -> Iterator[LoggedImage]:
             image = CompressedImage.FromString(record.data)
             yield LoggedImage(cameras[record.channel_id], image.timestamp.ToNanoseconds() / 1e9,
                               image.data)
+
+
+_MAGIC = b"\x89MCAP0\r\n"
+_RECORD = struct.Struct("<BQ")  # an MCAP record's opcode and length
+_CHUNK = struct.Struct("<QQQII")  # start and end time, uncompressed size and CRC, len(compression)
+_MESSAGE_CHANNEL = struct.Struct("<H")
+_OP_FOOTER, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK = 0x02, 0x04, 0x05, 0x06
+_MESSAGE_HEADER_B = 2 + 4 + 8 + 8  # channel id, sequence, log time, publish time
+
+
+def _messages(path: Path, channels: Container[int], complete: list | None = None
+              ) -> Iterator:
+    """The messages of an MCAP file's ``channels`` (ids; the container may grow as the
+    channels are met) front to back as (channel id, data) tuples, and all its
+    :class:`mcap.records.Channel` records; ``complete`` (a list) gets an item when the file
+    has its footer. A file cut short (or damaged) stops quietly where it does.
+
+    The records are read here, by the MCAP specification's layout, rather than by ``mcap``'s
+    reader, which makes a Python object of every record (each chunk's message indexes
+    too): reading one channel of a flight log with camera frames takes a third of the time."""
+    import zstandard
+
+    with open(path, "rb") as f:
+        if f.read(len(_MAGIC)) != _MAGIC:
+            raise ValueError(f"{path}: not an MCAP file")
+        while True:
+            head = f.read(_RECORD.size)
+            if len(head) < _RECORD.size:
+                return
+            opcode, length = _RECORD.unpack(head)
+            if opcode not in (_OP_CHUNK, _OP_MESSAGE, _OP_CHANNEL, _OP_FOOTER):
+                f.seek(length, io.SEEK_CUR)
+                continue
+            body = f.read(length)
+            if len(body) < length:
+                return  # cut short
+            if opcode == _OP_FOOTER:
+                if complete is not None:
+                    complete.append(True)
+                continue
+            try:
+                if opcode == _OP_CHUNK:
+                    yield from _chunk_messages(body, channels)
+                else:
+                    yield from _record(opcode, body, 0, length, channels)
+            except (ValueError, struct.error, EOFError, RuntimeError, zstandard.ZstdError):
+                return  # damaged (lz4 raises RuntimeError): keep what was read
+
+
+def _chunk_messages(chunk: bytes, channels: Container[int]) -> Iterator:
+    _start, _end, size, _crc, name_b = _CHUNK.unpack_from(chunk, 0)
+    at = _CHUNK.size
+    compression = chunk[at:at + name_b].decode()
+    at += name_b
+    (records_b,) = struct.unpack_from("<Q", chunk, at)
+    at += 8
+    data = chunk[at:at + records_b]
+    if compression == "zstd":
+        import zstandard
+
+        data = zstandard.decompress(data, size)
+    elif compression == "lz4":
+        import lz4.frame
+
+        data = lz4.frame.decompress(data)
+    elif compression:
+        raise ValueError(f"chunk compression {compression!r}")
+    at, end = 0, len(data)
+    while at + _RECORD.size <= end:
+        opcode, length = _RECORD.unpack_from(data, at)
+        at += _RECORD.size
+        if at + length > end:
+            raise ValueError("a chunk record runs past its chunk")
+        if opcode in (_OP_MESSAGE, _OP_CHANNEL):
+            yield from _record(opcode, data, at, length, channels)
+        at += length
+
+
+def _record(opcode: int, data: bytes, at: int, length: int, channels: Container[int]
+            ) -> Iterator:
+    if opcode == _OP_MESSAGE:
+        channel = _MESSAGE_CHANNEL.unpack_from(data, at)[0]
+        if channel in channels:  # (others are not copied out: camera frames are large)
+            yield channel, data[at + _MESSAGE_HEADER_B:at + length]
+    else:
+        from mcap.data_stream import ReadDataStream
+        from mcap.records import Channel
+
+        yield Channel.read(ReadDataStream(io.BytesIO(data[at:at + length])))
 
 
 def _stream(path: Path) -> Iterator:

@@ -34,13 +34,15 @@ Latency: for each setpoint computed from a frame, capture time → the setpoint 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from array import array
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from autopilot.estimation.pose_history import slerp
 from autopilot.flightlog import records as ch
+from autopilot.flightlog.truth import BodyTrack, extend_floats, truth_table
 from drivers.base import CameraIntrinsics
 from drivers.camera_model import project_points
 from drivers.geometry import quat_to_matrix
@@ -124,10 +126,10 @@ def _first_follow(log) -> tuple[list[tuple[float, float]], FollowedTarget] | Non
 
 def _intervals_of(log, index: int, name: str | None) -> list[tuple[float, float]]:
     events = log.get(ch.MISSION_EVENTS, [])
-    ends = [r["time_s"] for topic in (ch.GROUND_TRUTH, ch.VEHICLE_STATE)
-            for r in log.get(topic, [])]
+    end = max((r["time_s"] for topic in (ch.GROUND_TRUTH, ch.VEHICLE_STATE)
+               for r in log.get(topic, [])), default=0.0)
     legacy = events and "kind" not in events[0]
-    return step_intervals(events, max([*ends, 0.0]), step_index=None if legacy else index,
+    return step_intervals(events, max(end, 0.0), step_index=None if legacy else index,
                           step=name)
 
 
@@ -145,20 +147,19 @@ def follow_step_metrics(log: Mapping[str, Sequence[Mapping]],
 
 
 class TruthTrack:
-    def __init__(self, samples: Sequence[Mapping], body: str) -> None:
-        rows = [s for s in samples if body in s["bodies"]]
-        self.ok = bool(rows)
-        if not self.ok:
-            return
-        self.t = np.array([s["time_s"] for s in rows])
-        self.vp = np.array([s["vehicle_position_ned_m"] for s in rows])
-        self.vq = np.array([s["vehicle_attitude_q"] for s in rows])
-        self.bp = np.array([s["bodies"][body]["position_ned_m"] for s in rows])
+    """The vehicle's pose and a body's position at any time within the samples that had the
+    body (interpolated; the attitude by slerp)."""
+
+    def __init__(self, track: BodyTrack) -> None:
+        self.ok = len(track) > 0
+        self.t, self.vp, self.vq, self.bp = track.t, track.vehicle_p, track.vehicle_q, track.p
 
     def at(self, time_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
         t = self.t
         if time_s < t[0] or time_s > t[-1]:
             return None
+        if len(t) < 2:
+            return self.vp[0], self.vq[0], self.bp[0]
         i = min(int(np.searchsorted(t, time_s, side="right")) - 1, len(t) - 2)
         f = (time_s - t[i]) / (t[i + 1] - t[i]) if t[i + 1] > t[i] else 0.0
         lerp = lambda a: a[i] + f * (a[i + 1] - a[i])  # noqa: E731
@@ -211,12 +212,11 @@ def follow_metrics(log: Mapping[str, Sequence[Mapping]],
         if found is None:
             return {}
         intervals, target = found
-    truth_samples = log.get(ch.GROUND_TRUTH, [])
     frames = log.get(ch.detection_topic(target.pipeline), [])
     cams = {c["name"]: c for c in log.get(ch.CAMERA_INFO, [])}
     cam = cams.get(target.camera)
-    body = target.truth_body
-    truth = TruthTrack(truth_samples, body)
+    track = truth_table(log).body(target.truth_body)
+    truth = TruthTrack(track)
     if not intervals or cam is None or not truth.ok:
         return {}
     radius_m = target.size_m / 2.0
@@ -227,7 +227,7 @@ def follow_metrics(log: Mapping[str, Sequence[Mapping]],
         return any(a <= t <= b for a, b in intervals)
 
     in_view = correct = wrong = processed = 0
-    image_errors, detection_times = [], []
+    image_errors, detection_times = array("d"), array("d")
     for rec in frames:
         t = rec["time_s"]
         pose = truth.at(t) if following(t) else None
@@ -251,17 +251,14 @@ def follow_metrics(log: Mapping[str, Sequence[Mapping]],
             else:
                 wrong += 1
 
-    ranges = []
-    for s in truth_samples:
-        if following(s["time_s"]) and body in s["bodies"]:
-            d = np.linalg.norm(np.array(s["bodies"][body]["position_ned_m"])
-                               - np.array(s["vehicle_position_ned_m"]))
-            ranges.append(d - standoff)
+    followed = _within(track.t, intervals)
+    ranges = np.linalg.norm(track.p[followed] - track.vehicle_p[followed], axis=1) - standoff
 
     lost = 0.0
+    detected_at = _floats(detection_times)
     for a, b in intervals:
-        times = [a] + [t for t in detection_times if a <= t <= b] + [b]
-        lost = max(lost, max(np.diff(times)))
+        inside = detected_at[(detected_at >= a) & (detected_at <= b)]
+        lost = max(lost, float(np.max(np.diff(np.concatenate(([a], inside, [b]))))))
 
     # how fast the target really moved while followed (truth): the scenario as flown
     speeds = []
@@ -270,20 +267,20 @@ def follow_metrics(log: Mapping[str, Sequence[Mapping]],
         ok = dt > 0
         v = np.linalg.norm(np.diff(truth.bp, axis=0)[ok], axis=1) / dt[ok]
         mid = (truth.t[1:][ok] + truth.t[:-1][ok]) / 2.0
-        speeds = [float(x) for x, t in zip(v, mid, strict=True) if following(t)]
+        speeds = v[_within(mid, intervals)]
 
     abs_ranges = np.abs(ranges)
     return {
         "target_speed_mps_rms": _rms(speeds),
-        "target_speed_mps_max": max(speeds) if speeds else None,
+        "target_speed_mps_max": float(np.max(speeds)) if len(speeds) else None,
         "detection_rate": correct / in_view if in_view else None,
         "frames_in_view": in_view,
         "frames_processed": processed,
         "false_detection_rate": wrong / processed if processed else None,
         "rms_range_error_m": _rms(ranges),
-        "mean_range_error_m": float(np.mean(ranges)) if ranges else None,
-        "p95_abs_range_error_m": float(np.percentile(abs_ranges, 95)) if ranges else None,
-        "max_abs_range_error_m": float(np.max(abs_ranges)) if ranges else None,
+        "mean_range_error_m": float(np.mean(ranges)) if len(ranges) else None,
+        "p95_abs_range_error_m": float(np.percentile(abs_ranges, 95)) if len(ranges) else None,
+        "max_abs_range_error_m": float(np.max(abs_ranges)) if len(ranges) else None,
         "rms_image_error_px": _rms(image_errors),
         "p95_image_error_px": float(np.percentile(image_errors, 95)) if image_errors else None,
         "max_lost_s": float(lost),
@@ -293,14 +290,9 @@ def follow_metrics(log: Mapping[str, Sequence[Mapping]],
 
 
 class _TruthInterp:
-    def __init__(self, samples: Sequence[Mapping], body: str) -> None:
-        rows = [s for s in samples if body in s["bodies"]]
-        self.ok = len(rows) >= 2
-        if not self.ok:
-            return
-        self.t = np.array([s["time_s"] for s in rows])
-        self.p = np.array([s["bodies"][body]["position_ned_m"] for s in rows], dtype=float)
-        self.v = np.array([s["bodies"][body]["velocity_ned_m_s"] for s in rows], dtype=float)
+    def __init__(self, track: BodyTrack) -> None:
+        self.ok = len(track) >= 2
+        self.t, self.p, self.v = track.t, track.p, track.v
 
     def covers(self, time_s: float) -> bool:
         return bool(self.t[0] <= time_s <= self.t[-1])
@@ -311,14 +303,50 @@ class _TruthInterp:
         return interp(self.p), interp(self.v)
 
 
-def _errors(rows: Sequence[Mapping], truth: _TruthInterp) -> dict:
-    """Position/velocity errors of estimate records against the truth at their times."""
-    nan = lambda v: [math.nan if x is None else x for x in v]  # noqa: E731
-    times = np.array([r["time_s"] for r in rows])
+class Estimates:
+    """Target estimate records as columns: time, position, velocity and position σ (NaN for
+    null), and the estimate's age (NaN where the record had none)."""
+
+    def __init__(self) -> None:
+        self._t, self._p, self._v = array("d"), array("d"), array("d")
+        self._std, self._age = array("d"), array("d")
+
+    def add(self, r: Mapping) -> None:
+        self._t.append(r["time_s"])
+        extend_floats(self._p, r.get("position_ned_m"), 3)
+        extend_floats(self._v, r.get("velocity_ned_m_s"), 3)
+        extend_floats(self._std, r.get("position_std_m"), 3)
+        age = r.get("age_s")
+        self._age.append(math.nan if age is None else age)
+
+    def __len__(self) -> int:
+        return len(self._t)
+
+    @property
+    def age(self) -> np.ndarray:
+        return _floats(self._age)
+
+    def columns(self, keep: np.ndarray | None = None
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(time, position, velocity, σ), of the rows ``keep`` selects (all by default)."""
+        cols = (_floats(self._t), _floats(self._p).reshape(-1, 3),
+                _floats(self._v).reshape(-1, 3), _floats(self._std).reshape(-1, 3))
+        return cols if keep is None else tuple(c[keep] for c in cols)
+
+
+def _floats(column: array) -> np.ndarray:
+    """An ``array('d')`` as a numpy array without a copy (its length fixed from then on)."""
+    return np.frombuffer(column, dtype=float) if len(column) else np.zeros(0)
+
+
+def _errors(columns: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+            truth: _TruthInterp) -> dict:
+    """Position/velocity errors of estimates (:meth:`Estimates.columns`) against the truth at
+    their times."""
+    times, position, velocity, std = columns
     true_p, true_v = truth.at(times)
-    pos_err = np.array([nan(r["position_ned_m"]) for r in rows], dtype=float) - true_p
-    vel_err = np.array([nan(r["velocity_ned_m_s"]) for r in rows], dtype=float) - true_v
-    std = np.array([nan(r["position_std_m"]) for r in rows], dtype=float)
+    pos_err = position - true_p
+    vel_err = velocity - true_v
     norm = np.linalg.norm(pos_err, axis=1)
     return {
         "rms_position_error_m": float(np.sqrt(np.mean(norm ** 2))),
@@ -340,38 +368,67 @@ def estimation_metrics(log: Mapping[str, Sequence[Mapping]],
         if found is None:
             return {}
         intervals, target = found
-    truth = _TruthInterp(log.get(ch.GROUND_TRUTH, []), target.truth_body)
+    truth = _TruthInterp(truth_table(log).body(target.truth_body))
     if not truth.ok or not intervals:
         return {}
 
     def scored(t: float) -> bool:
         return truth.covers(t) and any(a <= t <= b for a, b in intervals)
 
-    updates = [e for e in log.get(ch.TARGET_ESTIMATES, [])
-               if e.get("pipeline", target.pipeline) == target.pipeline and scored(e["time_s"])]
-    at_update = {**_errors(updates, truth), "estimates": len(updates)} if updates else {}
-    ticks = [r for r in log.get(ch.CONTROL_TARGET, [])
-             if r["pipeline"] == target.pipeline and scored(r["time_s"])]
+    updates = _scored_estimates(
+        (e for e in log.get(ch.TARGET_ESTIMATES, [])
+         if e.get("pipeline", target.pipeline) == target.pipeline), scored)
+    at_update = {**_errors(updates.columns(), truth), "estimates": len(updates)} \
+        if len(updates) else {}
+    ticks = 0
+    usable = Estimates()  # the ticks with an estimate that is not stale
+    for r in log.get(ch.CONTROL_TARGET, []):
+        if r["pipeline"] == target.pipeline and scored(r["time_s"]):
+            ticks += 1
+            if r["present"] and not r["stale"]:
+                usable.add(r)
     if not ticks:  # a log from before control-time records: the updates are all there is
         return at_update
     cams = {c["name"]: c for c in log.get(ch.CAMERA_INFO, [])}
     rate = (cams.get(target.camera) or {}).get("rate_hz") or 30.0
     coast_after_s = 3.0 / rate
-    usable = [r for r in ticks if r["present"] and not r["stale"]]
-    coasting = [r for r in usable if r["age_s"] > coast_after_s]
-    result = {**(_errors(usable, truth) if usable else {}),
-              "ticks": len(ticks),
-              "lost_share": 1.0 - len(usable) / len(ticks),
-              "coasting_share": len(coasting) / len(ticks),
+    coasting = usable.age > coast_after_s
+    result = {**(_errors(usable.columns(), truth) if len(usable) else {}),
+              "ticks": ticks,
+              "lost_share": 1.0 - len(usable) / ticks,
+              "coasting_share": int(coasting.sum()) / ticks,
               "rms_position_error_coasting_m":
-                  _errors(coasting, truth)["rms_position_error_m"] if coasting else None,
+                  _errors(usable.columns(coasting), truth)["rms_position_error_m"]
+                  if coasting.any() else None,
               "at_update": at_update}
     return result
 
 
+def _scored_estimates(rows: Iterable[Mapping], scored) -> Estimates:
+    out = Estimates()
+    for r in rows:
+        if scored(r["time_s"]):
+            out.add(r)
+    return out
+
+
+def phase_entries(setpoints: Iterable[Mapping], step: str, start_s: float, end_s: float,
+                  phase: str) -> int:
+    """How many times a step's setpoints (those within [start_s, end_s]) went into ``phase``
+    from another phase (the first one's phase is not an entry): its retries."""
+    count, previous, first = 0, None, True
+    for r in setpoints:
+        if start_s <= r["time_s"] <= end_s and r.get("step") == step:
+            current = r.get("phase")
+            count += not first and current == phase and previous != phase
+            previous, first = current, False
+    return count
+
+
 def latency_metrics(log: Mapping[str, Sequence[Mapping]]) -> dict:
-    lat = [r["latency_ms"] for r in log.get(ch.SETPOINTS, []) if r.get("latency_ms") is not None]
-    if not lat:
+    lat = np.fromiter((r["latency_ms"] for r in log.get(ch.SETPOINTS, [])
+                       if r.get("latency_ms") is not None), dtype=float)
+    if not len(lat):
         return {"p50": None, "p95": None, "samples": 0}
     return {"p50": float(np.percentile(lat, 50)), "p95": float(np.percentile(lat, 95)),
             "max": float(np.max(lat)), "samples": len(lat)}
@@ -379,3 +436,11 @@ def latency_metrics(log: Mapping[str, Sequence[Mapping]]) -> dict:
 
 def _rms(values: Sequence[float]) -> float | None:
     return float(np.sqrt(np.mean(np.square(values)))) if len(values) else None
+
+
+def _within(times: np.ndarray, intervals: Sequence[tuple[float, float]]) -> np.ndarray:
+    """Which of ``times`` lie in one of the (closed) intervals."""
+    inside = np.zeros(len(times), dtype=bool)
+    for a, b in intervals:
+        inside |= (times >= a) & (times <= b)
+    return inside

@@ -20,6 +20,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from autopilot.flightlog import records as ch
+from autopilot.flightlog.truth import truth_table
 
 CRASH_TILT_DEG = 70.0
 CRASH_SPEED_M_S = 3.0
@@ -32,13 +33,11 @@ SAFE_MODES_IN_AIR = ("hold", "land", "return", "precland")
 def safety_metrics(records: Mapping[str, Sequence[Mapping]], fence=None,
                    flyaway_m: float = FLYAWAY_M) -> dict:
     """The ``safety`` metric group (empty without ground truth)."""
-    truth = [r for r in records.get(ch.GROUND_TRUTH, [])
-             if r.get("vehicle_position_ned_m") is not None]
-    if not truth:
+    table = truth_table(records)
+    have = table.has_vehicle
+    if not have.any():
         return {}
-    pos = np.array([r["vehicle_position_ned_m"] for r in truth], dtype=float)
-    vel = np.array([r["vehicle_velocity_ned_m_s"] for r in truth], dtype=float)
-    q = np.array([r["vehicle_attitude_q"] for r in truth], dtype=float)
+    pos, vel, q = table.p[have], table.v[have], table.q[have]
     home = pos[0]
     horizontal = np.linalg.norm(pos[:, :2] - home[:2], axis=1)
     height = home[2] - pos[:, 2]
@@ -51,7 +50,7 @@ def safety_metrics(records: Mapping[str, Sequence[Mapping]], fence=None,
     breached = _fence_breached(pos, home, fence)
     # the end state from the simulator's own flight stack where the log has it; else (older
     # logs) from the last telemetry, which a dropout or a lost link may have left behind
-    end = truth[-1]
+    end = table.last
     states = records.get(ch.VEHICLE_STATE, [])
     last = end if end.get("armed") is not None else (states[-1] if states else {})
     armed = bool(last.get("armed", False))

@@ -20,6 +20,7 @@ from autopilot.flightlog.metrics import (
     fully_in_image,
     project_target,
 )
+from autopilot.flightlog.truth import truth_table
 
 Records = Mapping[str, Sequence[Mapping]]
 
@@ -157,8 +158,8 @@ def detection_timeline(records: Records, target: FollowedTarget | None
     False without truth, and ``has_truth`` says which."""
     rows = records.get(ch.detection_topic(target.pipeline), []) if target is not None else []
     cams = {c.get("name"): c for c in records.get(ch.CAMERA_INFO, [])}
-    truth = TruthTrack(records.get(ch.GROUND_TRUTH, []),
-                       target.truth_body if target is not None else "")
+    truth = TruthTrack(truth_table(records).body(target.truth_body if target is not None
+                                                 else ""))
     in_view = np.zeros(len(rows), dtype=bool)
     has_truth = truth.ok
     if has_truth:

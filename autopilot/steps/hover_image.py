@@ -10,6 +10,7 @@ first found plus a settling time, and the detector's rate and cost.
 from __future__ import annotations
 
 import math
+from array import array
 from collections.abc import Mapping, Sequence
 
 import numpy as np
@@ -22,6 +23,7 @@ from autopilot.behaviors.hover_image import (
 )
 from autopilot.flightlog import records as ch
 from autopilot.flightlog.metrics import FollowedTarget, estimation_metrics, in_image, project_target
+from autopilot.flightlog.truth import truth_table
 from autopilot.perception.image_pipeline import image_spec
 from autopilot.steps.follow_ball import camera_of
 from autopilot.steps.registry import StepContext, StepKind, register
@@ -54,47 +56,41 @@ def hover_metrics(log: Mapping[str, Sequence[Mapping]], intervals: list[tuple[fl
     p = pipelines[0]
     params = HoverImageParams(**step["params"])
     body = p["truth_body"]
-    truth = [s for s in log.get(ch.GROUND_TRUTH, []) if body in s["bodies"]]
-    if not truth:
+    truth = truth_table(log).body(body)
+    if not len(truth):
         return {}
     frames = log.get(ch.detection_topic(p["name"]), [])
 
     def running(t: float) -> bool:
         return any(a <= t <= b for a, b in intervals)
 
-    found = [f["time_s"] for f in frames if f["detected"] and running(f["time_s"])]
-    start = (found[0] + SETTLE_S) if found else None
-    horizontal, vertical, yaw_errors = [], [], []
-    for s in truth:
-        t = s["time_s"]
+    found = next((f["time_s"] for f in frames if f["detected"] and running(f["time_s"])), None)
+    start = (found + SETTLE_S) if found is not None else None
+    horizontal, vertical, yaw_errors = array("d"), array("d"), array("d")
+    for i, t in enumerate(truth.t):
         if start is None or t < start or not running(t):
             continue
-        image = s["bodies"][body]
-        heading = _yaw(image["attitude_q"])
-        goal = hover_point(np.asarray(image["position_ned_m"]), heading, params)
-        vehicle = np.asarray(s["vehicle_position_ned_m"])
+        heading = _yaw(truth.q[i])
+        goal = hover_point(truth.p[i], heading, params)
+        vehicle = truth.vehicle_p[i]
         horizontal.append(float(np.hypot(*(vehicle[:2] - goal[:2]))))
         vertical.append(float(vehicle[2] - goal[2]))
         want = heading + math.radians(params.yaw_deg)
-        yaw_errors.append(math.degrees(math.remainder(_yaw(s["vehicle_attitude_q"]) - want,
+        yaw_errors.append(math.degrees(math.remainder(_yaw(truth.vehicle_q[i]) - want,
                                                       2.0 * math.pi)))
     cams = {c["name"]: c for c in log.get(ch.CAMERA_INFO, [])}
     cam = cams.get(p["camera"])
     in_view = detected = 0
-    times_ms = []
+    times_ms = array("d")
     if cam is not None:
-        t_truth = np.array([s["time_s"] for s in truth])
         for f in frames:
             t = f["time_s"]
             if not running(t):
                 continue
             if f.get("processing_ms") is not None:
                 times_ms.append(f["processing_ms"])
-            i = min(int(np.searchsorted(t_truth, t)), len(truth) - 1)
-            s = truth[i]
-            proj = project_target(cam, np.asarray(s["vehicle_position_ned_m"]),
-                                  np.asarray(s["vehicle_attitude_q"]),
-                                  np.asarray(s["bodies"][body]["position_ned_m"]),
+            i = min(int(np.searchsorted(truth.t, t)), len(truth) - 1)
+            proj = project_target(cam, truth.vehicle_p[i], truth.vehicle_q[i], truth.p[i],
                                   p["size_m"] / 2.0)
             if proj is None or not in_image(cam, proj[0] - proj[2], proj[1] - proj[2]) \
                     or not in_image(cam, proj[0] + proj[2], proj[1] + proj[2]):
@@ -113,7 +109,7 @@ def hover_metrics(log: Mapping[str, Sequence[Mapping]], intervals: list[tuple[fl
         "rms_yaw_error_deg": rms(yaw_errors),
         "detection_rate": detected / in_view if in_view else None,
         "frames_in_view": in_view,
-        "found_after_s": (found[0] - intervals[0][0]) if found else None,
+        "found_after_s": (found - intervals[0][0]) if found is not None else None,
         "scored_s": (sum(b - a for a, b in intervals) - (start - intervals[0][0]))
         if start is not None else 0.0,
         "time_per_frame_ms_p50": float(np.percentile(times_ms, 50)) if times_ms else None,

@@ -23,8 +23,8 @@ Its metrics (simulator ground truth, scoring only):
 
 from __future__ import annotations
 
-import itertools
 import math
+from array import array
 from collections.abc import Mapping, Sequence
 
 import numpy as np
@@ -36,6 +36,8 @@ from autopilot.behaviors.land_on_rover import (
     Seed004LandOnRover,
 )
 from autopilot.flightlog import records as ch
+from autopilot.flightlog.metrics import Estimates, phase_entries
+from autopilot.flightlog.truth import truth_table
 from autopilot.perception.deck_pipeline import ROVER_BODY, deck_spec
 from autopilot.steps.follow_ball import camera_of
 from autopilot.steps.registry import StepContext, StepKind, register
@@ -89,29 +91,24 @@ def landing_metrics(log: Mapping[str, Sequence[Mapping]], intervals: list[tuple[
     succeeded = any(e.get("kind") == "step_succeeded" and e.get("step_index") == step["index"]
                     for e in log.get(ch.MISSION_EVENTS, []))
     until = end + 2.0 if succeeded else math.inf
-    truth = [s for s in log.get(ch.GROUND_TRUTH, [])
-             if body in s["bodies"] and start <= s["time_s"] <= until]
+    track = truth_table(log).body(body)
+    truth = track.window((track.t >= start) & (track.t <= until))
     if len(truth) < 2:
         return {}
     config = _config(log)
     deck_l, deck_w = config.get("deck_size_m", (1.0, 0.8))
-    t = np.array([s["time_s"] for s in truth])
-    drone = np.array([s["vehicle_position_ned_m"] for s in truth], dtype=float)
-    drone_v = np.array([s["vehicle_velocity_ned_m_s"] for s in truth], dtype=float)
-    deck = np.array([s["bodies"][body]["position_ned_m"] for s in truth], dtype=float)
-    deck_v = np.array([s["bodies"][body]["velocity_ned_m_s"] for s in truth], dtype=float)
-    yaw = np.array([_yaw_of(s["bodies"][body]["attitude_q"]) for s in truth])
-    rel = drone - deck
+    t = truth.t
+    drone_v = truth.vehicle_v
+    deck_v = truth.v
+    yaw = np.array([_yaw_of(q) for q in truth.q])
+    rel = truth.vehicle_p - truth.p
     rel_v = drone_v - deck_v
     # in the rover's axes (along, across)
     c, s_ = np.cos(yaw), np.sin(yaw)
     along = c * rel[:, 0] + s_ * rel[:, 1]
     across = -s_ * rel[:, 0] + c * rel[:, 1]
     height = -rel[:, 2]
-    phases = [r.get("phase") for r in log.get(ch.SETPOINTS, [])
-              if start <= r["time_s"] <= end and r.get("step") == step["name"]]
-    retries = sum(1 for a, b in itertools.pairwise(phases)
-                  if b == "aborting" and a != "aborting")
+    retries = phase_entries(log.get(ch.SETPOINTS, []), step["name"], start, end, "aborting")
     landing: dict = {
         "landed": succeeded, "on_deck": False, "error_m": None, "error_deck_m": None,
         "rest_error_m": None, "relative_speed_m_s": None,
@@ -150,33 +147,40 @@ def _config(log: Mapping[str, Sequence[Mapping]]) -> dict:
     return (plans[-1].get("config") or {}).get("rover") or {}
 
 
+def _own_positions(log: Mapping[str, Sequence[Mapping]]) -> tuple[np.ndarray, np.ndarray]:
+    """The drone's own position estimate (its telemetry): times and positions."""
+    t, p = array("d"), array("d")
+    for r in log.get(ch.VEHICLE_STATE, []):
+        t.append(r["time_s"])
+        p.extend(r["position_ned_m"])
+    return np.array(t), np.array(p).reshape(-1, 3)
+
+
 def relative_metrics(log: Mapping[str, Sequence[Mapping]], intervals: list[tuple[float, float]],
                      pipeline: str, truth_t: np.ndarray, truth_rel: np.ndarray) -> dict:
     """The relative estimate flown on (see the module's notes) against the truth."""
     start, end = intervals[0][0], intervals[-1][1]
-    states = [r for r in log.get(ch.VEHICLE_STATE, [])]
-    ticks = [r for r in log.get(ch.CONTROL_TARGET, [])
-             if r.get("pipeline") == pipeline and any(a <= r["time_s"] <= b
-                                                      for a, b in intervals)]
-    if not ticks or len(states) < 2:
+    ticks = 0
+    usable = Estimates()
+    for r in log.get(ch.CONTROL_TARGET, []):
+        if r.get("pipeline") == pipeline and any(a <= r["time_s"] <= b for a, b in intervals):
+            ticks += 1
+            if r.get("present") and not r.get("stale"):
+                usable.add(r)
+    if not ticks or len(log.get(ch.VEHICLE_STATE, [])) < 2:
         return {}
-    usable = [r for r in ticks if r.get("present") and not r.get("stale")]
-    out: dict = {"ticks": len(ticks), "lost_share": 1.0 - len(usable) / len(ticks)}
-    if usable:
-        st = np.array([r["time_s"] for r in states])
-        sp = np.array([r["position_ned_m"] for r in states], dtype=float)
-        tt = np.array([r["time_s"] for r in usable])
+    out: dict = {"ticks": ticks, "lost_share": 1.0 - len(usable) / ticks}
+    if len(usable):
+        st, sp = _own_positions(log)
+        tt, deck, _, std = usable.columns()
         covered = (tt >= truth_t[0]) & (tt <= truth_t[-1]) & (tt >= st[0])
-        tt = tt[covered]
-        rows = [r for r, c in zip(usable, covered, strict=True) if c]
-        if len(rows):
+        tt, deck, std = tt[covered], deck[covered], std[covered]
+        if len(tt):
             # the drone's own estimate at each tick (its telemetry carried to the tick)
             own = _interp(tt, st, sp)
-            deck = np.array([r["position_ned_m"] for r in rows], dtype=float)
             est = own - deck
             true = _interp(tt, truth_t, truth_rel)
             err = est - true
-            std = np.array([r["position_std_m"] for r in rows], dtype=float)
             horiz = np.hypot(err[:, 0], err[:, 1])
             within = (np.abs(err[:, 0]) <= 2.0 * std[:, 0]) & \
                 (np.abs(err[:, 1]) <= 2.0 * std[:, 1])
@@ -187,13 +191,14 @@ def relative_metrics(log: Mapping[str, Sequence[Mapping]], intervals: list[tuple
                 "rms_vertical_error_m": float(np.sqrt(np.mean(err[:, 2] ** 2))),
                 "within_2sigma": float(np.mean(within)),
                 "final_horizontal_error_m": float(horiz[-1])})
-    records = [r for r in log.get(ch.RELATIVE_ESTIMATES, [])
-               if r.get("pipeline") == pipeline and r.get("accepted")]
+    measured: dict[str, array] = {source: array("d") for source in SOURCES}
+    for r in log.get(ch.RELATIVE_ESTIMATES, []):
+        if r.get("pipeline") == pipeline and r.get("accepted") and r.get("source") in measured:
+            measured[r["source"]].append(r["measurement_time_s"])
     grid = np.arange(start, end, 0.1)
     availability = {}
     for source in SOURCES:
-        times = np.array(sorted(r["measurement_time_s"] for r in records
-                                if r.get("source") == source))
+        times = np.sort(np.array(measured[source]))
         if not len(times) or not len(grid):
             availability[source] = 0.0
             continue
@@ -201,8 +206,7 @@ def relative_metrics(log: Mapping[str, Sequence[Mapping]], intervals: list[tuple
         fresh = (idx >= 0) & (grid - times[np.maximum(idx, 0)] <= 0.5)
         availability[source] = float(np.mean(fresh))
     out["availability"] = availability
-    out["updates"] = {source: sum(1 for r in records if r.get("source") == source)
-                      for source in SOURCES}
+    out["updates"] = {source: len(measured[source]) for source in SOURCES}
     return out
 
 
@@ -210,13 +214,12 @@ def relative_tracks(log: Mapping[str, Sequence[Mapping]], body: str = ROVER_BODY
     """What the report's rover panel draws: the drone relative to the deck in the rover's axes
     (along, across, height above the deck) — truth, and the estimate flown on — and the
     relative filter's updates per source with their horizontal error against truth."""
-    truth = [s for s in log.get(ch.GROUND_TRUTH, []) if body in s.get("bodies", {})]
+    truth = truth_table(log).body(body)
     if len(truth) < 2:
         return None
-    t = np.array([s["time_s"] for s in truth])
-    rel = np.array([np.subtract(s["vehicle_position_ned_m"],
-                                s["bodies"][body]["position_ned_m"]) for s in truth])
-    yaw = np.array([_yaw_of(s["bodies"][body]["attitude_q"]) for s in truth])
+    t = truth.t
+    rel = truth.vehicle_p - truth.p
+    yaw = np.array([_yaw_of(q) for q in truth.q])
 
     def axes(r: np.ndarray, psi: np.ndarray) -> np.ndarray:
         c, s_ = np.cos(psi), np.sin(psi)
@@ -225,40 +228,48 @@ def relative_tracks(log: Mapping[str, Sequence[Mapping]], body: str = ROVER_BODY
 
     out: dict = {"deck_size_m": tuple(_config(log).get("deck_size_m", (1.0, 0.8))),
                  "truth": axes(rel, yaw)}
-    states = log.get(ch.VEHICLE_STATE, [])
-    ticks = [r for r in log.get(ch.CONTROL_TARGET, [])
-             if r.get("present") and str(r.get("pipeline", "")).startswith("deck")]
+    ticks = Estimates()
+    for r in log.get(ch.CONTROL_TARGET, []):
+        if r.get("present") and str(r.get("pipeline", "")).startswith("deck"):
+            ticks.add(r)
     flown = np.zeros((0, 3))
-    if ticks and len(states) >= 2:
-        st = np.array([r["time_s"] for r in states])
-        sp = np.array([r["position_ned_m"] for r in states], dtype=float)
-        tt = np.array([r["time_s"] for r in ticks])
+    if len(ticks) and len(log.get(ch.VEHICLE_STATE, [])) >= 2:
+        st, sp = _own_positions(log)
+        tt, deck, _, _ = ticks.columns()
         keep = (tt >= max(st[0], t[0])) & (tt <= t[-1])
         if keep.any():
-            tt = tt[keep]
-            deck = np.array([r["position_ned_m"] for r, k in zip(ticks, keep, strict=True)
-                             if k], dtype=float)
+            tt, deck = tt[keep], deck[keep]
             flown = axes(_interp(tt, st, sp) - deck, np.interp(tt, t, np.unwrap(yaw)))
     out["flown"] = flown
-    updates, rejected = {}, {}
-    records = [r for r in log.get(ch.RELATIVE_ESTIMATES, []) if t[0] <= r["time_s"] <= t[-1]]
+    accepted = {source: (array("d"), array("d")) for source in SOURCES}  # times, positions
+    rejected_at = {source: array("d") for source in SOURCES}
+    sig_t, two_sigma = array("d"), array("d")
+    for r in log.get(ch.RELATIVE_ESTIMATES, []):
+        if not t[0] <= r["time_s"] <= t[-1]:
+            continue
+        source = r.get("source")
+        if r.get("accepted"):
+            sig_t.append(r["time_s"])
+            two_sigma.append(2.0 * max(r["position_std_m"][0], r["position_std_m"][1]))
+            if source in accepted:
+                accepted[source][0].append(r["time_s"])
+                accepted[source][1].extend(r["relative_position_m"])
+        elif source in rejected_at:
+            rejected_at[source].append(r["measurement_time_s"])
+    updates = {}
     for source in SOURCES:
-        rows = [r for r in records if r.get("source") == source and r.get("accepted")]
-        times = np.array([r["time_s"] for r in rows])
-        if len(rows):
-            est = np.array([r["relative_position_m"] for r in rows], dtype=float)
+        times = np.array(accepted[source][0])
+        if len(times):
+            est = np.array(accepted[source][1]).reshape(-1, 3)
             true = _interp(times, t, rel)
             error = np.hypot(est[:, 0] - true[:, 0], est[:, 1] - true[:, 1])
         else:
             error = np.zeros(0)
         updates[source] = {"t": times, "error_m": np.maximum(error, 1e-4)}
-        rejected[source] = np.array([r["measurement_time_s"] for r in records
-                                     if r.get("source") == source and not r.get("accepted")])
-    out["updates"], out["rejected"] = updates, rejected
-    sig = [r for r in records if r.get("accepted")]
-    out["sigma_t"] = np.array([r["time_s"] for r in sig])
-    out["two_sigma_m"] = np.array([2.0 * max(r["position_std_m"][0], r["position_std_m"][1])
-                                   for r in sig]) if sig else np.zeros(0)
+    out["updates"] = updates
+    out["rejected"] = {source: np.array(rejected_at[source]) for source in SOURCES}
+    out["sigma_t"] = np.array(sig_t)
+    out["two_sigma_m"] = np.array(two_sigma)
     return out
 
 

@@ -9,15 +9,16 @@ to climb and look again; ``metrics.estimation`` scores the pad estimate it flew 
 
 from __future__ import annotations
 
-import itertools
 import math
+from array import array
 from collections.abc import Mapping, Sequence
 
 import numpy as np
 
 from autopilot.behaviors.land_pad import LandPad, LandPadParams, LandPadSettings
 from autopilot.flightlog import records as ch
-from autopilot.flightlog.metrics import FollowedTarget, estimation_metrics
+from autopilot.flightlog.metrics import FollowedTarget, estimation_metrics, phase_entries
+from autopilot.flightlog.truth import truth_table
 from autopilot.perception.pad_pipeline import pad_spec
 from autopilot.steps.follow_ball import camera_of
 from autopilot.steps.registry import StepContext, StepKind, register
@@ -62,44 +63,46 @@ def landing_metrics(log: Mapping[str, Sequence[Mapping]], intervals: list[tuple[
     # where the vehicle came to rest: after its own landing, or after what the mission did
     # when the step failed (its fallback's landing): to the end of the log
     until = end + 0.5 if succeeded else math.inf
-    truth = [s for s in log.get(ch.GROUND_TRUTH, [])
-             if body in s["bodies"] and start <= s["time_s"] <= until]
-    if not truth:
+    track = truth_table(log).body(body)
+    truth = track.window((track.t >= start) & (track.t <= until))
+    if not len(truth):
         return {}
-    frames = [f for f in log.get(ch.detection_topic(p["name"]), [])
-              if start <= f["time_s"] <= end]
-    found = [f["time_s"] for f in frames if f["detected"]]
-    times_ms = [f["processing_ms"] for f in frames if f.get("processing_ms") is not None]
-    phases = [r.get("phase") for r in log.get(ch.SETPOINTS, [])
-              if start <= r["time_s"] <= end and r.get("step") == step["name"]]
-    retries = sum(1 for a, b in itertools.pairwise(phases)
-                  if b == "reacquiring" and a != "reacquiring")
-    z = np.array([s["vehicle_position_ned_m"][2] for s in truth])
-    t = np.array([s["time_s"] for s in truth])
-    vz = np.array([s["vehicle_velocity_ned_m_s"][2] for s in truth])
+    frames = detected = 0
+    first_found = None
+    times_ms = array("d")
+    for f in log.get(ch.detection_topic(p["name"]), []):
+        if start <= f["time_s"] <= end:
+            frames += 1
+            if f["detected"]:
+                detected += 1
+                first_found = f["time_s"] if first_found is None else first_found
+            if f.get("processing_ms") is not None:
+                times_ms.append(f["processing_ms"])
+    retries = phase_entries(log.get(ch.SETPOINTS, []), step["name"], start, end, "reacquiring")
+    z = truth.vehicle_p[:, 2]
+    t = truth.t
+    vz = truth.vehicle_v[:, 2]
     rest_z = float(z[-1])
     landing: dict = {
         "landed": False, "error_m": None, "on_pad": False, "touchdown_speed_m_s": None,
         "touchdown_horizontal_speed_m_s": None, "time_to_land_s": None, "retries": retries,
-        "found_after_s": (found[0] - start) if found else None,
-        "frames": len(frames), "detected_frames": len(found),
+        "found_after_s": (first_found - start) if first_found is not None else None,
+        "frames": frames, "detected_frames": detected,
         "time_per_frame_ms_p50": float(np.percentile(times_ms, 50)) if times_ms else None,
         "time_per_frame_ms_p95": float(np.percentile(times_ms, 95)) if times_ms else None,
     }
-    still = abs(float(vz[-1])) < 0.05 and float(np.hypot(
-        *truth[-1]["vehicle_velocity_ned_m_s"][:2])) < 0.05
-    pad_down = float(truth[-1]["bodies"][body]["position_ned_m"][2])
+    still = abs(float(vz[-1])) < 0.05 and float(np.hypot(*truth.vehicle_v[-1, :2])) < 0.05
+    pad_down = float(truth.p[-1, 2])
     on_ground = still and abs(rest_z - pad_down) < 0.3
     if on_ground:
         k = len(z) - 1
         while k > 0 and z[k - 1] >= rest_z - _REST_BAND_M:
             k -= 1
         before = (t >= t[k] - 0.3) & (t <= t[k])
-        rest = np.asarray(truth[-1]["vehicle_position_ned_m"])
-        pad = np.asarray(truth[-1]["bodies"][body]["position_ned_m"])
+        rest = truth.vehicle_p[-1]
+        pad = truth.p[-1]
         error = float(np.hypot(*(rest[:2] - pad[:2])))
-        vh = [float(np.hypot(*s["vehicle_velocity_ned_m_s"][:2]))
-              for s, b in zip(truth, before, strict=True) if b]
+        vh = [float(np.hypot(*v[:2])) for v in truth.vehicle_v[before]]
         landing.update({
             "landed": succeeded, "error_m": error, "on_pad": error <= params.size_m / 2.0,
             "touchdown_speed_m_s": float(np.max(vz[before])) if before.any() else None,

@@ -39,6 +39,7 @@ from autopilot.config import AppConfig
 from autopilot.estimation.pose_history import slerp
 from autopilot.flightlog import records as ch
 from autopilot.flightlog.metrics import _intrinsics, project_target
+from autopilot.flightlog.truth import truth_table
 from autopilot.planning.footprint import ground_footprint
 from autopilot.planning.trajectory import Limits, cross_track_m, resample
 from autopilot.steps.registry import StepContext, StepKind, register
@@ -165,11 +166,10 @@ def _plan_record(log: Records, step: Mapping) -> Mapping | None:
 
 class _Truth:
     def __init__(self, log: Records, start: float, end: float) -> None:
-        rows = [s for s in log.get(ch.GROUND_TRUTH, []) if start <= s["time_s"] <= end]
-        self.t = np.array([s["time_s"] for s in rows])
-        self.p = np.array([s["vehicle_position_ned_m"] for s in rows]).reshape(-1, 3)
-        self.v = np.array([s["vehicle_velocity_ned_m_s"] for s in rows]).reshape(-1, 3)
-        self.q = np.array([s["vehicle_attitude_q"] for s in rows]).reshape(-1, 4)
+        table = truth_table(log)
+        rows = (table.t >= start) & (table.t <= end)
+        self.t, self.p, self.v, self.q = table.t[rows], table.p[rows], table.v[rows], \
+            table.q[rows]
 
     def __len__(self) -> int:
         return len(self.t)
