@@ -251,7 +251,13 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
         log.close()
 
     records = await asyncio.to_thread(log.read_back)  # (from the file, as they are used)
-    metrics = await asyncio.to_thread(flight_metrics, records, plan.config.failsafe.geofence)
+    try:
+        metrics = await asyncio.to_thread(flight_metrics, records,
+                                          plan.config.failsafe.geofence)
+    except Exception as exc:  # e.g. a log damaged on disk: the flight still gets its summary
+        warn(f"the flight's metrics could not be computed from its log "
+             f"({type(exc).__name__}: {exc})")
+        metrics = {"mission": {}, "latency_ms": {}, "safety": {}}
     summary = {
         "status": status,
         "reason": reason,

@@ -18,6 +18,7 @@ import contextlib
 import io
 import json
 import logging
+import os
 import struct
 import threading
 from collections import defaultdict, deque
@@ -109,7 +110,7 @@ class FlightLog:
             return self.all_records()
         try:
             return StoredLog(self.path)
-        except (OSError, ValueError):  # the file went wrong after all: what can be read of it
+        except Exception:  # the file went wrong after all: what can be read of it
             return self.all_records()
 
     def write_image(self, camera: str, time_s: float, jpeg: bytes) -> None:
@@ -434,15 +435,19 @@ def _messages(path: Path, channels: Container[int], complete: list | None = None
     reader, which makes a Python object of every record (each chunk's message indexes
     too): reading one channel of a flight log with camera frames takes a third of the time."""
     import zstandard
+    from mcap.exceptions import McapError
 
     with open(path, "rb") as f:
+        size = os.fstat(f.fileno()).st_size
         if f.read(len(_MAGIC)) != _MAGIC:
-            raise ValueError(f"{path}: not an MCAP file")
+            return  # empty, cut inside its magic, or not an MCAP file: no records
         while True:
             head = f.read(_RECORD.size)
             if len(head) < _RECORD.size:
                 return
             opcode, length = _RECORD.unpack(head)
+            if length > size - f.tell():
+                return  # cut short (or a damaged length)
             if opcode not in (_OP_CHUNK, _OP_MESSAGE, _OP_CHANNEL, _OP_FOOTER):
                 f.seek(length, io.SEEK_CUR)
                 continue
@@ -458,7 +463,8 @@ def _messages(path: Path, channels: Container[int], complete: list | None = None
                     yield from _chunk_messages(body, channels)
                 else:
                     yield from _record(opcode, body, 0, length, channels)
-            except (ValueError, struct.error, EOFError, RuntimeError, zstandard.ZstdError):
+            except (ValueError, struct.error, EOFError, RuntimeError, McapError,
+                    zstandard.ZstdError):
                 return  # damaged (lz4 raises RuntimeError): keep what was read
 
 

@@ -7,6 +7,7 @@ flightlog.log.StoredLog`).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from array import array
 from collections.abc import Iterable, Mapping, Sequence
@@ -94,6 +95,8 @@ class TruthTable:
         self.v = np.frombuffer(v, dtype=float).reshape(n, 3) if n else np.zeros((0, 3))
         self.q = np.frombuffer(q, dtype=float).reshape(n, 4) if n else np.zeros((0, 4))
         self.has_vehicle = np.frombuffer(has_vehicle, dtype=np.int8).astype(bool)
+        for column in (self.t, self.p, self.v, self.q, self.has_vehicle):
+            column.flags.writeable = False  # (shared by every step's metrics)
         self.last = last
         self._bodies = bodies
         self._tracks: dict[str, BodyTrack] = {}
@@ -123,6 +126,8 @@ class TruthTable:
                        np.frombuffer(columns.q, dtype=float).reshape(k, 4))
             track = self._tracks[name] = BodyTrack(self.t[index], self.p[index], self.v[index],
                                                    self.q[index], *own)
+            for field in dataclasses.fields(track):
+                getattr(track, field.name).flags.writeable = False  # (shared by every step's)
         return track
 
 

@@ -37,7 +37,7 @@ from autopilot.behaviors.land_on_rover import (
 )
 from autopilot.flightlog import records as ch
 from autopilot.flightlog.metrics import Estimates, phase_entries
-from autopilot.flightlog.truth import truth_table
+from autopilot.flightlog.truth import extend_floats, truth_table
 from autopilot.perception.deck_pipeline import ROVER_BODY, deck_spec
 from autopilot.steps.follow_ball import camera_of
 from autopilot.steps.registry import StepContext, StepKind, register
@@ -152,7 +152,7 @@ def _own_positions(log: Mapping[str, Sequence[Mapping]]) -> tuple[np.ndarray, np
     t, p = array("d"), array("d")
     for r in log.get(ch.VEHICLE_STATE, []):
         t.append(r["time_s"])
-        p.extend(r["position_ned_m"])
+        extend_floats(p, r["position_ned_m"], 3)
     return np.array(t), np.array(p).reshape(-1, 3)
 
 
@@ -253,7 +253,7 @@ def relative_tracks(log: Mapping[str, Sequence[Mapping]], body: str = ROVER_BODY
             two_sigma.append(2.0 * max(r["position_std_m"][0], r["position_std_m"][1]))
             if source in accepted:
                 accepted[source][0].append(r["time_s"])
-                accepted[source][1].extend(r["relative_position_m"])
+                extend_floats(accepted[source][1], r["relative_position_m"], 3)
         elif source in rejected_at:
             rejected_at[source].append(r["measurement_time_s"])
     updates = {}

@@ -8,7 +8,14 @@ import numpy as np
 import pytest
 
 from autopilot.flightlog import records as ch
-from autopilot.flightlog.log import FlightLog, StoredChannel, StoredLog, encode, read_log
+from autopilot.flightlog.log import (
+    FlightLog,
+    StoredChannel,
+    StoredLog,
+    encode,
+    read_log,
+    read_log_checked,
+)
 from autopilot.run import flight_metrics
 from tests.factories import front_camera
 
@@ -175,3 +182,27 @@ def test_the_truth_columns_keep_nulls_as_nan_and_bodies_where_they_were():
     assert same(ball.v[1], [nan] * 3)  # not logged in that sample
     assert same(ball.vehicle_p, [[nan] * 3, [0.2, 1.0, -2.0]])
     assert len(table.body("rover")) == 0
+
+
+def test_a_damaged_log_reads_back_what_it_can_and_never_raises(tmp_path):
+    _flight(tmp_path / "flight.mcap", 2.0)
+    data = (tmp_path / "flight.mcap").read_bytes()
+    whole = read_log(tmp_path / "flight.mcap")
+    damaged = {
+        "empty": b"",
+        "inside the magic": data[:4],
+        "not an MCAP file": b"hello, world\n" * 10,
+        # the first record's length field made huge (its highest byte)
+        "a huge length": data[:16] + b"\x7f" + data[17:],
+        "zeroes over a chunk": data[:len(data) // 3] + bytes(4096) + data[len(data) // 3 + 4096:],
+    }
+    for name, content in damaged.items():
+        path = tmp_path / f"{name}.mcap"
+        path.write_bytes(content)
+        records, complete = read_log_checked(path)
+        assert not complete or name == "zeroes over a chunk", name
+        for topic, items in records.items():  # what it has is what the flight wrote
+            assert items == whole[topic][:len(items)], (name, topic)
+        stored = StoredLog(path)
+        assert {t: list(items) for t, items in stored.items()} == dict(records), name
+        flight_metrics(stored, None)  # scores what there is, without raising
