@@ -104,10 +104,6 @@ class TruthTable:
     def __len__(self) -> int:
         return len(self.t)
 
-    @property
-    def bodies(self) -> list[str]:
-        return list(self._bodies)
-
     def body(self, name: str) -> BodyTrack:
         """The samples in which ``name`` was present (none: an empty track)."""
         track = self._tracks.get(name)
