@@ -715,8 +715,10 @@ def _run(args: argparse.Namespace) -> int:
     rtf = summary["metrics"]["sim"].get("real_time_factor")
     timing = (f"simulated {summary['sim_time_s']:.1f} s in {summary['wall_time_s']:.1f} s "
               f"(× {rtf:.1f})" if rtf else f"flew for {summary['wall_time_s']:.1f} s")
+    profile = (summary.get("sim") or {}).get("profile")
     lines = [f"status: {summary['status']}" + (f" ({summary['reason']})" if summary["reason"]
-                                                else ""), timing + _steal(summary)]
+                                                else ""),
+             timing + (f", {profile} world" if profile else "") + _steal(summary)]
     if follow:
         lines.append("follow: " + ", ".join(
             f"{k}={_fmt(follow.get(k))}" for k in ("detection_rate", "rms_range_error_m",

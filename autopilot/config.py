@@ -27,7 +27,7 @@ from pydantic import (
 from pydantic_core import PydanticCustomError
 
 from autopilot.perception.colors import COLORS
-from autopilot.resources import default_config_path
+from autopilot.resources import default_config_path, profile_path
 from drivers.sim.config import CameraConfig, SimConfig
 
 KeyPath = tuple[str | int, ...]
@@ -737,7 +737,74 @@ def _short(value: Any) -> str:
     return text if len(text) <= 60 else text[:57] + "..."
 
 
+def merge_located(base: Located, other: Located, prefix: tuple[str, ...] = ()) -> Located:
+    """``base`` with ``other``'s section at ``prefix`` deep-merged over it, keeping the source
+    lines of every merged key."""
+    section: Any = other.data
+    for key in prefix:
+        section = section.get(key) if isinstance(section, dict) else None
+    if not section or not isinstance(section, dict):
+        return base  # (a section that is not a mapping is reported by the mission's model)
+
+    def merge(into: dict, new: dict) -> None:
+        for key, value in new.items():
+            if isinstance(value, dict) and isinstance(into.get(key), dict):
+                merge(into[key], value)
+            else:
+                into[key] = copy.deepcopy(value)
+
+    data = copy.deepcopy(base.data)
+    merge(data, section)
+    lines = dict(base.lines)
+    n = len(prefix)
+    lines.update({path[n:]: where for path, where in other.lines.items()
+                  if len(path) > n and path[:n] == prefix})
+    return Located(data, base.source, lines)
+
+
+# ------------------------------------------------------------------------------------------
+# Simulation profiles
+# ------------------------------------------------------------------------------------------
+
+#: ``sim.profile``: which world the simulator flies in. ``realistic`` is ``config.yaml`` as it
+#: stands (GNSS-grade navigation, fitted camera calibrations, imperfect sensors); ``ideal``
+#: lays ``autopilot/profiles/ideal.yaml`` over it (the kind world: RTK-grade navigation, true
+#: intrinsics, no dropped frames), for regression and comparison. Whatever a mission or
+#: ``--set`` says is laid over the profile, so each dimension stays settable on its own.
+PROFILES = ("realistic", "ideal")
+
+
+def _chosen_profile(layers: Sequence[Any], overrides: Iterable[str]) -> Any:
+    """The profile the last layer to name one chose: ``--set sim.profile=…``, else a
+    mission's ``config.sim.profile``, else the base configuration's."""
+    for item in reversed(list(overrides)):
+        key, sep, raw = item.partition("=")
+        if sep and key.strip() == "sim.profile":
+            return raw.strip()
+    for data in reversed(list(layers)):
+        sim = data.get("sim") if isinstance(data, dict) else None
+        if isinstance(sim, dict) and "profile" in sim:
+            return sim["profile"]
+    return None
+
+
+def with_profile(base: Located, layers: Sequence[Any] = (),
+                 overrides: Iterable[str] = ()) -> Located:
+    """``base`` with the chosen profile's overlay laid over it (under ``layers``, the data a
+    mission and ``--set`` will lay over it afterwards). An unknown profile name is left for
+    validation to report, where it was written."""
+    name = _chosen_profile([base.data, *layers], overrides)
+    if not isinstance(name, str) or name not in PROFILES:
+        return base
+    path = profile_path(name)
+    if path is None:
+        return base
+    return merge_located(base, load_yaml(path))
+
+
 def load_config(path: str | Path | None = None, overrides: Iterable[str] = ()) -> AppConfig:
-    """Load ``config.yaml`` (the shipped one by default), apply overrides, validate."""
-    located = load_yaml(path or default_config_path())
+    """Load ``config.yaml`` (the shipped one by default), lay the chosen simulation profile
+    over it, apply overrides, validate."""
+    overrides = list(overrides)
+    located = with_profile(load_yaml(path or default_config_path()), (), overrides)
     return validate(AppConfig, apply_overrides(located, overrides))

@@ -23,7 +23,6 @@ configuration.
 
 from __future__ import annotations
 
-import copy
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -51,7 +50,9 @@ from autopilot.config import (
     _Model,
     apply_overrides,
     load_yaml,
+    merge_located,
     validate,
+    with_profile,
 )
 from autopilot.perception.colors import COLORS
 from autopilot.pipeline import PipelineSpec
@@ -341,9 +342,11 @@ def load_mission(name_or_path: str, overrides: list[str] = (),
     steps = None
     if isinstance(raw_steps, list) and all(isinstance(raw, dict) for raw in raw_steps):
         steps = collect(lambda: _validate_steps(raw_steps, located))
-    base = load_yaml(config_path or default_config_path())
+    mission_config = located.data.get("config") if isinstance(located.data, dict) else None
+    base = with_profile(load_yaml(config_path or default_config_path()), [mission_config],
+                        config_overrides)
     config = collect(lambda: validate(AppConfig, apply_overrides(
-        _merge_located(base, located, ("config",)), config_overrides)))
+        merge_located(base, located, ("config",)), config_overrides)))
     if not problems and steps is not None and config is not None:
         # what a step needs of the configuration (its pipelines: a detector that can find
         # its target, …)
@@ -413,31 +416,6 @@ def _validate_steps(raw_steps: list[dict[str, Any]], located: Located) -> tuple[
     if problems:
         raise ConfigError(problems)
     return tuple(steps)
-
-
-def _merge_located(base: Located, other: Located, prefix: tuple[str, ...]) -> Located:
-    """``base`` with ``other``'s section at ``prefix`` deep-merged over it, keeping the source
-    lines of every merged key."""
-    section: Any = other.data
-    for key in prefix:
-        section = section.get(key) if isinstance(section, dict) else None
-    if not section or not isinstance(section, Mapping):
-        return base  # (a section that is not a mapping is reported by the mission's model)
-
-    def merge(into: dict, new: Mapping) -> None:
-        for key, value in new.items():
-            if isinstance(value, Mapping) and isinstance(into.get(key), dict):
-                merge(into[key], value)
-            else:
-                into[key] = copy.deepcopy(value)
-
-    data = copy.deepcopy(base.data)
-    merge(data, section)
-    lines = dict(base.lines)
-    n = len(prefix)
-    lines.update({path[n:]: where for path, where in other.lines.items()
-                  if len(path) > n and path[:n] == prefix})
-    return Located(data, base.source, lines)
 
 
 # ------------------------------------------------------------------------------------------

@@ -23,3 +23,10 @@ def default_config_path() -> Path:
 
 def missions_dir() -> Path:
     return _find("missions")
+
+
+def profile_path(name: str) -> Path | None:
+    """The overlay of simulation profile ``name`` (``sim.profile``), or None: that profile is
+    ``config.yaml`` as it stands."""
+    path = _HERE / "profiles" / f"{name}.yaml"
+    return path if path.exists() else None

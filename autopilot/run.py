@@ -265,6 +265,8 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
         "source": str(plan.source),
         "driver": plan.config.driver,
         "clock": "lockstep" if vehicle.clock.lockstep else "realtime",
+        # the simulated world's profile (sim.profile); null: a real vehicle flew
+        "sim": {"profile": plan.config.sim.profile} if plan.config.driver == "sim" else None,
         "seed": seed,
         "sim_time_s": sim_time,
         "wall_time_s": wall_time,

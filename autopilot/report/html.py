@@ -458,7 +458,9 @@ def _metrics_table(summary: dict | None) -> str:
     if not summary:
         return "<p class='none'>no summary.json (the run did not finish)</p>"
     rows = [("status", summary.get("status")), ("mission", summary.get("mission")),
-            ("driver", summary.get("driver")), ("sim time (s)", summary.get("sim_time_s")),
+            ("driver", summary.get("driver")),
+            ("simulated world", (summary.get("sim") or {}).get("profile", "—")),
+            ("sim time (s)", summary.get("sim_time_s")),
             ("wall time (s)", summary.get("wall_time_s"))]
     def flatten(prefix: str, values: dict) -> None:
         for key, value in values.items():

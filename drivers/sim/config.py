@@ -7,7 +7,7 @@ Names carry their units; the PX4 parameter each one mirrors is noted where there
 
 from __future__ import annotations
 
-from typing import Annotated
+from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
@@ -248,6 +248,9 @@ class FlightStackConfig(_Model):
 
 
 class SimConfig(_Model):
+    #: Which world: ``realistic`` (config.yaml's values) or ``ideal`` (the kind world laid over
+    #: them from autopilot/profiles/ideal.yaml); see autopilot.config.PROFILES.
+    profile: Literal["realistic", "ideal"]
     seed: Annotated[int, Field(ge=0)]
     #: Where the local origin (the vehicle's start, PX4's EKF origin and first home) is on
     #: Earth: latitude °, longitude °, altitude above mean sea level m.

@@ -118,3 +118,66 @@ def test_validate_command_exit_codes(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "bad.yaml:" in err
     assert "driver:" in err
+
+
+# ------------------------------------------------------------------------------------------
+# Simulation profiles (sim.profile)
+# ------------------------------------------------------------------------------------------
+
+
+@pytest.fixture
+def kind_overlay(tmp_path, monkeypatch):
+    """An ``ideal`` overlay that changes two keys, standing in for the shipped one."""
+    overlay = tmp_path / "ideal.yaml"
+    overlay.write_text("sim:\n  rangefinder: {noise_m: 0.0001}\n"
+                       "  estimator: {position_error_m: 0.001}\n")
+    import autopilot.config as config_module
+
+    monkeypatch.setattr(config_module, "profile_path",
+                        lambda name: overlay if name == "ideal" else None)
+    return overlay
+
+
+def test_a_profile_lays_its_overlay_under_what_the_user_sets(kind_overlay):
+    base = load_config(overrides=["sim.profile=realistic"])
+    ideal = load_config(overrides=["sim.profile=ideal"])
+    assert ideal.sim.profile == "ideal"
+    assert base.sim.profile == "realistic"
+    assert ideal.sim.rangefinder.noise_m == 0.0001
+    assert ideal.sim.estimator.position_error_m == 0.001
+    # what the overlay does not name stays as config.yaml has it
+    assert ideal.sim.rangefinder.max_m == base.sim.rangefinder.max_m
+    # each dimension is still settable on its own, whatever the profile
+    mixed = load_config(overrides=["sim.profile=ideal", "sim.rangefinder.noise_m=0.3"])
+    assert mixed.sim.rangefinder.noise_m == 0.3
+    assert mixed.sim.estimator.position_error_m == 0.001
+
+
+def test_a_missions_profile_and_its_own_keys(kind_overlay, tmp_path):
+    from autopilot.mission import load_mission
+
+    mission = tmp_path / "m.yaml"
+    mission.write_text("name: m\nsteps:\n  - takeoff: {altitude_m: 2}\n  - land: {}\n"
+                       "config:\n  sim:\n    profile: ideal\n    rangefinder: {noise_m: 0.2}\n")
+    plan = load_mission(str(mission))
+    assert plan.config.sim.profile == "ideal"
+    assert plan.config.sim.rangefinder.noise_m == 0.2  # the mission's key over the overlay
+    assert plan.config.sim.estimator.position_error_m == 0.001  # the overlay's
+    # --set chooses over the mission
+    plan = load_mission(str(mission), ["sim.profile=realistic"])
+    assert plan.config.sim.profile == "realistic"
+    assert plan.config.sim.estimator.position_error_m != 0.001
+
+
+def test_an_unknown_profile_is_refused_where_it_was_written():
+    with pytest.raises(ConfigError) as err:
+        load_config(overrides=["sim.profile=kind"])
+    assert "--set: sim.profile:" in str(err.value)
+    assert "realistic" in str(err.value)
+
+
+def test_the_shipped_profiles_are_valid():
+    from autopilot.config import PROFILES
+
+    for name in PROFILES:
+        assert load_config(overrides=[f"sim.profile={name}"]).sim.profile == name
