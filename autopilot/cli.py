@@ -346,7 +346,7 @@ def build_parser() -> argparse.ArgumentParser:
     soak_bench = benches.add_parser(
         "soak", help="an hour of simulated flight (lockstep), the shipped missions back to back "
         "in one process: memory, tasks, threads, file descriptors and event-loop lag sampled; "
-        "fails on growth over 5 % or any leak (about 25 min on 2 cores)")
+        "fails on growth over 5 %% or any leak (about 25 min on 2 cores)")
     soak_bench.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     soak_bench.add_argument("--duration-s", type=float, default=3600.0, metavar="S",
                             help="simulated seconds of flight (default 3600)")
