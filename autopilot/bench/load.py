@@ -16,9 +16,10 @@ p50/p95 (the run's summary), frames shed by perception (frames the camera delive
 follow step that detection never saw: gaps in the processed frames' sequence numbers), frames
 shed by the console (frames the viewer should have had at its rate, from the frames the camera
 delivered while it watched, that never came), the range RMS (``autopilot score`` against the
-simulator's truth) and the vehicle's own real-time factor (from the simulator's event lines: a
-vehicle that falls behind the wall clock makes its telemetry look old, which is not the
-autopilot's load).
+simulator's truth) and the vehicle's own real-time factor (simulated over wall time between
+the simulator's first and last event lines, else its truth log's last time over the wall time
+since it came up: a vehicle that falls behind the wall clock makes its telemetry look old,
+which is not the autopilot's load).
 
 Every process the bench starts is in a session of its own, is stopped when the bench ends
 (normally, on an error, on Ctrl-C or SIGTERM) and, through ``PR_SET_PDEATHSIG``, is killed by the
@@ -348,9 +349,11 @@ def _share(pair: tuple[int, int] | None) -> float | None:
 
 def row_from(hogs: int, summary: Mapping | None, records: Mapping | None,
              viewer: Mapping | None, sim_lines: Sequence[str], fps: float,
-             failure: str | None = None) -> dict:
+             failure: str | None = None, truth_real_time_factor: float | None = None) -> dict:
     """One load's figures from its run's summary and log records, the viewer's result and the
-    simulator's output; ``failure`` says why the run gave no summary (if it did not)."""
+    simulator's output; ``failure`` says why the run gave no summary (if it did not).
+    ``truth_real_time_factor`` stands in for the vehicle's when its lines do not give it (a
+    flight that ended before the vehicle armed)."""
     from autopilot.flightlog import records as ch
 
     records = records or {}
@@ -385,7 +388,8 @@ def row_from(hogs: int, summary: Mapping | None, records: Mapping | None,
         "viewer_error": (viewer or {}).get("error"),
         "rms_range_error_m": follow.get("rms_range_error_m"),
         "detection_rate": follow.get("detection_rate"),
-        "vehicle_real_time_factor": vehicle_real_time_factor(sim_lines),
+        "vehicle_real_time_factor": vehicle_real_time_factor(sim_lines)
+        or truth_real_time_factor,
         "loop_lag_p99_ms": (summary or {}).get("stats", {}).get("loop_lag_p99_ms"),
     }
 
@@ -449,6 +453,7 @@ def fly_one(hogs: int, folder: Path, mission: Path, driver: str, overrides: Sequ
             cores: tuple[int, int], follow_s: float, fps: float,
             log: Callable[[str], None]) -> dict:
     """One load: the processes started, the flight flown, everything stopped; its row."""
+    from autopilot.flightlog import records as ch
     from autopilot.flightlog.log import read_log
     from autopilot.score import score
 
@@ -472,6 +477,7 @@ def fly_one(hogs: int, folder: Path, mission: Path, driver: str, overrides: Sequ
                                   f"front=udp://127.0.0.1:{video}", "--out", str(sim_dir),
                                   *sets], vehicle_core, nice=-10, output=sim_out)
         ready = _wait_for_line(sim_out, "PX4-compatible simulated vehicle", sim, 180.0)
+        ready_s = stop_s = time.monotonic()  # (its clock starts just before it says so)
         if not ready:
             failure = "the vehicle did not start: " + (_last_line(sim_out) or "no output")
         else:
@@ -495,10 +501,15 @@ def fly_one(hogs: int, folder: Path, mission: Path, driver: str, overrides: Sequ
                 failure = f"the autopilot exited with code {code}: " + \
                     (_last_line(run_out) or "no output")
             procs.stop("viewer", signal.SIGTERM, 10.0)
+        stop_s = time.monotonic()
         procs.stop("sim", signal.SIGINT, 30.0)  # (it lands a vehicle still armed, then exits)
         for i in range(hogs):
             procs.stop(f"hog{i}", signal.SIGTERM, 2.0)
-    summary = records = None
+    summary = records = truth_rtf = None
+    if ready and (sim_dir / "truth.mcap").is_file() and stop_s - ready_s > 5.0:
+        with contextlib.suppress(Exception):  # (a damaged log: no figure, not a crash)
+            truth = read_log(sim_dir / "truth.mcap").get(ch.GROUND_TRUTH, [])
+            truth_rtf = truth[-1]["time_s"] / (stop_s - ready_s) if truth else None
     if (run_dir / "summary.json").is_file():
         if (sim_dir / "truth.mcap").is_file():
             try:
@@ -512,7 +523,7 @@ def fly_one(hogs: int, folder: Path, mission: Path, driver: str, overrides: Sequ
     with contextlib.suppress(OSError, ValueError):
         viewer = json.loads(viewer_out.read_text())
     sim_lines = sim_out.read_text(errors="replace").splitlines() if sim_out.is_file() else []
-    row = row_from(hogs, summary, records, viewer, sim_lines, fps, failure)
+    row = row_from(hogs, summary, records, viewer, sim_lines, fps, failure, truth_rtf)
     log(f"{hogs} busy: {'completed' if row['completed'] else 'NOT completed: ' + row['why']}")
     return row
 

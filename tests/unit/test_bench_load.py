@@ -80,6 +80,11 @@ def test_an_abort_is_a_non_completion_with_its_reason():
     assert row["perception_shed_share"] is None
     assert row["console_shed_share"] is None
     assert row["vehicle_real_time_factor"] is None
+    # no events (it never armed): the truth log's figure stands in; the lines' win otherwise
+    assert load.row_from(6, None, None, None, [], 15.0, truth_real_time_factor=0.3)[
+        "vehicle_real_time_factor"] == 0.3
+    assert load.row_from(6, None, None, None, SIM_LINES, 15.0, truth_real_time_factor=0.3)[
+        "vehicle_real_time_factor"] == pytest.approx(30.0 / 35.0)
     crashed = load.row_from(6, None, None, None, [], 15.0,
                             failure="the autopilot exited with code 1: Traceback")
     assert not crashed["completed"]
