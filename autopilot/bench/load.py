@@ -43,6 +43,7 @@ import socket
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
@@ -540,19 +541,22 @@ def run_bench(hogs: Sequence[int], follow_s: float = DEFAULT_FOLLOW_S, driver: s
     mission = folder / "follow_ball.yaml"
     mission.write_text(short_mission(follow_s))
     plan = load_mission(str(mission), overrides)  # nothing flies on an invalid mission
-    previous = signal.getsignal(signal.SIGTERM)
+    main = threading.current_thread() is threading.main_thread()
+    previous = signal.getsignal(signal.SIGTERM) if main else None
 
     def terminated(signum, frame):  # SIGTERM: as Ctrl-C, so that every child is stopped
         raise KeyboardInterrupt
 
-    signal.signal(signal.SIGTERM, terminated)
+    if main:  # (signal handlers are the main thread's; elsewhere the caller's own apply)
+        signal.signal(signal.SIGTERM, terminated)
     rows = []
     try:
         for n in hogs:
             rows.append(fly_one(n, folder / f"hogs{n}", mission, driver, overrides, cores,
                                 follow_s, fps, log))
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        if main:
+            signal.signal(signal.SIGTERM, previous)
         if out is None:
             shutil.rmtree(folder, ignore_errors=True)
     rate = plan.config.runtime.control_rate_hz
