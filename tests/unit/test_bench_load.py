@@ -158,6 +158,7 @@ def test_hogs_are_parsed_and_one_core_is_refused(monkeypatch, capsys):
     with pytest.raises(load.LoadBenchError, match="needs two cores"):
         load.pick_cores([5])
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0})
+    monkeypatch.setattr(cli, "configure_for_flight", lambda: None)  # (this process's settings)
     assert cli.main(["bench", "load", "--hogs", "0"]) == cli.EXIT_USAGE
     assert "needs two cores" in capsys.readouterr().err
 
