@@ -374,6 +374,24 @@ def build_parser() -> argparse.ArgumentParser:
                                help="watch the bare frames (?overlay=0): the newest, without "
                                "waiting for the frame's detections")
 
+    load_bench = benches.add_parser(
+        "load", help="flight on a busy CPU: the vehicle (autopilot sim) on a core of its own, "
+        "the autopilot (MAVLink driver, H.264 video, a console viewer) sharing the other with "
+        "N busy processes; per N: completed, control tick, latency, frames shed by perception "
+        "and by the console, range RMS (about 1 min per N)")
+    load_bench.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    load_bench.add_argument("--hogs", default=",".join(map(str, (0, 2, 4, 6))),
+                            metavar="N|N,N,...", help="busy processes: one load, or a list "
+                            "(default 0,2,4,6)")
+    load_bench.add_argument("--follow-s", type=float, default=20.0, metavar="S",
+                            help="how long each flight follows the ball (default 20)")
+    load_bench.add_argument("--driver", choices=("mavsdk", "pymavlink"), default="mavsdk")
+    load_bench.add_argument("--out", metavar="DIR",
+                            help="keep each load's logs (vehicle, run, viewer) in DIR/hogsN")
+    load_bench.add_argument("--set", dest="overrides", action="append", default=[],
+                            metavar="KEY=VALUE", help="override a mission or configuration key "
+                            "(the vehicle's and the autopilot's)")
+
     api_bench = benches.add_parser(
         "api", help="what the goal API costs the process: a real-time standby hover with the "
         "API idle, then busy (status polled, the status stream followed) (about 1 min)")
@@ -1084,6 +1102,21 @@ def _bench(args: argparse.Namespace) -> int:
         result = console_bench.run_bench(args.window, args.windows, args.fps, args.browser,
                                          log, overlay=not args.bare)
         print(json.dumps(result) if args.json else console_bench.format_table(result))
+        return EXIT_OK
+
+    if args.bench == "load":
+        from pathlib import Path
+
+        from autopilot.bench import load as load_bench
+
+        hogs = load_bench.parse_hogs(args.hogs)
+        if not 0 < args.follow_s <= 600:
+            raise InputError(f"--follow-s {args.follow_s}: between 0 and 600 s")
+        cores = load_bench.pick_cores()
+        result = load_bench.run_bench(hogs, args.follow_s, args.driver, args.overrides,
+                                      _stderr_progress, Path(args.out) if args.out else None,
+                                      cores=cores)
+        print(json.dumps(result) if args.json else load_bench.format_table(result))
         return EXIT_OK
 
     if args.bench == "api":
