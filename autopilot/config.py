@@ -341,9 +341,6 @@ class VehicleCameraConfig(CameraConfig):
     video_source: str | None = None
     #: capture → arrival, for a stream whose packets carry no usable clock (see the README)
     stream_latency_s: Annotated[float, Field(ge=0, lt=2)] = 0.0
-    #: OpenCV or ROS calibration YAML: the intrinsics and distortion the autopilot uses over
-    #: MAVLink (None: the nominal pinhole of the keys above, and a warning)
-    calibration: str | None = None
 
 
 class VehicleSetup(_Model):

@@ -103,13 +103,58 @@ class CameraEffects:
     noise_std_dn: float = 0.0
     exposure_s: float = 0.0
     rolling_shutter_s: float = 0.0
+    #: JPEG round trip at this quality (0: none)
+    jpeg_quality: int = 0
 
     @classmethod
     def from_config(cls, cfg: CameraConfig) -> CameraEffects | None:
         """None for an ideal camera (``realistic: false``)."""
         if not cfg.realistic:
             return None
-        return cls(cfg.noise_std_dn, cfg.exposure_s, cfg.rolling_shutter_s)
+        return cls(cfg.noise_std_dn, cfg.exposure_s, cfg.rolling_shutter_s,
+                   cfg.codec_quality if cfg.codec == "jpeg" else 0)
+
+
+@dataclass(frozen=True, slots=True)
+class Capture:
+    """What happens to one frame between its capture and its delivery."""
+
+    dropped: bool
+    delay_s: float  # beyond the camera's latency
+    gain: float  # the auto-exposure's brightness factor
+
+
+class CaptureModel:
+    """A camera's frame-to-frame imperfections: dropped frames, latency jitter (frames keep
+    their order) and auto-exposure steps. One random stream per (seed, camera), drawn in
+    capture order, so a lockstep run stays deterministic."""
+
+    def __init__(self, name: str, cfg: CameraConfig, seed: int) -> None:
+        on = cfg.realistic
+        self.drop_fraction = cfg.drop_fraction if on else 0.0
+        self.jitter_s = cfg.latency_jitter_s if on else 0.0
+        self.step = cfg.auto_exposure_step if on else 0.0
+        self.step_probability = -math.expm1(-1.0 / (cfg.rate_hz * cfg.auto_exposure_interval_s))
+        self.gain = 1.0
+        self._last_delay_s = 0.0
+        self._period_s = 1.0 / cfg.rate_hz
+        self._rng = np.random.default_rng((seed, zlib.crc32(name.encode()), 3))
+
+    def next(self) -> Capture:
+        rng = self._rng
+        u_drop, u_step, u_dir, z = rng.random(), rng.random(), rng.random(), rng.standard_normal()
+        if self.step > 0.0 and u_step < self.step_probability:
+            # a bounded walk: at most two steps from the nominal exposure
+            up = u_dir < 0.5
+            if self.gain >= 1.0 + 1.5 * self.step:
+                up = False
+            elif self.gain <= 1.0 - 1.5 * self.step:
+                up = True
+            self.gain += self.step if up else -self.step
+        # the previous frame's delay less a period: the next frame cannot overtake it
+        delay = max(abs(z) * self.jitter_s, self._last_delay_s - self._period_s)
+        self._last_delay_s = delay
+        return Capture(u_drop < self.drop_fraction, delay, self.gain)
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -171,9 +216,13 @@ def blur_kernel(du_px: float, dv_px: float) -> np.ndarray | None:
 
 class SimCamera:
     def __init__(self, cam_id: int, info: CameraInfo, latency_s: float,
-                 effects: CameraEffects | None = None) -> None:
+                 effects: CameraEffects | None = None,
+                 reported: CameraInfo | None = None) -> None:
         self.cam_id = cam_id
+        #: The camera as it is (rendered so) ...
         self.info = info
+        #: ... and as its frames describe it (nominal mount, calibrated intrinsics).
+        self.reported = reported or info
         self.latency_s = latency_s
         #: None: the ideal pinhole image (then ``info`` has no distortion either).
         self.effects = effects
@@ -261,15 +310,15 @@ class CameraRig:
 
     def submit(self, data: mujoco.MjData, cam: SimCamera, time_s: float,
                render_from_s: float | None = None,
-               motion: VehicleMotion | None = None) -> PendingFrame:
+               motion: VehicleMotion | None = None, gain: float = 1.0) -> PendingFrame:
         """Capture what ``cam`` sees now; the image is collected by :meth:`finish`. With a
         ``render_gate``, rendering waits until ``render_from_s`` (if given). ``motion``: the
         vehicle's at capture, for a realistic camera's motion blur and rolling shutter (None:
-        at rest)."""
+        at rest); ``gain``: its auto-exposure's brightness factor."""
         target = self._snapshot(data, cam)
         pending = PendingFrame(cam, time_s, cam.seq,
                                self._executor().submit(self._render, target, render_from_s,
-                                                       motion, cam.seq))
+                                                       motion, cam.seq, gain))
         cam.seq += 1
         cam.rendered += 1
         target.pending = pending
@@ -299,7 +348,7 @@ class CameraRig:
         """The captured frame (waits for the render if it is not done; once per frame)."""
         if pending.frame is None:
             image = pending.image.result()
-            pending.frame = Frame(camera=pending.camera.info, time_s=pending.time_s,
+            pending.frame = Frame(camera=pending.camera.reported, time_s=pending.time_s,
                                   seq=pending.seq, image=image)
             target = self._targets[pending.camera.cam_id]
             if target.pending is pending:
@@ -307,7 +356,8 @@ class CameraRig:
         return pending.frame
 
     def _render(self, target: _CameraTarget, render_from_s: float | None = None,
-                motion: VehicleMotion | None = None, seq: int = 0) -> np.ndarray:
+                motion: VehicleMotion | None = None, seq: int = 0,
+                gain: float = 1.0) -> np.ndarray:
         """On the render thread: draw the snapshot, read it back top-down BGR (and make it look
         like a real camera's, for a realistic camera)."""
         if render_from_s is not None and self.render_gate is not None:
@@ -352,14 +402,15 @@ class CameraRig:
         if effects is None:
             image = cv2.flip(bgr, 0)  # OpenGL rows run bottom-up
         else:
-            image = self._realistic(target, effects, bgr, motion, seq)
+            image = self._realistic(target, effects, bgr, motion, seq, gain)
         image.flags.writeable = False
         return image
 
     @staticmethod
     def _realistic(target: _CameraTarget, effects: CameraEffects, bottom_up: np.ndarray,
-                   motion: VehicleMotion | None, seq: int) -> np.ndarray:
-        """Distortion (and rolling shutter), motion blur and read noise; see the module notes."""
+                   motion: VehicleMotion | None, seq: int, gain: float = 1.0) -> np.ndarray:
+        """Distortion (and rolling shutter), motion blur, exposure, read noise and the codec;
+        see the module notes."""
         info = target.cam.info
         rate_u, rate_v = image_motion_px_s(info, motion) if motion is not None else (0.0, 0.0)
         if target.warp:
@@ -386,6 +437,8 @@ class CameraRig:
             kernel = blur_kernel(rate_u * effects.exposure_s, rate_v * effects.exposure_s)
             if kernel is not None:
                 image = cv2.filter2D(image, -1, kernel, borderType=cv2.BORDER_REPLICATE)
+        if gain != 1.0:
+            image = cv2.convertScaleAbs(image, alpha=gain)
         if effects.noise_std_dn > 0:
             n = image.size
             if target.noise is None:  # two frames' worth, drawn once
@@ -399,6 +452,10 @@ class CameraRig:
             up, down = (part[offset:offset + n].reshape(image.shape) for part in target.noise)
             image = cv2.add(image, up)
             cv2.subtract(image, down, dst=image)
+        if effects.jpeg_quality:
+            _, data = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY,
+                                                   effects.jpeg_quality])
+            image = cv2.imdecode(data, cv2.IMREAD_COLOR)
         return image
 
     def _release(self) -> None:
