@@ -248,6 +248,10 @@ class EstimationConfig(_Model):
     pad: PadEstimationConfig
     relative: RelativeEstimationConfig
     navigation: NavigationUncertaintyConfig
+    #: How far the cameras may be off their nominal mount (σ per axis): a fixed rotation that
+    #: every target seen through them inherits, as an attitude error that averaging frames
+    #: does not remove.
+    camera_mount_std_deg: Annotated[float, Field(ge=0, le=10)]
 
 
 class FollowControlConfig(_Model):
