@@ -47,6 +47,18 @@ camera would, not MuJoCo's ideal pinhole; on the render thread, after the read-b
   seed and the camera's name) at an offset drawn for each frame from (seed, camera, frame
   number), so frames stay deterministic whatever order the cameras render in.
 
+* **exposure steps**: the frame's auto-exposure gain (:class:`CaptureModel`), applied before
+  the noise;
+* **codec**: a JPEG round trip (``codec: jpeg``, ``codec_quality``), the artefacts of a
+  compressed stream, about 2 ms a frame.
+
+Between capture and delivery (:class:`CaptureModel`, drawn on the simulator's thread in capture
+order, so lockstep runs stay deterministic): dropped frames (``drop_fraction``; never rendered),
+latency jitter (``latency_jitter_s``, frames keep their order) and the auto-exposure's steps.
+The camera renders with its true mount (off nominal by ``mount_error_deg``) and intrinsics;
+its frames report :attr:`SimCamera.reported`, the nominal mount and the intrinsics of its
+calibration file (see autopilot/sim_calibration.py).
+
 The image motion for blur and rolling shutter is that of the image centre, from the vehicle's
 true angular and linear velocity at capture (:class:`VehicleMotion`): rotation, plus translation
 over the distance along the boresight to the ground (the translation of a camera looking at
