@@ -49,8 +49,9 @@ camera would, not MuJoCo's ideal pinhole; on the render thread, after the read-b
 
 * **exposure steps**: the frame's auto-exposure gain (:class:`CaptureModel`), applied before
   the noise;
-* **codec**: a JPEG round trip (``codec: jpeg``, ``codec_quality``), the artefacts of a
-  compressed stream, about 2 ms a frame.
+* **codec**: a JPEG round trip (``codec: jpeg``, ``codec_quality``; about 2 ms a frame) or an
+  H.264 one as the network stream's (``codec: h264``, ``codec_bitrate_bps``; stateful, one
+  encoder per camera), the artefacts of a compressed stream.
 
 Between capture and delivery (:class:`CaptureModel`, drawn on the simulator's thread in capture
 order, so lockstep runs stay deterministic): dropped frames (``drop_fraction``; never rendered),
@@ -117,6 +118,9 @@ class CameraEffects:
     rolling_shutter_s: float = 0.0
     #: JPEG round trip at this quality (0: none)
     jpeg_quality: int = 0
+    #: H.264 round trip at this bit rate (0: none)
+    h264_bitrate_bps: int = 0
+    rate_hz: float = 30.0
 
     @classmethod
     def from_config(cls, cfg: CameraConfig) -> CameraEffects | None:
@@ -124,7 +128,46 @@ class CameraEffects:
         if not cfg.realistic:
             return None
         return cls(cfg.noise_std_dn, cfg.exposure_s, cfg.rolling_shutter_s,
-                   cfg.codec_quality if cfg.codec == "jpeg" else 0)
+                   cfg.codec_quality if cfg.codec == "jpeg" else 0,
+                   cfg.codec_bitrate_bps if cfg.codec == "h264" else 0, cfg.rate_hz)
+
+
+class H264RoundTrip:
+    """A camera's frames through libx264 and back, as the network stream encodes them
+    (drivers/video.py's settings; one thread, so the output is deterministic). With no
+    B-frames and zero latency each frame comes out as it goes in."""
+
+    def __init__(self, width_px: int, height_px: int, rate_hz: float, bitrate_bps: int) -> None:
+        from fractions import Fraction
+
+        import av
+
+        enc = av.CodecContext.create("libx264", "w")
+        enc.width, enc.height = width_px, height_px
+        enc.pix_fmt = "yuv420p"
+        enc.time_base = Fraction(1, 90_000)
+        enc.framerate = Fraction(rate_hz).limit_denominator(1001)
+        enc.bit_rate = bitrate_bps
+        enc.thread_count = 1
+        enc.options = {"preset": "ultrafast", "tune": "zerolatency",
+                       "x264-params": "keyint=30:bframes=0:repeat-headers=1:annexb=1"}
+        enc.open()
+        self._enc = enc
+        self._dec = av.CodecContext.create("h264", "r")
+        self._dec.thread_count = 1
+        self._pts = 0
+
+    def __call__(self, image: np.ndarray) -> np.ndarray:
+        import av
+
+        frame = av.VideoFrame.from_ndarray(np.ascontiguousarray(image), format="bgr24")
+        frame.pts = self._pts
+        self._pts += 3000
+        out = None
+        for packet in self._enc.encode(frame):
+            for decoded in self._dec.decode(packet):
+                out = decoded.to_ndarray(format="bgr24")
+        return image if out is None else out
 
 
 @dataclass(frozen=True, slots=True)
@@ -292,6 +335,7 @@ class _CameraTarget:
         self.maps: tuple[np.ndarray, np.ndarray] | None = None
         self.row_times_s: np.ndarray | None = None
         self.noise: tuple[np.ndarray, np.ndarray] | None = None
+        self.h264: H264RoundTrip | None = None
 
 
 class CameraRig:
@@ -468,6 +512,12 @@ class CameraRig:
             _, data = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY,
                                                    effects.jpeg_quality])
             image = cv2.imdecode(data, cv2.IMREAD_COLOR)
+        if effects.h264_bitrate_bps:
+            if target.h264 is None:
+                intr = info.intrinsics
+                target.h264 = H264RoundTrip(intr.width_px, intr.height_px, effects.rate_hz,
+                                            effects.h264_bitrate_bps)
+            image = target.h264(image)
         return image
 
     def _release(self) -> None:

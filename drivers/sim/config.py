@@ -66,9 +66,12 @@ class CameraConfig(_Model):
     auto_exposure_step: Annotated[float, Field(ge=0, le=0.5)]
     auto_exposure_interval_s: Annotated[float, Field(gt=0)]
     #: What the image goes through before the autopilot sees it: ``jpeg`` a JPEG round trip
-    #: at ``codec_quality`` (the artefacts of a compressed stream), ``none`` the raw pixels.
-    codec: Literal["none", "jpeg"]
+    #: at ``codec_quality``, ``h264`` an H.264 round trip at ``codec_bitrate_bps`` (the
+    #: artefacts of a compressed stream), ``none`` the raw pixels.
+    codec: Literal["none", "jpeg", "h264"]
     codec_quality: Annotated[int, Field(ge=1, le=100)]
+    #: ``codec: h264``: libx264 at this bit rate, as the network stream (drivers/video.py)
+    codec_bitrate_bps: Annotated[int, Field(ge=50_000, le=100_000_000)]
     #: The intrinsics the frames report: ``fitted`` a calibration ``autopilot calibrate``
     #: fitted on simulated board views of this camera (cached), ``truth`` the true ones.
     #: A ``calibration`` file, when given, is reported instead of either.
