@@ -248,6 +248,10 @@ class EstimationConfig(_Model):
     pad: PadEstimationConfig
     relative: RelativeEstimationConfig
     navigation: NavigationUncertaintyConfig
+    #: How far the cameras may be off their nominal mount (σ per axis): a fixed rotation that
+    #: every target seen through them inherits, as an attitude error that averaging frames
+    #: does not remove.
+    camera_mount_std_deg: Annotated[float, Field(ge=0, le=10)]
 
 
 class FollowControlConfig(_Model):
@@ -341,9 +345,6 @@ class VehicleCameraConfig(CameraConfig):
     video_source: str | None = None
     #: capture → arrival, for a stream whose packets carry no usable clock (see the README)
     stream_latency_s: Annotated[float, Field(ge=0, lt=2)] = 0.0
-    #: OpenCV or ROS calibration YAML: the intrinsics and distortion the autopilot uses over
-    #: MAVLink (None: the nominal pinhole of the keys above, and a warning)
-    calibration: str | None = None
 
 
 class VehicleSetup(_Model):

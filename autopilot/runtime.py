@@ -55,6 +55,7 @@ from autopilot.behaviors.base import (
 )
 from autopilot.behaviors.flight import ReturnHome, SafeStop
 from autopilot.behaviors.manual import ACTIONS, HeldKeys, ManualFlight, ManualSettings
+from autopilot.config import AppConfig
 from autopilot.console.view import pose_record, publish_vehicle, vehicle_map, vehicle_status
 from autopilot.control.battery import BatteryReserve, ReserveSettings
 from autopilot.control.geofence import FenceSettings, Geofence
@@ -166,6 +167,22 @@ class RunStats:
     loop_lag_p99_ms: float | None = None
     loop_lag_max_ms: float | None = None
     loop_stalls: int = 0  # the loop silent for runtime.loop_stall_s or longer
+
+
+def detection_charge(config: AppConfig, kinds: Sequence[str]
+                     ) -> float | Callable[[list[tuple[object | None, float, str | None]]], float]:
+    """What the lockstep clock charges for detecting ``kinds`` in one frame (``sim.compute_*``):
+    a fixed time, each kind's modelled cost, or (``measured``) a function of
+    :func:`_detect_all`'s results, the time they really took; all but ``fixed`` scaled by
+    ``sim.compute_scale`` (a slower companion computer)."""
+    sim, fixed_s = config.sim, config.runtime.lockstep_detection_s
+    if sim.compute_charge == "fixed":
+        return fixed_s * len(kinds)
+    scale = sim.compute_scale
+    if sim.compute_charge == "measured":
+        return lambda results: scale * sum(ms for _, ms, _ in results) / 1e3
+    return scale * sum(sim.compute_cost_ms[k] / 1e3 if k in sim.compute_cost_ms else fixed_s
+                       for k in kinds)
 
 
 def _detect_all(pipelines: list[Pipeline], frame: Frame, hints: list[object | None]
@@ -1048,7 +1065,7 @@ class Runtime:
 
     async def _detection(self, lane: Lane) -> None:
         pipelines = [self.pipelines[key] for key in lane.keys]
-        budget = self.config.runtime.lockstep_detection_s * len(pipelines)
+        budget = detection_charge(self.config, [p.kind for p in pipelines])
         async with contextlib.aclosing(self.vehicle.frames(lane.camera)) as frames:
             async for frame in frames:
                 received = self.clock.now()

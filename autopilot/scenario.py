@@ -43,7 +43,11 @@ def build_world(scenario: Scenario | None, sim: SimConfig, rover: RoverConfig | 
                 ) -> tuple[SimConfig, list[ScenarioObject]]:
     """The simulator configuration (seed and wind from the scenario) and the scenario objects.
     ``rover``: the rover as the autopilot's configuration has it (a scenario's rover is built
-    to match unless it says otherwise)."""
+    to match unless it says otherwise). Cameras that report a fitted calibration are pointed
+    at it (:mod:`autopilot.sim_calibration`: fitted once, then cached)."""
+    from autopilot.sim_calibration import with_fitted_calibrations
+
+    sim = with_fitted_calibrations(sim)
     if scenario is None:
         return sim, []
     wind = sim.wind.model_copy(update={"gust_mps": scenario.wind.gust_mps,

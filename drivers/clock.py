@@ -47,11 +47,13 @@ class Clock(abc.ABC):
         await self.sleep_until(self.now() + duration_s)
 
     async def run_blocking(self, fn: Callable[..., T], /, *args: Any,
-                           executor: Executor | None = None, budget_s: float | None = None) -> T:
+                           executor: Executor | None = None,
+                           budget_s: float | Callable[[T], float] | None = None) -> T:
         """Run blocking or CPU-heavy ``fn(*args)`` in an executor (the loop's default if None).
 
-        ``budget_s`` is how long the job is modelled to take on a lockstep clock; in real time
-        it takes as long as it takes, and the budget is ignored."""
+        ``budget_s`` is how long the job is modelled to take on a lockstep clock, or a function
+        of its result that says so (e.g. the time it really took); in real time it takes as
+        long as it takes, and the budget is ignored."""
         loop = asyncio.get_running_loop()
         return await loop.run_in_executor(executor, functools.partial(fn, *args))
 
@@ -122,7 +124,19 @@ class LockstepClock(Clock):
         await future
 
     async def run_blocking(self, fn: Callable[..., T], /, *args: Any,
-                           executor: Executor | None = None, budget_s: float | None = None) -> T:
+                           executor: Executor | None = None,
+                           budget_s: float | Callable[[T], float] | None = None) -> T:
+        if callable(budget_s):
+            # the charge is known only from the result: time stands still while the job runs
+            # (an unbudgeted job holds the simulator in settle), then the result arrives that
+            # long after the job started
+            started = self._now
+            result = await self.run_blocking(fn, *args, executor=executor)
+            charge = budget_s(result)
+            if not charge >= 0.0:
+                raise ValueError(f"budget_s must be >= 0, got {charge}")
+            await self.sleep_until(started + charge)
+            return result
         if budget_s is not None:
             if not budget_s >= 0.0:
                 raise ValueError(f"budget_s must be >= 0, got {budget_s}")

@@ -46,6 +46,7 @@ from autopilot.config import AppConfig, load_config
 from autopilot.process import StealMeter
 from drivers.base import CameraInfo, CameraIntrinsics
 from drivers.camera_model import project_points, undistort_points
+from drivers.sim.config import SimConfig
 from drivers.sim.scenario import CalibrationBoard
 from drivers.sim.simulator import Simulator
 
@@ -134,17 +135,34 @@ def run_bench(log: Callable[[str], None] = lambda message: None, quick: bool = F
 
 def _run_board(cfg: AppConfig, board: BoardSpec, opts: BenchOptions, index: int,
                log: Callable[[str], None], folder: Path | None) -> dict:
+    calibrated, truth, rendered, elapsed, blurred = fit_camera(cfg.sim, board, opts, index,
+                                                               folder)
+    section = _score(calibrated, truth, board, opts, blurred)
+    section["render_time_s"] = rendered
+    section["calibrate_time_s"] = elapsed - rendered
+    log(f"{board.pattern}: {section['views_used']} views of {section['views_found']} found, "
+        f"focal error {section['focal_error_pct']:.3f} %, RMS "
+        f"{section['reprojection_rms_px']:.3f} px")
+    return section
+
+
+def fit_camera(sim_config: SimConfig, board: BoardSpec, opts: BenchOptions, index: int = 0,
+               folder: Path | None = None, camera_name: str = CAMERA
+               ) -> tuple[CalibrationResult, CameraIntrinsics, float, float, set[str]]:
+    """``autopilot calibrate``'s fit on rendered views of ``board`` seen by the simulated
+    camera ``camera_name``: the result, the true intrinsics, the render time and the whole
+    time (s), and the names of the views taken turning fast."""
     target = CalibrationBoard(
         "calibration_board", (0.0, 0.0, -_BOARD_HEIGHT_M), pattern=board.pattern,
         squares=(board.columns, board.rows), square_m=board.square_m,
         marker_m=board.marker_m, dictionary=board.dictionary or "DICT_5X5_100")
-    sim = Simulator(cfg.sim, scenario=[target])
+    sim = Simulator(sim_config, scenario=[target])
     blurred: set[str] = set()
     rendered = [0.0]
     try:
-        camera = sim.camera_infos()[CAMERA]
+        camera = sim.camera_infos()[camera_name]
         truth = camera.intrinsics
-        sim.capture(CAMERA)  # warm-up: the renderer's first frame costs more
+        sim.capture(camera_name)  # warm-up: the renderer's first frame costs more
 
         def frames() -> Iterator[SourceFrame]:
             rng = np.random.default_rng((opts.seed, 7, index))
@@ -161,7 +179,7 @@ def _run_board(cfg: AppConfig, board: BoardSpec, opts: BenchOptions, index: int,
                     blurred.add(name)
                 perception._pose_camera(sim, camera, r_ned_cam, position, rng,
                                         shaken if fast else still)
-                image = cv2.cvtColor(sim.capture(CAMERA).image, cv2.COLOR_RGB2BGR)
+                image = cv2.cvtColor(sim.capture(camera_name).image, cv2.COLOR_RGB2BGR)
                 if folder is not None:
                     cv2.imwrite(str(folder / name), image)
                 rendered[0] += time.perf_counter() - t0
@@ -173,13 +191,7 @@ def _run_board(cfg: AppConfig, board: BoardSpec, opts: BenchOptions, index: int,
         elapsed = time.perf_counter() - t0
     finally:
         sim.close()
-    section = _score(calibrated, truth, board, opts, blurred)
-    section["render_time_s"] = rendered[0]
-    section["calibrate_time_s"] = elapsed - rendered[0]
-    log(f"{board.pattern}: {section['views_used']} views of {section['views_found']} found, "
-        f"focal error {section['focal_error_pct']:.3f} %, RMS "
-        f"{section['reprojection_rms_px']:.3f} px")
-    return section
+    return calibrated, truth, rendered[0], elapsed, blurred
 
 
 def _view(rng: np.random.Generator, camera: CameraInfo, target: CalibrationBoard,

@@ -61,9 +61,11 @@ def filter_settings(cfg: AppConfig) -> TargetFilterSettings:
 
 
 def navigation_settings(cfg: AppConfig) -> NavigationUncertainty:
-    n = cfg.estimation.navigation
-    return NavigationUncertainty(n.position_std_m, math.radians(n.attitude_std_deg),
-                                 math.radians(n.yaw_std_deg))
+    n, mount = cfg.estimation.navigation, cfg.estimation.camera_mount_std_deg
+    # the camera's mount error turns its view as the vehicle's attitude error does
+    return NavigationUncertainty(n.position_std_m,
+                                 math.radians(math.hypot(n.attitude_std_deg, mount)),
+                                 math.radians(math.hypot(n.yaw_std_deg, mount)))
 
 
 class BallPipeline:

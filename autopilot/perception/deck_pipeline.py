@@ -129,7 +129,8 @@ class DeckPipeline:
         e = cfg.estimation.relative
         self._tag_noise = (e.tag_pixel_noise_px, e.tag_range_noise_fraction,
                            math.radians(e.tag_heading_noise_deg))
-        self._attitude_std = math.radians(cfg.estimation.navigation.attitude_std_deg)
+        self._attitude_std = math.radians(math.hypot(
+            cfg.estimation.navigation.attitude_std_deg, cfg.estimation.camera_mount_std_deg))
         self.history = PoseHistory(span_s=max(3.0, 2.0 * e.history_s),
                                    max_extrapolation_s=0.3)
         self._last_reading = math.nan

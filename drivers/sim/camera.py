@@ -47,6 +47,19 @@ camera would, not MuJoCo's ideal pinhole; on the render thread, after the read-b
   seed and the camera's name) at an offset drawn for each frame from (seed, camera, frame
   number), so frames stay deterministic whatever order the cameras render in.
 
+* **exposure steps**: the frame's auto-exposure gain (:class:`CaptureModel`), applied before
+  the noise;
+* **codec**: a JPEG round trip (``codec: jpeg``, ``codec_quality``; about 2 ms a frame) or an
+  H.264 one as the network stream's (``codec: h264``, ``codec_bitrate_bps``; stateful, one
+  encoder per camera), the artefacts of a compressed stream.
+
+Between capture and delivery (:class:`CaptureModel`, drawn on the simulator's thread in capture
+order, so lockstep runs stay deterministic): dropped frames (``drop_fraction``; never rendered),
+latency jitter (``latency_jitter_s``, frames keep their order) and the auto-exposure's steps.
+The camera renders with its true mount (off nominal by ``mount_error_deg``) and intrinsics;
+its frames report :attr:`SimCamera.reported`, the nominal mount and the intrinsics of its
+calibration file (see autopilot/sim_calibration.py).
+
 The image motion for blur and rolling shutter is that of the image centre, from the vehicle's
 true angular and linear velocity at capture (:class:`VehicleMotion`): rotation, plus translation
 over the distance along the boresight to the ground (the translation of a camera looking at
@@ -103,13 +116,100 @@ class CameraEffects:
     noise_std_dn: float = 0.0
     exposure_s: float = 0.0
     rolling_shutter_s: float = 0.0
+    #: JPEG round trip at this quality (0: none)
+    jpeg_quality: int = 0
+    #: H.264 round trip at this bit rate (0: none)
+    h264_bitrate_bps: int = 0
+    rate_hz: float = 30.0
 
     @classmethod
     def from_config(cls, cfg: CameraConfig) -> CameraEffects | None:
         """None for an ideal camera (``realistic: false``)."""
         if not cfg.realistic:
             return None
-        return cls(cfg.noise_std_dn, cfg.exposure_s, cfg.rolling_shutter_s)
+        return cls(cfg.noise_std_dn, cfg.exposure_s, cfg.rolling_shutter_s,
+                   cfg.codec_quality if cfg.codec == "jpeg" else 0,
+                   cfg.codec_bitrate_bps if cfg.codec == "h264" else 0, cfg.rate_hz)
+
+
+class H264RoundTrip:
+    """A camera's frames through libx264 and back, as the network stream encodes them
+    (drivers/video.py's settings; one thread, so the output is deterministic). With no
+    B-frames and zero latency each frame comes out as it goes in."""
+
+    def __init__(self, width_px: int, height_px: int, rate_hz: float, bitrate_bps: int) -> None:
+        from fractions import Fraction
+
+        import av
+
+        enc = av.CodecContext.create("libx264", "w")
+        enc.width, enc.height = width_px, height_px
+        enc.pix_fmt = "yuv420p"
+        enc.time_base = Fraction(1, 90_000)
+        enc.framerate = Fraction(rate_hz).limit_denominator(1001)
+        enc.bit_rate = bitrate_bps
+        enc.thread_count = 1
+        enc.options = {"preset": "ultrafast", "tune": "zerolatency",
+                       "x264-params": "keyint=30:bframes=0:repeat-headers=1:annexb=1"}
+        enc.open()
+        self._enc = enc
+        self._dec = av.CodecContext.create("h264", "r")
+        self._dec.thread_count = 1
+        self._pts = 0
+
+    def __call__(self, image: np.ndarray) -> np.ndarray:
+        import av
+
+        frame = av.VideoFrame.from_ndarray(np.ascontiguousarray(image), format="bgr24")
+        frame.pts = self._pts
+        self._pts += 3000
+        out = None
+        for packet in self._enc.encode(frame):
+            for decoded in self._dec.decode(packet):
+                out = decoded.to_ndarray(format="bgr24")
+        return image if out is None else out
+
+
+@dataclass(frozen=True, slots=True)
+class Capture:
+    """What happens to one frame between its capture and its delivery."""
+
+    dropped: bool
+    delay_s: float  # beyond the camera's latency
+    gain: float  # the auto-exposure's brightness factor
+
+
+class CaptureModel:
+    """A camera's frame-to-frame imperfections: dropped frames, latency jitter (frames keep
+    their order) and auto-exposure steps. One random stream per (seed, camera), drawn in
+    capture order, so a lockstep run stays deterministic."""
+
+    def __init__(self, name: str, cfg: CameraConfig, seed: int) -> None:
+        on = cfg.realistic
+        self.drop_fraction = cfg.drop_fraction if on else 0.0
+        self.jitter_s = cfg.latency_jitter_s if on else 0.0
+        self.step = cfg.auto_exposure_step if on else 0.0
+        self.step_probability = -math.expm1(-1.0 / (cfg.rate_hz * cfg.auto_exposure_interval_s))
+        self.gain = 1.0
+        self._last_delay_s = 0.0
+        self._period_s = 1.0 / cfg.rate_hz
+        self._rng = np.random.default_rng((seed, zlib.crc32(name.encode()), 3))
+
+    def next(self) -> Capture:
+        rng = self._rng
+        u_drop, u_step, u_dir, z = rng.random(), rng.random(), rng.random(), rng.standard_normal()
+        if self.step > 0.0 and u_step < self.step_probability:
+            # a bounded walk: at most two steps from the nominal exposure
+            up = u_dir < 0.5
+            if self.gain >= 1.0 + 1.5 * self.step:
+                up = False
+            elif self.gain <= 1.0 - 1.5 * self.step:
+                up = True
+            self.gain += self.step if up else -self.step
+        # the previous frame's delay less a period: the next frame cannot overtake it
+        delay = max(abs(z) * self.jitter_s, self._last_delay_s - self._period_s)
+        self._last_delay_s = delay
+        return Capture(u_drop < self.drop_fraction, delay, self.gain)
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -171,9 +271,13 @@ def blur_kernel(du_px: float, dv_px: float) -> np.ndarray | None:
 
 class SimCamera:
     def __init__(self, cam_id: int, info: CameraInfo, latency_s: float,
-                 effects: CameraEffects | None = None) -> None:
+                 effects: CameraEffects | None = None,
+                 reported: CameraInfo | None = None) -> None:
         self.cam_id = cam_id
+        #: The camera as it is (rendered so) ...
         self.info = info
+        #: ... and as its frames describe it (nominal mount, calibrated intrinsics).
+        self.reported = reported or info
         self.latency_s = latency_s
         #: None: the ideal pinhole image (then ``info`` has no distortion either).
         self.effects = effects
@@ -231,6 +335,7 @@ class _CameraTarget:
         self.maps: tuple[np.ndarray, np.ndarray] | None = None
         self.row_times_s: np.ndarray | None = None
         self.noise: tuple[np.ndarray, np.ndarray] | None = None
+        self.h264: H264RoundTrip | None = None
 
 
 class CameraRig:
@@ -261,15 +366,15 @@ class CameraRig:
 
     def submit(self, data: mujoco.MjData, cam: SimCamera, time_s: float,
                render_from_s: float | None = None,
-               motion: VehicleMotion | None = None) -> PendingFrame:
+               motion: VehicleMotion | None = None, gain: float = 1.0) -> PendingFrame:
         """Capture what ``cam`` sees now; the image is collected by :meth:`finish`. With a
         ``render_gate``, rendering waits until ``render_from_s`` (if given). ``motion``: the
         vehicle's at capture, for a realistic camera's motion blur and rolling shutter (None:
-        at rest)."""
+        at rest); ``gain``: its auto-exposure's brightness factor."""
         target = self._snapshot(data, cam)
         pending = PendingFrame(cam, time_s, cam.seq,
                                self._executor().submit(self._render, target, render_from_s,
-                                                       motion, cam.seq))
+                                                       motion, cam.seq, gain))
         cam.seq += 1
         cam.rendered += 1
         target.pending = pending
@@ -299,7 +404,7 @@ class CameraRig:
         """The captured frame (waits for the render if it is not done; once per frame)."""
         if pending.frame is None:
             image = pending.image.result()
-            pending.frame = Frame(camera=pending.camera.info, time_s=pending.time_s,
+            pending.frame = Frame(camera=pending.camera.reported, time_s=pending.time_s,
                                   seq=pending.seq, image=image)
             target = self._targets[pending.camera.cam_id]
             if target.pending is pending:
@@ -307,7 +412,8 @@ class CameraRig:
         return pending.frame
 
     def _render(self, target: _CameraTarget, render_from_s: float | None = None,
-                motion: VehicleMotion | None = None, seq: int = 0) -> np.ndarray:
+                motion: VehicleMotion | None = None, seq: int = 0,
+                gain: float = 1.0) -> np.ndarray:
         """On the render thread: draw the snapshot, read it back top-down BGR (and make it look
         like a real camera's, for a realistic camera)."""
         if render_from_s is not None and self.render_gate is not None:
@@ -352,14 +458,15 @@ class CameraRig:
         if effects is None:
             image = cv2.flip(bgr, 0)  # OpenGL rows run bottom-up
         else:
-            image = self._realistic(target, effects, bgr, motion, seq)
+            image = self._realistic(target, effects, bgr, motion, seq, gain)
         image.flags.writeable = False
         return image
 
     @staticmethod
     def _realistic(target: _CameraTarget, effects: CameraEffects, bottom_up: np.ndarray,
-                   motion: VehicleMotion | None, seq: int) -> np.ndarray:
-        """Distortion (and rolling shutter), motion blur and read noise; see the module notes."""
+                   motion: VehicleMotion | None, seq: int, gain: float = 1.0) -> np.ndarray:
+        """Distortion (and rolling shutter), motion blur, exposure, read noise and the codec;
+        see the module notes."""
         info = target.cam.info
         rate_u, rate_v = image_motion_px_s(info, motion) if motion is not None else (0.0, 0.0)
         if target.warp:
@@ -386,6 +493,8 @@ class CameraRig:
             kernel = blur_kernel(rate_u * effects.exposure_s, rate_v * effects.exposure_s)
             if kernel is not None:
                 image = cv2.filter2D(image, -1, kernel, borderType=cv2.BORDER_REPLICATE)
+        if gain != 1.0:
+            image = cv2.convertScaleAbs(image, alpha=gain)
         if effects.noise_std_dn > 0:
             n = image.size
             if target.noise is None:  # two frames' worth, drawn once
@@ -399,6 +508,16 @@ class CameraRig:
             up, down = (part[offset:offset + n].reshape(image.shape) for part in target.noise)
             image = cv2.add(image, up)
             cv2.subtract(image, down, dst=image)
+        if effects.jpeg_quality:
+            _, data = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY,
+                                                   effects.jpeg_quality])
+            image = cv2.imdecode(data, cv2.IMREAD_COLOR)
+        if effects.h264_bitrate_bps:
+            if target.h264 is None:
+                intr = info.intrinsics
+                target.h264 = H264RoundTrip(intr.width_px, intr.height_px, effects.rate_hz,
+                                            effects.h264_bitrate_bps)
+            image = target.h264(image)
         return image
 
     def _release(self) -> None:

@@ -53,6 +53,33 @@ class CameraConfig(_Model):
     exposure_s: Annotated[float, Field(ge=0, le=0.1)]
     #: Rolling shutter: time from the first row's exposure to the last's (0: global shutter).
     rolling_shutter_s: Annotated[float, Field(ge=0, le=0.1)]
+    #: Capture latency jitter: each frame arrives ``latency_s`` plus a half-normal delay of
+    #: this scale later (frames keep their order); its stamp stays the capture time.
+    latency_jitter_s: Annotated[float, Field(ge=0, le=0.1)]
+    #: Share of frames the camera drops (never delivered; the sequence number skips them).
+    drop_fraction: Annotated[float, Field(ge=0, lt=1)]
+    #: The mount's error: the camera is turned off its nominal angles by a rotation drawn once
+    #: per (seed, camera), σ per axis in degrees; frames report the nominal mount.
+    mount_error_deg: Annotated[float, Field(ge=0, le=10)]
+    #: Auto-exposure steps: the brightness changes by this fraction (up or down) at random
+    #: times, on average every ``auto_exposure_interval_s`` (0: constant brightness).
+    auto_exposure_step: Annotated[float, Field(ge=0, le=0.5)]
+    auto_exposure_interval_s: Annotated[float, Field(gt=0)]
+    #: What the image goes through before the autopilot sees it: ``jpeg`` a JPEG round trip
+    #: at ``codec_quality``, ``h264`` an H.264 round trip at ``codec_bitrate_bps`` (the
+    #: artefacts of a compressed stream), ``none`` the raw pixels.
+    codec: Literal["none", "jpeg", "h264"]
+    codec_quality: Annotated[int, Field(ge=1, le=100)]
+    #: ``codec: h264``: libx264 at this bit rate, as the network stream (drivers/video.py)
+    codec_bitrate_bps: Annotated[int, Field(ge=50_000, le=100_000_000)]
+    #: The intrinsics the frames report: ``fitted`` a calibration ``autopilot calibrate``
+    #: fitted on simulated board views of this camera (cached), ``truth`` the true ones.
+    #: A ``calibration`` file, when given, is reported instead of either.
+    sim_calibration: Literal["fitted", "truth"]
+    #: OpenCV or ROS calibration YAML: the intrinsics and distortion the autopilot uses (over
+    #: MAVLink: None gives the nominal pinhole of the keys above, and a warning; in the
+    #: simulator: see ``sim_calibration``)
+    calibration: str | None = None
 
     @model_validator(mode="after")
     def _physical(self) -> CameraConfig:
@@ -275,6 +302,16 @@ class SimConfig(_Model):
     uwb: UwbConfig
     rover_link: RoverLinkConfig
     flight_stack: FlightStackConfig
+    #: Lockstep: what detection is charged in simulated time. ``model``: each detector its
+    #: kind's cost in ``compute_cost_ms`` (measured once; deterministic); ``measured``: the
+    #: time it really took on this machine, frame by frame (not deterministic); ``fixed``:
+    #: ``runtime.lockstep_detection_s`` each. Scaled by ``compute_scale`` (model, measured).
+    compute_charge: Literal["model", "measured", "fixed"]
+    #: How much slower the emulated companion computer is than this machine's core.
+    compute_scale: Annotated[float, Field(gt=0, le=100)]
+    #: Per detector kind (ball, marker, image, pad, deck), its mean cost on this machine (ms);
+    #: a kind not listed is charged ``runtime.lockstep_detection_s``.
+    compute_cost_ms: dict[str, Annotated[float, Field(ge=0, le=1000)]]
     #: the vehicle's cameras (the application fills them in from ``vehicle.cameras``)
     cameras: dict[str, CameraConfig] = Field(default_factory=dict)
     #: injected faults (a mission's ``scenario.faults``; see drivers/sim/faults.py)

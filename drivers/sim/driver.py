@@ -52,7 +52,7 @@ from drivers.sim.config import SimConfig
 from drivers.sim.flight.flight_stack import CommandRejected
 from drivers.sim.flight.navigator import MissionStatus, NavEvent
 from drivers.sim.flight.params import SPECS, ParamSpec, config_defaults
-from drivers.sim.model import camera_info
+from drivers.sim.model import reported_camera_info
 from drivers.sim.scenario import ScenarioObject
 from drivers.sim.simulator import GroundTruth, Photo, SimOutput, Simulator
 from drivers.slots import Broadcast
@@ -70,7 +70,7 @@ class SimDriver(Vehicle):
         self.lockstep = lockstep
         self._clock: LockstepClock | MonotonicClock = LockstepClock() if lockstep \
             else MonotonicClock()
-        self._cameras = {name: camera_info(name, cam)
+        self._cameras = {name: reported_camera_info(name, cam)
                          for name, cam in config.cameras.items() if cam.enabled}
         self._executor: ThreadPoolExecutor | None = None
         self._sim: Simulator | None = None

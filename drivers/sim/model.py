@@ -6,10 +6,13 @@ back from the compiled model, so the MJCF file is their single source.
 
 from __future__ import annotations
 
+import dataclasses
 import math
+import zlib
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+import cv2
 import mujoco
 import numpy as np
 
@@ -53,6 +56,43 @@ def camera_info(name: str, cfg: CameraConfig) -> CameraInfo:
                       position_body_m=cfg.position_frd_m, rate_hz=cfg.rate_hz)
 
 
+def mount_error(name: str, cfg: CameraConfig, seed: int) -> np.ndarray:
+    """The rotation (optical → optical) by which camera ``name`` is really turned off its
+    nominal mount: a rotation vector of ``mount_error_deg`` σ per axis, drawn once from
+    (seed, camera); the identity for an ideal camera."""
+    if not cfg.realistic or cfg.mount_error_deg <= 0.0:
+        return np.eye(3)
+    rng = np.random.default_rng((seed, zlib.crc32(name.encode()), 4))
+    rvec = np.radians(cfg.mount_error_deg) * rng.standard_normal(3)
+    return cv2.Rodrigues(rvec)[0]
+
+
+def true_camera_info(name: str, cfg: CameraConfig, seed: int) -> CameraInfo:
+    """The camera as it really is (what is rendered): the true intrinsics, the mount with its
+    error."""
+    nominal = camera_info(name, cfg)
+    return CameraInfo(name=name, intrinsics=nominal.intrinsics,
+                      rotation_body_cam=nominal.rotation_body_cam @ mount_error(name, cfg, seed),
+                      position_body_m=nominal.position_body_m, rate_hz=cfg.rate_hz)
+
+
+def reported_camera_info(name: str, cfg: CameraConfig) -> CameraInfo:
+    """The camera as its frames describe it to the autopilot: the nominal mount, and the
+    intrinsics of its ``calibration`` file (the true ones when it has none), as a MAVLink
+    vehicle's camera with a calibration file."""
+    info = camera_info(name, cfg)
+    if cfg.calibration is None:
+        return info
+    from drivers.calibration import load_calibration
+
+    intrinsics = load_calibration(cfg.calibration)
+    if (intrinsics.width_px, intrinsics.height_px) != (cfg.width_px, cfg.height_px):
+        raise ValueError(f"camera {name}: calibration {cfg.calibration} is for "
+                         f"{intrinsics.width_px}x{intrinsics.height_px}, the camera is "
+                         f"{cfg.width_px}x{cfg.height_px}")
+    return dataclasses.replace(info, intrinsics=intrinsics)
+
+
 def camera_intrinsics(cfg: CameraConfig) -> CameraIntrinsics:
     """The camera's intrinsics as delivered with its frames: MuJoCo's pinhole (square pixels,
     principal point centred; OpenCV puts pixel centres at integer coordinates, hence the
@@ -86,7 +126,7 @@ def build_model(cfg: SimConfig, scenario: Sequence[ScenarioObject] = ()) -> Buil
 
     enabled = {n: c for n, c in cfg.cameras.items() if c.enabled}
     for name, cam in enabled.items():
-        r_body_cam = camera_rotation_body(cam.pitch_deg, cam.yaw_deg)
+        r_body_cam = true_camera_info(name, cam, cfg.seed).rotation_body_cam
         r_flu_mjcam = FLU_FROM_FRD @ r_body_cam @ _MUJOCO_CAM_FROM_OPTICAL
         intr = camera_intrinsics(cam)
         body.add_camera(
@@ -107,10 +147,7 @@ def build_model(cfg: SimConfig, scenario: Sequence[ScenarioObject] = ()) -> Buil
     cameras = {
         name: (
             model.camera(VEHICLE_PREFIX + name).id,
-            CameraInfo(name=name, intrinsics=camera_intrinsics(cam),
-                       rotation_body_cam=camera_rotation_body(cam.pitch_deg, cam.yaw_deg),
-                       position_body_m=np.array(cam.position_frd_m, dtype=float),
-                       rate_hz=cam.rate_hz),
+            true_camera_info(name, cam, cfg.seed),
         )
         for name, cam in enabled.items()
     }

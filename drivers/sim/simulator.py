@@ -33,7 +33,13 @@ import numpy as np
 
 from drivers.base import CameraInfo, ConnectionLost, Frame, Health, Setpoint, VehicleState
 from drivers.geo import GlobalOrigin
-from drivers.sim.camera import CameraEffects, CameraRig, SimCamera, VehicleMotion
+from drivers.sim.camera import (
+    CameraEffects,
+    CameraRig,
+    CaptureModel,
+    SimCamera,
+    VehicleMotion,
+)
 from drivers.sim.config import SimConfig
 from drivers.sim.faults import (
     FaultSchedule,
@@ -45,7 +51,7 @@ from drivers.sim.flight.flight_stack import FlightStack
 from drivers.sim.flight.navigator import NavEvent
 from drivers.sim.flight.params import Parameters, config_defaults
 from drivers.sim.frames import q_enu_flu_to_ned_frd, quat_ned_frd_to_enu_flu
-from drivers.sim.model import build_model
+from drivers.sim.model import build_model, reported_camera_info
 from drivers.sim.rover import (
     Rover,
     RoverLinkModel,
@@ -137,7 +143,7 @@ class Simulator:
         self._rng_latency = rng_latency
 
         self.scenario = list(scenario)
-        built = build_model(config, self.scenario)
+        built = build_model(config.model_copy(update={"seed": self.seed}), self.scenario)
         self.model = built.model
         self.data = mujoco.MjData(self.model)
         self.frame = built.frame
@@ -174,8 +180,11 @@ class Simulator:
         self._weight_n = self.airframe.mass_kg * 9.80665
 
         self.cameras = {name: SimCamera(cam_id, info, config.cameras[name].latency_s,
-                                        CameraEffects.from_config(config.cameras[name]))
+                                        CameraEffects.from_config(config.cameras[name]),
+                                        reported_camera_info(name, config.cameras[name]))
                         for name, (cam_id, info) in built.cameras.items()}
+        self._capture_models = {name: CaptureModel(name, config.cameras[name], self.seed)
+                                for name in self.cameras}
         self._rig = CameraRig(self.model, self.seed)
         self._moving = [obj for obj in self.scenario if obj.moves]
         #: the rover (a scenario with one), its UWB anchors and its own telemetry
@@ -354,12 +363,17 @@ class Simulator:
             if k >= sched.next_step:
                 if cam.active and not (self.faults and self.faults.camera(
                         "camera_dropout", name, self._fault_time(t))):
-                    due = t + cam.latency_s
-                    if motion is None:
-                        motion = self._vehicle_motion()
-                    pending = self._rig.submit(self.data, cam, t,
-                                               due - self.cfg.realtime_render_lead_s, motion)
-                    self._queue(due, "frame", pending)
+                    capture = self._capture_models[name].next()
+                    if capture.dropped:
+                        cam.seq += 1  # the autopilot sees the gap in the sequence numbers
+                    else:
+                        due = t + cam.latency_s + capture.delay_s
+                        if motion is None:
+                            motion = self._vehicle_motion()
+                        pending = self._rig.submit(self.data, cam, t,
+                                                   due - self.cfg.realtime_render_lead_s,
+                                                   motion, capture.gain)
+                        self._queue(due, "frame", pending)
                 sched.advance(k)
         self._update_next_capture()
 

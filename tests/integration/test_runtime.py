@@ -13,7 +13,7 @@ from autopilot import values
 from autopilot.behaviors.flight import SafeStop
 from autopilot.flightlog import records as ch
 from autopilot.mission import load_mission
-from autopilot.runtime import Runtime
+from autopilot.runtime import Runtime, detection_charge
 from drivers.base import FlightMode
 
 from .simtools import fly_short
@@ -41,10 +41,10 @@ def test_follow_ball_closed_loop(tmp_path):
     assert 0.8 <= est["within_2sigma"] <= 0.95
     assert est["lost_share"] == 0.0
     assert est["rms_position_error_m"] <= 0.08
-    # lockstep: capture → setpoint is the camera's own latency plus the modelled detection
-    # time (to the next 2 ms physics step); the rest of the pipeline takes no simulated time
+    # lockstep: capture → setpoint is the camera's own latency plus the detection's charge
+    # (to the next 2 ms physics step); the rest of the pipeline takes no simulated time
     cfg = load_mission("follow_ball").config
-    expected_ms = 1e3 * (cfg.sim.cameras["front"].latency_s + cfg.runtime.lockstep_detection_s)
+    expected_ms = 1e3 * (cfg.sim.cameras["front"].latency_s + detection_charge(cfg, ["ball"]))
     assert summary["metrics"]["latency_ms"]["p95"] == pytest.approx(expected_ms, abs=2.0)
     on_disk = json.loads((tmp_path / "summary.json").read_text())
     for key in ("status", "mission", "driver", "sim_time_s", "wall_time_s"):
