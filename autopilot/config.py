@@ -253,7 +253,8 @@ class Seed004EstimationConfig(_Model):
     r_px4: Positive
     r_compass: Positive
     r_range: Positive
-    accel_var: Positive
+    drone_accel_var: Positive
+    rover_accel_var: Positive
     yaw_rate_var: Positive
     initial_rover_std_m: Positive
     initial_velocity_std_m_s: Positive

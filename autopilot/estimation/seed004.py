@@ -56,10 +56,13 @@ class Seed004Settings:
     predict_rate_hz: float = 5.0
     r_uwb: float = 2.0  # "R_uwb = 2m"
     r_tag: float = 0.5  # "R_tag = 0.5m"
-    r_px4: float = 0.05  # not given by the seed
+    r_px4: float = 0.01  # not given by the seed
     r_compass: float = 0.01  # not given (rad²)
     r_range: float = 0.01  # not given (m²)
-    accel_var: float = 1.0  # Q: white acceleration (m²/s⁴) of the UAV and the rover; not given
+    #: Q: white acceleration (m²/s⁴) of the UAV (under PX4's position control) and of the
+    #: rover; not given
+    drone_accel_var: float = 16.0
+    rover_accel_var: float = 0.25
     yaw_rate_var: float = 0.01  # Q on ψ (rad²/s per second); not given
     initial_rover_std_m: float = 3.0  # the rough rover_position's σ; not given
     initial_velocity_std_m_s: float = 2.0
@@ -179,9 +182,9 @@ class Seed004Filter:
         f = np.eye(N)
         f[P_D, V_D] = np.eye(3) * dt
         f[P_R, V_R] = np.eye(3) * dt
-        q1 = Q_discrete_white_noise(2, dt=dt, var=self.s.accel_var)
         q = np.zeros((N, N))
-        for pos, vel in ((0, 3), (6, 9)):
+        for pos, vel, var in ((0, 3, self.s.drone_accel_var), (6, 9, self.s.rover_accel_var)):
+            q1 = Q_discrete_white_noise(2, dt=dt, var=var)
             for axis in range(3):
                 idx = [pos + axis, vel + axis]
                 q[np.ix_(idx, idx)] = q1
