@@ -304,10 +304,9 @@ def build_parser() -> argparse.ArgumentParser:
                           metavar="KEY=VALUE", help="override a mission or configuration key")
 
     landing = benches.add_parser(
-        "landing", help="land_on_rover over many seeds: ours against seed 004's strategy "
-        "(UWB until the tag is seen, then the tag alone, with a PID) and ours without the tag, "
-        "in the same trials: success rate, median and p95 touchdown error (about 15 min for "
-        "the default 20 trials of each on 2 cores)")
+        "landing", help="land_on_rover over many seeds: ours against seed 004's (its fused "
+        "filter and gain-scheduled PID) and ours without the tag, in the same trials: success "
+        "rate, median and p95 touchdown error (--rover-speed 0: a static rover)")
     landing.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     landing.add_argument("--trials", type=int, default=20, metavar="N",
                          help="seeds per strategy (default 20)")

@@ -241,12 +241,32 @@ class RelativeEstimationConfig(_Model):
     max_extrapolation_s: Positive  # the estimate is not predicted further than this
 
 
+class Seed004EstimationConfig(_Model):
+    """Seed 004's fused filter (autopilot/estimation/seed004.py), the baseline of
+    ``autopilot bench landing --strategy seed004``: its R values (each a single diagonal
+    value), its timers, and what the seed does not give (Q, R_px4, R_compass, R_range)."""
+
+    update_rate_hz: Positive
+    predict_rate_hz: Positive
+    r_uwb: Positive
+    r_tag: Positive
+    r_px4: Positive
+    r_compass: Positive
+    r_range: Positive
+    drone_accel_var: Positive
+    rover_accel_var: Positive
+    yaw_rate_var: Positive
+    initial_rover_std_m: Positive
+    initial_velocity_std_m_s: Positive
+
+
 class EstimationConfig(_Model):
     target: TargetEstimationConfig
     marker: MarkerEstimationConfig
     image: ImageEstimationConfig
     pad: PadEstimationConfig
     relative: RelativeEstimationConfig
+    seed004: Seed004EstimationConfig
     navigation: NavigationUncertaintyConfig
     #: How far the cameras may be off their nominal mount (σ per axis): a fixed rotation that
     #: every target seen through them inherits, as an attitude error that averaging frames
@@ -306,9 +326,23 @@ class PhotoConfig(_Model):
     sensor_width_mm: Annotated[float, Field(gt=0, le=100)]  # focal length in mm = fx × this / width
 
 
+class Seed004LandingConfig(_Model):
+    """Seed 004's landing action's gain-scheduled PID (autopilot/behaviors/land_on_rover.py),
+    the baseline of ``autopilot bench landing --strategy seed004``."""
+
+    approach_pid: tuple[NonNegative, NonNegative, NonNegative]  # Kp, Ki, Kd far from the deck
+    near_pid: tuple[NonNegative, NonNegative, NonNegative]  # ... within near_distance_m
+    near_distance_m: Positive
+    descent_threshold_m: Positive
+    vertical_gain_per_s: Positive
+    max_descent_speed_m_s: Positive
+    max_speed_m_s: Positive
+
+
 class ControlConfig(_Model):
     follow: FollowControlConfig
     trajectory: TrajectoryControlConfig
+    seed004_landing: Seed004LandingConfig
 
 
 class FrameLogConfig(_Model):

@@ -87,8 +87,8 @@ class LandOnRoverParams(Params):
     wait_timeout_s: Positive = 10.0
     timeout_s: Positive = 180.0
     face_rover_heading: bool = True  # else keep the heading at the start
-    #: ours, or seed004: seed 004's strategy (a baseline for `autopilot bench landing`): UWB
-    #: positions until the tag is seen, then the tag alone; a PID on the position error
+    #: ours, or seed004: seed 004's (a baseline for `autopilot bench landing`): its fused filter
+    #: (PX4 position, UWB, tag, rover compass, altimeter) and its gain-scheduled PID
     strategy: Literal["ours", "seed004"] = "ours"
     trim_gain_per_s: Annotated[float, Field(ge=0, le=5)] = 0.6  # integral action over the deck
     max_trim_m: Annotated[float, Field(ge=0, le=1)] = 0.15
@@ -394,31 +394,52 @@ class LandOnRover(Behavior):
                                         position=position, max_step_m=p.approach_speed_m_s / 1.8))
 
 
+@dataclass(frozen=True, slots=True)
+class Seed004LandingSettings:
+    """Seed 004's landing action's controller (``control.seed004_landing`` in config.yaml):
+    the seed names a gain-scheduled PID and approach thresholds but prints no number."""
+
+    approach_pid: tuple[float, float, float] = (1.5, 0.0, 0.1)  # Kp, Ki, Kd far from the deck
+    near_pid: tuple[float, float, float] = (1.5, 0.5, 0.1)  # ... within near_distance_m
+    near_distance_m: float = 1.0
+    descent_threshold_m: float = 0.1  # the approach ends (descent starts) within this
+    vertical_gain_per_s: float = 1.0  # vz = gain × (height − the phase's height)
+    max_descent_speed_m_s: float = 0.5
+    max_speed_m_s: float = 5.0
+
+
 class Seed004LandOnRover(LandOnRover):
-    """Seed 004's landing controller, as a baseline for ``autopilot bench landing``: velocity
-    setpoints from a PID on the relative position error (the report's tracking gains; integral
-    action scheduled in within ``near_m`` of the deck, where a moving deck would otherwise be
-    trailed for ever), no feed-forward of the rover's motion. Approach at the current height;
-    descend at ``final_speed_m_s`` while the horizontal error is within
-    ``acceptance_radius_m`` × 2, hold the height otherwise; below the commit height keep
-    descending; at contact the motors are cut and the landing ends once resting on the deck,
-    as ours does (the comparison is of estimation and control, not of the touchdown)."""
+    """Seed 004's landing action (its Algorithm 9), as a baseline for ``autopilot bench
+    landing``: every tick, the relative position from the seed's fused filter → velocity
+    inputs from "the adaptive, or gain scheduled, PID controller" → offboard velocity
+    setpoints; no feed-forward of the rover's motion, no abort. The phases of its figure 4.7:
+    ``approaching`` at ``approach_height_m`` above the deck until the horizontal error is
+    within ``descent_threshold_m`` (the seed's "thresholds associated to the approach"), then
+    ``descending`` to the deck (the PID's vertical error: the height), for good. Gains
+    scheduled on the horizontal distance: ``approach_pid`` beyond ``near_distance_m``,
+    ``near_pid`` (with the integral that catches a moving deck) within it. At contact the
+    motors are cut and the landing ends once resting on the deck, as ours does (the comparison
+    is of estimation and control, not of the touchdown)."""
 
     name = "land_on_rover"
 
     def __init__(self, params: LandOnRoverParams, settings: LandOnRoverSettings,
-                 pid: tuple[float, float, float] = (1.5, 0.0, 0.1), near_m: float = 1.0,
-                 near_ki: float = 0.5) -> None:
+                 control: Seed004LandingSettings = Seed004LandingSettings()) -> None:
         super().__init__(params, settings)
-        self.kp, self.ki, self.kd = pid
-        self.near_m, self.near_ki = near_m, near_ki
+        self.control = control
         self.phase = "approaching"
-        self.retries = 0
         self._start = self._last = self._phase_since = 0.0
         self._integral = np.zeros(2)
         self._last_error: np.ndarray | None = None
+        self._last_error_s = 0.0
+        self._derivative = np.zeros(2)
         self._yaw = math.nan
         self._stalled_since: float | None = None
+
+    def gains(self, distance_m: float) -> tuple[float, float, float]:
+        """The gain schedule: (Kp, Ki, Kd) at this horizontal distance from the deck."""
+        c = self.control
+        return c.near_pid if distance_m <= c.near_distance_m else c.approach_pid
 
     def activate(self, inputs: BehaviorInputs) -> BehaviorOutput:
         s = inputs.state
@@ -430,7 +451,7 @@ class Seed004LandOnRover(LandOnRover):
             phase=self.phase)
 
     def update(self, inputs: BehaviorInputs) -> BehaviorOutput:
-        p, s, now, t = self.params, inputs.state, inputs.now_s, inputs.target
+        p, c, s, now, t = self.params, self.control, inputs.state, inputs.now_s, inputs.target
         dt = min(max(now - self._last, 1e-3), 0.5)
         self._last = now
         out = lambda sp, status=Status.RUNNING, req=(), reason="": BehaviorOutput(  # noqa: E731
@@ -444,33 +465,35 @@ class Seed004LandOnRover(LandOnRover):
         error = np.asarray(t.position_ned_m[:2], dtype=float) - \
             np.asarray(s.position_ned_m[:2], dtype=float)
         distance = float(np.linalg.norm(error))
-        derivative = np.zeros(2) if self._last_error is None \
-            else (error - self._last_error) / dt
-        self._last_error = error
-        ki = self.near_ki if distance < self.near_m else self.ki
-        if ki > 0.0:  # anti-windup: the integral's share at most the approach speed
-            limit = p.approach_speed_m_s / ki
+        # the derivative over the filter's published estimates (5 Hz), not the control ticks
+        if self._last_error is None:
+            self._last_error, self._last_error_s = error, now
+        elif not np.allclose(error, self._last_error, atol=1e-9, rtol=0.0):
+            self._derivative = (error - self._last_error) / max(now - self._last_error_s, 1e-3)
+            self._last_error, self._last_error_s = error, now
+        kp, ki, kd = self.gains(distance)
+        if ki > 0.0:  # anti-windup: the integral's share at most the top speed
+            limit = c.max_speed_m_s / ki
             self._integral = np.clip(self._integral + error * dt, -limit, limit)
         else:
             self._integral[:] = 0.0
-        v = self.kp * error + ki * self._integral + self.kd * derivative
+        v = kp * error + ki * self._integral + kd * self._derivative
         speed = float(np.linalg.norm(v))
-        if speed > p.approach_speed_m_s + 3.0:
-            v *= (p.approach_speed_m_s + 3.0) / speed
+        if speed > c.max_speed_m_s:
+            v *= c.max_speed_m_s / speed
         height = float(t.position_ned_m[2] - s.position_ned_m[2])
-        r = s.distance_to_ground_m
-        if math.isfinite(r) and distance < 0.3:
-            height = float(r * quat_to_matrix(s.attitude_q)[2, 2])
-        if self.phase == "approaching" and distance < 2.0 * p.acceptance_radius_m:
+        if self.phase == "approaching" and distance <= c.descent_threshold_m:
             self.phase, self._phase_since = "descending", now
-        vz = 0.0
+        target_height = p.approach_height_m if self.phase == "approaching" else 0.0
+        vz = float(np.clip(c.vertical_gain_per_s * (height - target_height),
+                           -c.max_descent_speed_m_s, c.max_descent_speed_m_s))
         if self.phase == "descending":
-            if height <= p.touchdown_height_m or self._stalled(s, now, height):
+            r = s.distance_to_ground_m
+            contact = math.isfinite(r) and r <= p.touchdown_height_m
+            if contact or self._stalled(s, now, height):
                 self.phase, self._phase_since = "touching down", now
                 self._stalled_since = None
                 return out(None, req=(VehicleRequest(RequestKind.DISARM, force=True),))
-            if distance < 2.0 * p.acceptance_radius_m or height < p.commit_height_m:
-                vz = p.final_speed_m_s
         return out(Setpoint.velocity_ned(float(v[0]), float(v[1]), vz, yaw_rad=self._yaw,
                                          time_s=now))
 

@@ -4,9 +4,11 @@ strategy in the same trials (the same seeds: the same rover path, sensor noise a
 * ``ours`` — the shipped land_on_rover: the relative-state filter (UWB ranges, the deck's tag,
   rangefinder, the rover's reports, each at its capture time) and the moving setpoint with the
   deck's velocity and acceleration fed forward;
-* ``seed004`` — seed 004's strategy: UWB positions (pre-solved by multilateration) until the tag
-  is seen, then the tag alone, in a constant-velocity Kalman filter with the report's R; a PID
-  on the position error commanding velocity (``strategy: seed004``);
+* ``seed004`` — seed 004's, as its chapter 4 describes it (``strategy: seed004``): one filterpy
+  Kalman filter fusing PX4's local position, a UWB position pre-solved in the rover's frame,
+  the tag, the rover's compass and the laser altimeter on its 10 Hz update and 5 Hz prediction
+  timers (:mod:`autopilot.estimation.seed004`), and its landing action's gain-scheduled PID
+  commanding velocity (approach, then descent within its threshold);
 * ``ours_uwb_only`` — ours without the tag (``use_marker: false``), the landing a camera
   failure leaves.
 

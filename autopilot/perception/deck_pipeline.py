@@ -26,9 +26,9 @@ from autopilot.estimation.relative import (
     RelativeEstimate,
     RelativeFilter,
     RelativeSettings,
-    Seed004Relative,
     tag_measurement,
 )
+from autopilot.estimation.seed004 import Seed004Filter, Seed004Settings
 from autopilot.estimation.target import TargetEstimate
 from autopilot.flightlog import records as ch
 from autopilot.perception.pad import MarkerPadDetector, MarkerPadSettings, marker_pad_layout
@@ -122,9 +122,10 @@ class DeckPipeline:
         self.deck_height_m = cfg.rover.deck_height_m
         self.filter = RelativeFilter(relative_settings(cfg), deck_geometry(cfg),
                                      use_uwb=use_uwb, use_tag=use_tag)
-        #: seed 004's strategy (a baseline): used instead of the filter when chosen
-        self.seed004 = Seed004Relative(deck_geometry(cfg)) if self.strategy == "seed004" \
-            else None
+        #: seed 004's fused filter (a baseline): used instead of ours when chosen
+        self.seed004 = Seed004Filter(
+            Seed004Settings(**cfg.estimation.seed004.model_dump()), deck_geometry(cfg),
+            use_uwb=use_uwb, use_marker=use_tag) if self.strategy == "seed004" else None
         self._use_uwb, self._use_tag = use_uwb, use_tag
         e = cfg.estimation.relative
         self._tag_noise = (e.tag_pixel_noise_px, e.tag_range_noise_fraction,
@@ -140,7 +141,12 @@ class DeckPipeline:
 
     def add_state(self, state: VehicleState) -> None:
         self.history.add(state)
-        if self.seed004 is not None:
+        if self.seed004 is not None:  # PX4's local position and the laser altimeter
+            self.seed004.add_px4(state.time_s, state.position_ned_m)
+            r = state.distance_to_ground_m
+            if math.isfinite(r) and r != self._last_reading:
+                self.seed004.add_range(state.time_s, r)
+            self._last_reading = r
             return
         self.filter.add_velocity(state.time_s, state.velocity_ned_m_s)
         r = state.distance_to_ground_m
@@ -177,7 +183,10 @@ class DeckPipeline:
 
     def _seed004_sensor(self, sample: object) -> None:
         if isinstance(sample, RoverState):
-            self.seed004.add_rover(sample.time_s, sample.heading_rad)
+            self.seed004.add_compass(sample.time_s, sample.heading_rad)
+            if not self._use_uwb:  # the client's rough rover_position (seed 004, 4.4.1)
+                self.seed004.add_rover_position(np.asarray(sample.position_ned_m, dtype=float)
+                                                + np.array([0.0, 0.0, -self.deck_height_m]))
         elif isinstance(sample, UwbRanges) and self._use_uwb:
             pose = self.history.pose_at(sample.time_s)
             if pose is not None:

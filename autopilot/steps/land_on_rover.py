@@ -33,6 +33,7 @@ from autopilot.behaviors.land_on_rover import (
     LandOnRover,
     LandOnRoverParams,
     LandOnRoverSettings,
+    Seed004LandingSettings,
     Seed004LandOnRover,
 )
 from autopilot.flightlog import records as ch
@@ -54,7 +55,8 @@ def _behavior(params: LandOnRoverParams, ctx: StepContext) -> LandOnRover:
         camera_of(ctx, config.rover.camera, "rover.camera")
     settings = LandOnRoverSettings(tuple(config.rover.deck_size_m), config.rover.deck_height_m)
     if params.strategy == "seed004":
-        return Seed004LandOnRover(params, settings, config.control.trajectory.seed004_pid)
+        return Seed004LandOnRover(params, settings, Seed004LandingSettings(
+            **config.control.seed004_landing.model_dump()))
     return LandOnRover(params, settings)
 
 
