@@ -274,6 +274,8 @@ def build_parser() -> argparse.ArgumentParser:
         follow.add_argument("--mission", default=name, metavar="NAME|FILE")
         follow.add_argument("--scenario", dest="scenarios", action="append", default=None,
                             metavar="NAME", help="only this scenario (repeatable)")
+        follow.add_argument("--quick", action="store_true",
+                            help="the default scenario only, the step shortened to 10 s (CI)")
         follow.add_argument("--set", dest="overrides", action="append", default=[],
                             metavar="KEY=VALUE", help="override a mission or configuration key")
 
@@ -1025,7 +1027,7 @@ def _bench(args: argparse.Namespace) -> int:
             raise InputError(f"--scenario {unknown[0]}: no such scenario (known: "
                              f"{', '.join(known)})")
         result = follow.run_bench(args.bench, args.mission, args.overrides, log,
-                                  args.scenarios)
+                                  args.scenarios, quick=args.quick)
         print(json.dumps(result) if args.json else follow.format_table(result))
         return EXIT_OK
 

@@ -4,19 +4,26 @@ With ``controller: estimator`` (ours) the behaviour is :class:`~autopilot.behavi
 FollowTarget` on the tracked ball (lost-target handling included).
 
 ``controller: seed001`` and ``seed003`` are the two student reports' rules, kept as baselines
-for ``autopilot bench follow_ball``. They act on raw detections, as the originals did:
+for ``autopilot bench follow_ball``. They act on raw detections, as the originals did, and
+command what the originals commanded: an AR.Drone ``cmd_vel`` twist whose components are
+fractions of the drone's maximum tilt, climb rate and yaw rate, flown through
+:class:`~autopilot.control.ardrone.ArDroneTiltModel` (the tilt integrated into the velocity our
+vehicle is given):
 
-* seed 001 — proportional on pixel errors with dead bands: forward = (r* − r)/5,
-  up = (c_y − v)/25, and either left = (c_x − u)/100 (lateral) or a yaw rate of (c_x − u)/100
-  units (yaw), a unit being 1 m/s (95 °/s for yaw, the AR.Drone's); it keeps acting on the last
-  detection when the ball disappears (it "flies toward stale detections").
-* seed 003 — bang-bang bands, one axis at a time in priority order (range, height, side) at
-  a fixed 1 m/s; it stops whenever the current frame has no ball.
+* seed 001 (``follow_ball.py``, its final deliverable) — proportional on pixel errors with dead
+  bands: linear.x = (RADIUS − r)/5, linear.z = (c_y − v)/25, and either linear.y =
+  (c_x − u)/100 (lateral) or angular.z = (c_x − u)/100 (yaw); it acts on the last circle seen,
+  so it keeps flying toward a stale detection when the ball disappears, and its twists disable
+  the auto-hover (angular.x = angular.y = 1), so a zero command levels the drone and lets it
+  coast.
+* seed 003 (``main.cpp``) — bang-bang at full scale, one axis per frame in priority order
+  (range, height, side): ±1 on linear.x, linear.z or linear.y, and a zero twist (the
+  auto-hover) when the frame has no ball or the ball is within every band.
 
-Their pixel thresholds are rescaled to this camera: r* is the ball's apparent radius at the
-standoff distance; image centres replace their hard-coded (320, 180) and (300, 250); seed 003's
-radius band 20–40 px becomes r*/√2 … r*·√2, its ±50 px bands are kept. Speeds are limited like
-ours.
+Their pixel thresholds are kept in pixels; what depends on the camera is moved to ours: the
+image centre replaces their (320, 180) and seed 003's band centres (300, 250); seed 001's target
+radius RADIUS = 20 px and the middle of seed 003's 20–40 px band become r*, the ball's apparent
+radius at the standoff distance, so seed 003's band is r*/√2 … r*·√2.
 """
 
 from __future__ import annotations
@@ -28,6 +35,7 @@ from pydantic import Field
 
 from autopilot.behaviors.base import BehaviorInputs, Params
 from autopilot.behaviors.follow import FollowTarget, LostTargetSettings
+from autopilot.control.ardrone import ArDroneLimits, ArDroneTiltModel, Twist
 from autopilot.control.follow import FollowSettings
 from drivers.base import CameraInfo, Setpoint
 
@@ -54,73 +62,116 @@ class FollowBall(FollowTarget):
         target_radius_px = intr.fx * math.tan(alpha)
         rule = None
         if params.controller == "seed001":
-            rule = Seed001Rule(camera, target_radius_px, follow.mode == "lateral",
-                               follow.max_speed_m_s)
+            rule = Seed001Rule(camera, target_radius_px, follow.mode == "lateral")
         elif params.controller == "seed003":
-            rule = Seed003Rule(camera, target_radius_px, follow.max_speed_m_s)
+            rule = Seed003Rule(camera, target_radius_px)
         super().__init__(params, follow, lost, camera, rule)
         self._target_radius_px = target_radius_px
 
 
 class Seed001Rule:
-    """Seed 001: proportional pixel rule with dead bands; keeps using the last detection."""
+    """Seed 001's navigator: proportional on pixel errors with dead bands, on the last circle."""
 
-    YAW_UNIT_RAD_S = math.radians(95.0)  # AR.Drone: angular.z = 1 ≈ 95 °/s
+    # the seed's constants (pixels of its camera, as it gives them)
+    IGNORE_DISTANCE_PX = 5.0  # dead band of the image-position errors
+    IGNORE_RADIUS_PX = 1.0  # dead band of the radius error
+    MAX_X_SPEED_DIFF_PX = 5.0  # radius error at full pitch
+    MAX_Y_SPEED_DIFF_PX = 100.0  # horizontal error at full roll (lateral mode)
+    MAX_Z_ROTATION_DIFF_PX = 100.0  # horizontal error at full yaw rate (yaw mode)
+    SCALAR_Z_SPEED_PX = 25.0  # vertical error at full climb rate
 
     def __init__(self, camera: CameraInfo, target_radius_px: float, lateral: bool,
-                 max_speed_m_s: float) -> None:
+                 limits: ArDroneLimits | None = None) -> None:
         self.cx, self.cy = camera.intrinsics.cx, camera.intrinsics.cy
-        self.r_target = target_radius_px
+        self.r_target = target_radius_px  # the seed's RADIUS
         self.lateral = lateral
-        self.limit = max_speed_m_s
+        self.model = ArDroneTiltModel(limits)
+
+    def twist(self, u_px: float, v_px: float, radius_px: float) -> Twist:
+        """The seed's ``navigate`` on one circle."""
+        image_diff_x = self.cx - u_px  # positive: the drone must move left
+        image_diff_y = self.cy - v_px  # positive: up
+        radius_diff = self.r_target - radius_px  # positive: forward
+        x = _scaled(radius_diff, self.IGNORE_RADIUS_PX, self.MAX_X_SPEED_DIFF_PX)
+        z = _scaled(image_diff_y, self.IGNORE_DISTANCE_PX, self.SCALAR_Z_SPEED_PX)
+        y = yaw = 0.0
+        if self.lateral:
+            y = _scaled(image_diff_x, self.IGNORE_DISTANCE_PX, self.MAX_Y_SPEED_DIFF_PX)
+        else:
+            yaw = _scaled(image_diff_x, self.IGNORE_DISTANCE_PX, self.MAX_Z_ROTATION_DIFF_PX)
+        # getCleanTwist: angular.x = angular.y = 1 "Disable hover mode"
+        return Twist(x, y, z, yaw, angular_x=1.0, angular_y=1.0)
 
     def command(self, inputs: BehaviorInputs) -> Setpoint:
         det = inputs.last_detection  # stale or not: seed 001 flies on its last circle
-        if det is None:
-            return Setpoint.velocity_body(0.0, 0.0, 0.0, time_s=inputs.now_s)
-        dx, dy, dr = self.cx - det.u_px, self.cy - det.v_px, self.r_target - det.radius_px
-        forward = dr / 5.0 if abs(dr) >= 1.0 else 0.0
-        up = dy / 25.0 if abs(dy) >= 5.0 else 0.0
-        turn = dx / 100.0 if abs(dx) >= 5.0 else 0.0  # positive: the ball is to the left
-        left = turn if self.lateral else 0.0
-        yaw_rate = 0.0 if self.lateral else -turn * self.YAW_UNIT_RAD_S
-        lim = self.limit
-        return Setpoint.velocity_body(_clip(forward, lim), _clip(-left, lim), _clip(-up, lim),
-                                      yaw_rate_rad_s=yaw_rate, time_s=inputs.now_s)
+        # before any circle: its initial lastCircle, Circle(320, 180, 20) — the target itself
+        twist = self.twist(self.cx, self.cy, self.r_target) if det is None else \
+            self.twist(det.u_px, det.v_px, det.radius_px)
+        return self.model.step(twist, inputs.now_s, inputs.state.yaw_rad,
+                               inputs.state.velocity_ned_m_s)
 
 
 class Seed003Rule:
-    """Seed 003: bang-bang bands, one axis at a time; stops when the frame has no ball."""
+    """Seed 003's callback: bang-bang bands, one axis at a time; the auto-hover when the frame
+    has no ball or the ball sits within every band.
 
-    SPEED_M_S = 1.0
-    BAND_PX = 50.0
+    Each frame publishes a twist (the last one published in the callback is the one the drone
+    flies). The seed's ``temp1`` / ``temp2`` extra stops are left out: they read uninitialised
+    locals, and any stop they publish is superseded by the next twist of the same callback.
+    """
+
+    FULL = 1.0  # changeTwist(±1, …): full scale
+    BAND_PX = 50.0  # y < 200, y > 300, x > 350, x < 250 around the centre (300, 250)
 
     def __init__(self, camera: CameraInfo, target_radius_px: float,
-                 max_speed_m_s: float) -> None:
+                 limits: ArDroneLimits | None = None) -> None:
         self.cx, self.cy = camera.intrinsics.cx, camera.intrinsics.cy
-        self.r_lo = target_radius_px / math.sqrt(2.0)
-        self.r_hi = target_radius_px * math.sqrt(2.0)
-        self.speed = min(self.SPEED_M_S, max_speed_m_s)
+        self.r_lo = target_radius_px / math.sqrt(2.0)  # the seed's r < 20: too far
+        self.r_hi = target_radius_px * math.sqrt(2.0)  # r > 40: too close
+        self.model = ArDroneTiltModel(limits)
+        self._seq = -1
+        self._twist = Twist()  # after takeoff: changeTwist(0,0,0,0), hovering
+
+    def twist(self, circle: tuple[float, float, float] | None) -> Twist | None:
+        """The twist the seed publishes last for one frame's circle ``(x, y, r)`` (None: no
+        circle in the frame); None if it publishes nothing (a value exactly on a band's edge)."""
+        if circle is None:
+            return Twist()  # stop()
+        x, y, r = circle
+        v, band = self.FULL, self.BAND_PX
+        published = None
+        if r < self.r_lo:
+            published = Twist(linear_x=v)  # forwardx()
+        if r > self.r_hi:
+            published = Twist(linear_x=-v)  # backx()
+        if self.r_lo < r < self.r_hi:
+            if y < self.cy - band:
+                published = Twist(linear_z=v)  # up()
+            if y > self.cy + band:
+                published = Twist(linear_z=-v)  # down()
+            if self.cy - band < y < self.cy + band:
+                if x > self.cx + band:
+                    published = Twist(linear_y=-v)  # backy(): right
+                if x < self.cx - band:
+                    published = Twist(linear_y=v)  # forwardy(): left
+                if self.cx - band < x < self.cx + band:
+                    published = Twist()  # stop()
+        return published
 
     def command(self, inputs: BehaviorInputs) -> Setpoint:
-        det = inputs.detection
-        v = self.speed
-        fwd = right = down = 0.0
-        if det is not None:
-            if det.radius_px < self.r_lo:
-                fwd = v
-            elif det.radius_px > self.r_hi:
-                fwd = -v
-            elif det.v_px < self.cy - self.BAND_PX:
-                down = -v
-            elif det.v_px > self.cy + self.BAND_PX:
-                down = v
-            elif det.u_px > self.cx + self.BAND_PX:
-                right = v
-            elif det.u_px < self.cx - self.BAND_PX:
-                right = -v
-        return Setpoint.velocity_body(fwd, right, down, yaw_rate_rad_s=0.0, time_s=inputs.now_s)
+        if inputs.frame_seq != self._seq:  # the seed acts in its image callback
+            self._seq = inputs.frame_seq
+            det = inputs.detection
+            published = self.twist(None if det is None else
+                                   (det.u_px, det.v_px, det.radius_px))
+            if published is not None:
+                self._twist = published
+        return self.model.step(self._twist, inputs.now_s, inputs.state.yaw_rad,
+                               inputs.state.velocity_ned_m_s)
 
 
-def _clip(value: float, limit: float) -> float:
-    return max(-limit, min(limit, value))
+def _scaled(difference: float, ignore: float, full_scale: float) -> float:
+    """Seed 001's get*Reaction: 0 within the dead band, else difference / full_scale."""
+    if abs(difference) < ignore:
+        return 0.0
+    return difference / full_scale

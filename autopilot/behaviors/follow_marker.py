@@ -8,20 +8,28 @@ marker is predicted to be, then the mission's fallback takes over — the seed's
 looking", predicted rather than blind.
 
 ``controller: seed002`` is the student report's rule, kept as the baseline of ``autopilot bench
-follow_marker``: proportional on the marker's translation in the camera frame (metres) — forward
-0.1·(z − 1), right 0.2·x, down 2.0·y, in m/s (the AR.Drone's command units) — with no yaw
-control; a command equal to the previous one means no new sighting, and then it commands zero
-(its "twist == twist_old" loss check): here, a new frame without the marker.
+follow_marker``. It commands what the report's marker follower commanded (its listing 6.8): an
+AR.Drone ``cmd_vel`` twist, proportional on the marker's translation in the camera frame
+(metres) — linear.x = 0.1·(z − 1), linear.y = −0.2·x, linear.z = −2.0·y — whose components are
+fractions of the drone's maximum tilt and climb rate (the report calls them m/s, but the driver
+takes fractions), with no yaw control, flown through :class:`~autopilot.control.ardrone.
+ArDroneTiltModel`. Its loop sends each twist for 0.1 s (listing 6.11) and then reads the newest
+marker transform again; a twist equal to the previous one means no new sighting, and then it
+sends a zero twist (listing 6.9), which puts the AR.Drone in its auto-hover. (The report's
+marker size is given in tenths of metres and its translation multiplied by 10 — listing 6.6 —
+so the translation is in metres, and 1 is its 1 m standoff.)
 """
 
 from __future__ import annotations
 
+import math
 from typing import Annotated, Literal
 
 from pydantic import Field
 
 from autopilot.behaviors.base import BehaviorInputs, Params
 from autopilot.behaviors.follow import FollowTarget, LostTargetSettings
+from autopilot.control.ardrone import ArDroneLimits, ArDroneTiltModel, Twist
 from autopilot.control.follow import FollowSettings
 from drivers.base import CameraInfo, Setpoint
 
@@ -38,36 +46,40 @@ class FollowMarker(FollowTarget):
 
     def __init__(self, params: FollowMarkerParams, follow: FollowSettings,
                  lost: LostTargetSettings, camera: CameraInfo) -> None:
-        rule = Seed002Rule(params.standoff_m, follow.max_speed_m_s) \
-            if params.controller == "seed002" else None
+        rule = Seed002Rule(params.standoff_m) if params.controller == "seed002" else None
         super().__init__(params, follow, lost, camera, rule)
 
 
 class Seed002Rule:
     """Seed 002's three P controllers on the marker's camera-frame translation."""
 
-    P_FORWARD, P_LATERAL, P_VERTICAL = 0.1, 0.2, 2.0
+    P_X, P_Y, P_Z = 0.1, 0.2, 2.0  # 1/m: twist fraction per metre (the report: "s^-1")
+    DISPATCH_S = 0.1  # each twist is sent for 0.1 s before the transform is read again
 
-    def __init__(self, standoff_m: float, max_speed_m_s: float) -> None:
+    def __init__(self, standoff_m: float, limits: ArDroneLimits | None = None) -> None:
         self.standoff_m = standoff_m
-        self.limit = max_speed_m_s
-        self._seq = -1
-        self._command = (0.0, 0.0, 0.0)
+        self.model = ArDroneTiltModel(limits)
+        self._next_s = -math.inf
+        self._twist_old: Twist | None = None
+        self._twist = Twist()  # after takeoff, before a sighting: nothing sent, hovering
+
+    def twist(self, position_cam_m) -> Twist:
+        """Listing 6.8 on the marker's translation (x right, y down, z forward; metres)."""
+        x, y, z = (float(c) for c in position_cam_m)
+        return Twist(linear_x=(z - self.standoff_m) * self.P_X, linear_y=-x * self.P_Y,
+                     linear_z=-y * self.P_Z)
 
     def command(self, inputs: BehaviorInputs) -> Setpoint:
-        if inputs.frame_seq != self._seq:  # a new frame: a new sighting, or none
-            self._seq = inputs.frame_seq
-            det = inputs.detection
-            if det is None:
-                self._command = (0.0, 0.0, 0.0)
-            else:
-                x, y, z = det.position_cam_m
-                lim = self.limit
-                self._command = (_clip(self.P_FORWARD * (z - self.standoff_m), lim),
-                                 _clip(self.P_LATERAL * x, lim),
-                                 _clip(self.P_VERTICAL * y, lim))
-        return Setpoint.velocity_body(*self._command, yaw_rate_rad_s=0.0, time_s=inputs.now_s)
-
-
-def _clip(value: float, limit: float) -> float:
-    return max(-limit, min(limit, value))
+        now = inputs.now_s
+        if now >= self._next_s - 1e-6:  # (a tick's rounding)
+            self._next_s = now + self.DISPATCH_S
+            det = inputs.last_detection  # the newest transform the detector broadcast
+            if det is not None:  # none yet: lookupTransform throws, the loop sends nothing
+                twist = self.twist(det.position_cam_m)
+                if twist == self._twist_old:  # the same sighting again
+                    twist = Twist()
+                else:
+                    self._twist_old = twist
+                self._twist = twist
+        return self.model.step(self._twist, now, inputs.state.yaw_rad,
+                               inputs.state.velocity_ned_m_s)

@@ -8,6 +8,11 @@ the target's real RMS speed is reported with the figures) — each flown in
 lockstep with our controller (``estimator``) and with the seed rules as baselines, everything
 else identical (same seed, world, camera, detector). Reports the follow metrics side by side
 and, per scenario, each baseline's RMS range error as a multiple of ours.
+
+The seed rules command an AR.Drone (fractions of its maximum tilt, climb and yaw rates), flown
+through :class:`~autopilot.control.ardrone.ArDroneTiltModel`. ``quick``: the default scenario
+only, with the step shortened to ``QUICK_DURATION_S`` — for CI, which checks that every rule
+still flies and that ours stays ahead; the figures of record come from the full bench.
 """
 
 from __future__ import annotations
@@ -27,6 +32,16 @@ class FollowBench:
     mission: str
     controllers: tuple[str, ...]  # ours first
     scenarios: dict[str, tuple[str, ...]]  # name → mission overrides
+
+
+#: what each controller is, for the tables generated from ``--json``
+CONTROLLERS = {
+    "estimator": "ours: target estimate, standoff and feed-forward",
+    "seed001": "seed 001: P on pixel errors with dead bands, last circle held (AR.Drone tilt)",
+    "seed003": "seed 003: full-scale bang-bang, one axis a frame (AR.Drone tilt)",
+    "seed002": "seed 002: P on the marker's camera translation (AR.Drone tilt)",
+}
+QUICK_DURATION_S = 10.0  # the followed step's length in a quick run
 
 
 BENCHES = {
@@ -62,9 +77,11 @@ def _step_index(plan, step: str) -> int:
 
 def run_bench(bench: str = "follow_ball", mission: str | None = None,
               overrides: Sequence[str] = (), log: Callable[[str], None] = lambda message: None,
-              scenarios: Sequence[str] | None = None) -> dict:
+              scenarios: Sequence[str] | None = None, quick: bool = False) -> dict:
     spec = BENCHES[bench]
     mission = mission or spec.mission
+    if quick and scenarios is None:
+        scenarios = ("default",)
     results: dict[str, dict] = {}
     for scenario, scenario_overrides in spec.scenarios.items():
         if scenarios is not None and scenario not in scenarios:
@@ -73,14 +90,20 @@ def run_bench(bench: str = "follow_ball", mission: str | None = None,
         for controller in spec.controllers:
             base = load_mission(mission, [*scenario_overrides, *overrides])
             step = _step_index(base, spec.step)
-            plan = load_mission(mission, [*scenario_overrides, *overrides,
-                                          f"steps.{step}.{spec.step}.controller={controller}"])
+            key = f"steps.{step}.{spec.step}"
+            shorten = [f"{key}.duration_s={QUICK_DURATION_S:g}"] if quick else []
+            plan = load_mission(mission, [*scenario_overrides, *overrides, *shorten,
+                                          f"{key}.controller={controller}"])
             log(f"{scenario}: {controller} …")
             summary = asyncio.run(fly(plan, None))
+            follow = summary["metrics"].get("follow") or {}
             runs[controller] = {
                 "status": summary["status"],
-                **{k: (summary["metrics"].get("follow") or {}).get(k) for k in METRICS},
+                **{k: follow.get(k) for k in METRICS},
                 "real_time_factor": summary["metrics"]["sim"]["real_time_factor"],
+                "reason": summary.get("reason"),
+                "follow_time_s": follow.get("follow_time_s"),
+                "sim_profile": (summary.get("sim") or {}).get("profile"),
             }
         ours = runs[spec.controllers[0]]["rms_range_error_m"]
         baselines = spec.controllers[1:]
@@ -94,7 +117,9 @@ def run_bench(bench: str = "follow_ball", mission: str | None = None,
             "better_seed_rule_over_ours": ratios[better],
         }
     return {"bench": bench, "mission": mission, "overrides": list(overrides),
-            "scenarios": results}
+            "scenarios": results, "quick": quick,
+            "step_duration_s": QUICK_DURATION_S if quick else None,
+            "controllers": {c: CONTROLLERS.get(c, c) for c in spec.controllers}}
 
 
 def _ratio(baseline: float | None, ours: float | None) -> float | None:
@@ -105,6 +130,9 @@ def _ratio(baseline: float | None, ours: float | None) -> float | None:
 
 def format_table(result: dict) -> str:
     lines = []
+    if result.get("quick"):
+        lines.append(f"quick: the step cut to {result['step_duration_s']:g} s (figures of "
+                     "record: without --quick)")
     for scenario, data in result["scenarios"].items():
         extra = ", ".join(data["overrides"]) or "as shipped"
         lines.append(f"{scenario} ({extra})")

@@ -1,0 +1,44 @@
+"""The quick follow benches (``autopilot bench follow_ball|follow_marker --quick``): every
+seed rule still flies — takes off, follows the whole step without losing the target, lands —
+and ours keeps a smaller RMS range error than each of them. One seed, a 10 s step, lockstep."""
+
+import json
+
+import pytest
+
+from autopilot.bench.follow import BENCHES, QUICK_DURATION_S, run_bench
+from autopilot.cli import main
+
+
+@pytest.mark.parametrize("bench", ["follow_ball", "follow_marker"])
+def test_quick_bench_baselines_fly_and_ours_is_better(bench):
+    result = run_bench(bench, quick=True)
+    assert result["quick"] is True
+    assert result["step_duration_s"] == QUICK_DURATION_S
+    assert list(result["scenarios"]) == ["default"]
+    data = result["scenarios"]["default"]
+    runs = data["runs"]
+    ours, *baselines = BENCHES[bench].controllers
+    assert list(runs) == [ours, *baselines]
+    for controller, run in runs.items():
+        assert run["status"] == "completed", (controller, run["reason"])
+        assert run["follow_time_s"] == pytest.approx(QUICK_DURATION_S, abs=0.2), controller
+        assert run["detection_rate"] >= 0.9, (controller, run["detection_rate"])
+        assert run["max_lost_s"] < 1.0, controller
+    for controller in baselines:
+        assert runs[controller]["rms_range_error_m"] > runs[ours]["rms_range_error_m"], controller
+        assert data["baseline_rms_over_ours"][controller] > 1.0
+    assert set(result["controllers"]) == set(runs)
+
+
+def test_quick_flag_reaches_the_bench(capsys, monkeypatch):
+    seen = {}
+
+    def fake_run_bench(bench, mission, overrides, log, scenarios, quick=False):
+        seen.update(bench=bench, quick=quick)
+        return {"bench": bench, "scenarios": {}, "quick": quick, "step_duration_s": 10.0}
+
+    monkeypatch.setattr("autopilot.bench.follow.run_bench", fake_run_bench)
+    assert main(["bench", "follow_marker", "--quick", "--json"]) == 0
+    assert seen == {"bench": "follow_marker", "quick": True}
+    assert json.loads(capsys.readouterr().out)["quick"] is True
