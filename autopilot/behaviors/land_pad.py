@@ -208,7 +208,8 @@ class LandPad(Behavior):
         p, s, now = self.params, inputs.state, inputs.now_s
         dt = min(max(now - self._last_tick, 0.0), 0.5)
         self._last_tick = now
-        self._range = self._ranges.add(s.time_s, s.distance_to_ground_m)
+        self._range = self._ranges.add(s.time_s, s.distance_to_ground_m,
+                                       float(s.velocity_ned_m_s[2]))
         if self.phase == "touching down":
             if not s.armed and not s.in_air:
                 return self._out(None, Status.SUCCEEDED)
