@@ -115,6 +115,9 @@ class NavigationGradeConfig(_Model):
     height_time_constant_s: Positive
     #: white noise on every position axis, each estimate
     position_noise_m: NonNegative
+    #: the EKF output's smoothing of the aiding's errors (a first-order lag on the wandering
+    #: position and height errors: they move at centimetres per second, not in steps); 0: none
+    position_smoothing_s: NonNegative = 0.0
     #: velocity error, per axis, wandering with its own (short) correlation time
     velocity_error_m_s: NonNegative
     velocity_time_constant_s: Positive

@@ -57,7 +57,12 @@ class EstimatorModel:
             [tilt, tilt, math.radians(g.yaw_error_deg)]
         taus = [g.horizontal_time_constant_s] * 2 + [g.height_time_constant_s] + \
             [g.velocity_time_constant_s] * 3 + [g.attitude_time_constant_s] * 3
+        smooth = g.position_smoothing_s
+        if smooth:  # the lag's output keeps the asked σ: var = σ_in² τ / (τ + T)
+            for i in range(3):
+                sigma[i] *= math.sqrt((taus[i] + smooth) / taus[i])
         self._errors = GaussMarkov(rng, np.array(sigma), np.array(taus))
+        self._position_error = self._errors.value[0:3].copy()
         self._q_err: tuple[float, ...] = (1.0, 0.0, 0.0, 0.0)
         self._noise: list[list[float]] = []
         self._white = np.zeros(3)
@@ -75,6 +80,12 @@ class EstimatorModel:
         """Advance the errors by ``dt_s``; ``velocity_ned_m_s`` (the true velocity) drives an
         optical-flow grade's drift."""
         err = self._errors.step(dt_s)
+        smooth = self.grade.position_smoothing_s
+        if smooth:
+            a = math.exp(-dt_s / smooth)
+            self._position_error = a * self._position_error + (1.0 - a) * err[0:3]
+        else:
+            self._position_error = err[0:3]
         att = err[6:9]
         angle = float(np.sqrt(att @ att))
         self._q_err = tuple(quat_from_axis_angle(att, angle).tolist())
@@ -109,14 +120,14 @@ class EstimatorModel:
                  rates: np.ndarray) -> EstimatedState:
         err = self._errors.value
         q_est, gyro = self.attitude(q.tolist(), rates.tolist())
-        return EstimatedState(position + err[0:3] + self._white + self._drift,
+        return EstimatedState(position + self._position_error + self._white + self._drift,
                               velocity + err[3:6] + self._flow_velocity_error,
                               np.array(q_est), np.array(gyro))
 
     @property
     def position_error_ned_m(self) -> np.ndarray:
         """The estimate's position error now (for tests and scoring)."""
-        return self._errors.value[0:3] + self._white + self._drift
+        return self._position_error + self._white + self._drift
 
 
 class Rangefinder:
