@@ -171,3 +171,36 @@ def test_the_landings_height_ignores_the_rangefinders_outliers():
     for k in range(10):
         voted = votes.add(10.0 + 0.02 * k, math.nan)
     assert math.isnan(voted)
+
+
+def test_a_target_filter_that_knows_the_navigation_keeps_a_still_pad_through_its_wander():
+    """A pad lying still, seen at 30 Hz with 3 mm of measurement noise from a vehicle on GNSS
+    navigation: in the navigation's frame the pad wanders with its error. The filter told of
+    the navigation (its white noise, its wander) accepts nearly every frame; one that is not
+    rejects many and loses the pad."""
+    import dataclasses
+
+    from autopilot.estimation.target import PositionMeasurement, TargetFilter
+    from autopilot.perception.ball_pipeline import filter_settings
+
+    cfg = load_config(overrides=["sim.profile=realistic"])
+    told = dataclasses.replace(filter_settings(cfg), accel_noise_m_s2=0.5)
+    blind = dataclasses.replace(told, navigation_noise_m=0.0,
+                                navigation_drift_m2_s=(0.0, 0.0, 0.0))
+    noise = 0.003
+    rates = {}
+    for name, settings in (("told", told), ("blind", blind)):
+        nav = _estimator("gnss", seed=5)
+        rng = np.random.default_rng(1)
+        f, accepted, n = TargetFilter(settings), 0, 1800
+        for k in range(n):
+            t = k / 30.0
+            nav.step(1 / 30.0)
+            seen = nav.position_error_ned_m + rng.normal(0.0, noise, 3)
+            cov = np.eye(3) * noise ** 2
+            if settings.navigation_noise_m:
+                cov = cov + np.eye(3) * settings.navigation_noise_m ** 2
+            accepted += f.update(PositionMeasurement(t, seen, cov)).accepted
+        rates[name] = accepted / n
+    assert rates["told"] > 0.97
+    assert rates["blind"] < 0.8
