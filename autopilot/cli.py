@@ -728,7 +728,8 @@ def _run(args: argparse.Namespace) -> int:
         lines.append("estimate (as flown on): " + ", ".join(
             f"{k}={_fmt(estimation.get(k))}" for k in (
                 "rms_position_error_m", "rms_relative_position_error_m",
-                "rms_velocity_error_m_s", "within_2sigma", "coasting_share", "lost_share")))
+                "rms_velocity_error_m_s", "within_2sigma", "relative_within_2sigma",
+                "coasting_share", "lost_share")))
     for group, keys in (
             ("orbit", ("rms_cross_track_m", "max_cross_track_m", "rms_cross_track_nav_m",
                        "rms_navigation_error_m", "photos", "images_planned", "centre_in_frame")),

@@ -264,6 +264,7 @@ class NavigationUncertainty:
     position_std_m: float = 0.0
     attitude_std_rad: float = 0.0  # roll and pitch
     yaw_std_rad: float = 0.0
+    height_std_m: float | None = None  # None: as position_std_m
 
 
 def navigation_covariance(relative_ned_m: np.ndarray, nav: NavigationUncertainty) -> np.ndarray:
@@ -271,7 +272,8 @@ def navigation_covariance(relative_ned_m: np.ndarray, nav: NavigationUncertainty
     ``relative_ned_m`` from it: its position error, plus the target's lever arm turned by the
     attitude errors (a yaw error moves it horizontally across the line of sight; roll and pitch
     errors, across the line of sight in any direction)."""
-    cov = np.eye(3) * nav.position_std_m ** 2
+    height = nav.position_std_m if nav.height_std_m is None else nav.height_std_m
+    cov = np.diag([nav.position_std_m ** 2, nav.position_std_m ** 2, height ** 2])
     rel = np.asarray(relative_ned_m, dtype=float)
     distance = float(np.linalg.norm(rel))
     if distance > 1e-6 and nav.attitude_std_rad > 0.0:

@@ -65,7 +65,7 @@ def filter_settings(cfg: AppConfig) -> TargetFilterSettings:
 def navigation_settings(cfg: AppConfig) -> NavigationUncertainty:
     n = cfg.estimation.navigation
     return NavigationUncertainty(n.position_std_m, math.radians(n.attitude_std_deg),
-                                 math.radians(n.yaw_std_deg))
+                                 math.radians(n.yaw_std_deg), n.height_std_m)
 
 
 class BallPipeline:
