@@ -746,14 +746,15 @@ def _run(args: argparse.Namespace) -> int:
     if estimation:
         lines.append("estimate (as flown on): " + ", ".join(
             f"{k}={_fmt(estimation.get(k))}" for k in (
-                "rms_position_error_m", "rms_velocity_error_m_s", "within_2sigma",
+                "rms_position_error_m", "rms_relative_position_error_m",
+                "rms_velocity_error_m_s", "within_2sigma", "relative_within_2sigma",
                 "coasting_share", "lost_share")))
     for group, keys in (
-            ("orbit", ("rms_cross_track_m", "max_cross_track_m", "photos", "images_planned",
-                       "centre_in_frame")),
-            ("survey", ("rms_cross_track_m", "max_cross_track_m", "coverage", "photos",
-                        "photos_planned")),
-            ("goto", ("rms_cross_track_m", "final_error_m")),
+            ("orbit", ("rms_cross_track_m", "max_cross_track_m", "rms_cross_track_nav_m",
+                       "rms_navigation_error_m", "photos", "images_planned", "centre_in_frame")),
+            ("survey", ("rms_cross_track_m", "max_cross_track_m", "rms_cross_track_nav_m",
+                        "rms_navigation_error_m", "coverage", "photos", "photos_planned")),
+            ("goto", ("rms_cross_track_m", "rms_cross_track_nav_m", "final_error_m")),
             ("landing", ("on_deck", "on_pad", "error_m", "relative_horizontal_speed_m_s",
                          "touchdown_speed_m_s", "time_to_land_s", "retries")),
             ("relative", ("rms_horizontal_error_m", "within_2sigma", "lost_share"))):

@@ -188,7 +188,11 @@ class NavigationUncertaintyConfig(_Model):
     """The vehicle's own pose errors (slowly varying), which every target placed in the world
     with that pose inherits."""
 
-    position_std_m: NonNegative
+    position_std_m: NonNegative  # horizontal, wandering over position_time_constant_s
+    position_time_constant_s: Positive
+    height_std_m: NonNegative  # wandering over height_time_constant_s
+    height_time_constant_s: Positive
+    position_noise_m: NonNegative  # white, each sample
     attitude_std_deg: NonNegative  # roll and pitch
     yaw_std_deg: NonNegative
 

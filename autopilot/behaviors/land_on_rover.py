@@ -55,6 +55,7 @@ from autopilot.behaviors.base import (
     Status,
     VehicleRequest,
 )
+from autopilot.estimation.range_median import RangeMedian
 from autopilot.estimation.target import TargetEstimate
 from drivers.base import Setpoint, VehicleState
 from drivers.geometry import quat_to_matrix
@@ -118,6 +119,8 @@ class LandOnRover(Behavior):
         self._trim = np.zeros(2)
         self._hold = np.zeros(3)
         self.abort_reasons: list[str] = []
+        self._ranges = RangeMedian()  # the rangefinder, its outliers voted out
+        self._range = math.nan
 
     # -- helpers -----------------------------------------------------------------------------
 
@@ -146,7 +149,7 @@ class LandOnRover(Behavior):
         local = _yaw_matrix(t.heading_rad or 0.0).T @ offset
         half_l, half_w = (v / 2.0 for v in self.settings.deck_size_m)
         over = abs(local[0]) < half_l - 0.1 and abs(local[1]) < half_w - 0.1
-        r = s.distance_to_ground_m
+        r = self._range
         if over and math.isfinite(r):
             tilt_cos = float(quat_to_matrix(s.attitude_q)[2, 2])
             if tilt_cos > 0.5:
@@ -218,6 +221,8 @@ class LandOnRover(Behavior):
         p, s, now = self.params, inputs.state, inputs.now_s
         dt = min(max(now - self._last_tick, 0.0), 0.5)
         self._last_tick = now
+        self._range = self._ranges.add(s.time_s, s.distance_to_ground_m,
+                                       float(s.velocity_ned_m_s[2]))
         if self.phase == "touching down":
             return self._touching_down(inputs)
         if now - self._start > p.timeout_s:

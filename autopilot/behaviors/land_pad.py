@@ -62,6 +62,7 @@ from autopilot.behaviors.base import (
     VehicleRequest,
 )
 from autopilot.config import ColorName
+from autopilot.estimation.range_median import RangeMedian
 from drivers.base import FlightMode, Setpoint, VehicleState
 from drivers.geometry import quat_to_matrix
 
@@ -103,10 +104,12 @@ class LandPadSettings:
     footprint_per_m: float = 1.2
 
 
-def height_above(state: VehicleState, pad_down_m: float | None) -> float:
-    """Height above the ground under the vehicle: the rangefinder's reading on the vertical
-    while it reads; else above the pad's estimate (else the take-off point)."""
-    r = state.distance_to_ground_m
+def height_above(state: VehicleState, pad_down_m: float | None,
+                 range_m: float | None = None) -> float:
+    """Height above the ground under the vehicle: the rangefinder's reading (``range_m``, by
+    default the state's) on the vertical while it reads; else above the pad's estimate (else
+    the take-off point)."""
+    r = state.distance_to_ground_m if range_m is None else range_m
     if math.isfinite(r):
         tilt_cos = float(quat_to_matrix(state.attitude_q)[2, 2])
         if tilt_cos > 0.5:
@@ -156,6 +159,8 @@ class LandPad(Behavior):
         self._aligned_since: float | None = None
         self._stalled_since: float | None = None
         self._trim = np.zeros(2)
+        self._ranges = RangeMedian()  # the rangefinder, its outliers voted out
+        self._range = math.nan
 
     # -- helpers -------------------------------------------------------------------------
 
@@ -203,6 +208,8 @@ class LandPad(Behavior):
         p, s, now = self.params, inputs.state, inputs.now_s
         dt = min(max(now - self._last_tick, 0.0), 0.5)
         self._last_tick = now
+        self._range = self._ranges.add(s.time_s, s.distance_to_ground_m,
+                                       float(s.velocity_ned_m_s[2]))
         if self.phase == "touching down":
             if not s.armed and not s.in_air:
                 return self._out(None, Status.SUCCEEDED)
@@ -308,7 +315,7 @@ class LandPad(Behavior):
         p, s, now = self.params, inputs.state, inputs.now_s
         if not fresh:
             return self._go_lost(inputs)
-        height = height_above(s, self._pad[2])
+        height = height_above(s, self._pad[2], self._range)
         if height <= p.commit_height_m:
             self._set_phase("committed", now)
             return self._committed(inputs, fresh, dt)
@@ -377,7 +384,7 @@ class LandPad(Behavior):
 
     def _committed(self, inputs: BehaviorInputs, fresh: bool, dt: float) -> BehaviorOutput:
         p, s, now = self.params, inputs.state, inputs.now_s
-        height = height_above(s, self._pad[2])
+        height = height_above(s, self._pad[2], self._range)
         descending = float(s.velocity_ned_m_s[2])
         if descending < 0.05 and now - self._phase_since > 1.0:
             self._stalled_since = self._stalled_since or now

@@ -34,10 +34,10 @@ SCENARIOS: dict[str, tuple[str, tuple[str, ...]]] = {
 }
 TRACKERS = ("ours", "seed004")
 METRICS = {
-    "orbit": ("rms_cross_track_m", "max_cross_track_m", "radius_rms_error_m", "photos",
-              "centre_in_frame", "centre_offset_px_max"),
-    "survey": ("rms_cross_track_m", "max_cross_track_m", "coverage", "photos",
-               "forward_overlap_min", "side_overlap_min"),
+    "orbit": ("rms_cross_track_m", "max_cross_track_m", "rms_cross_track_nav_m",
+              "radius_rms_error_m", "photos", "centre_in_frame", "centre_offset_px_max"),
+    "survey": ("rms_cross_track_m", "max_cross_track_m", "rms_cross_track_nav_m", "coverage",
+               "photos", "forward_overlap_min", "side_overlap_min"),
 }
 
 

@@ -42,6 +42,11 @@ class TargetFilterSettings:
     radius_noise_px: float  # apparent-radius noise (drives the range noise)
     restart_after: int = 4  # consecutive consistent rejections that restart the track
     confirm_after: int = 5  # updates before a track is trusted
+    #: the vehicle's navigation seen from the filter: its white position noise (added to each
+    #: measurement) and its wander (a random walk of the whole frame, m²/s per axis NED, which
+    #: a still target then seems to make)
+    navigation_noise_m: float = 0.0
+    navigation_drift_m2_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -204,7 +209,11 @@ class TargetFilter:
     def _transition(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
         f = np.eye(6)
         f[:3, 3:] = np.eye(3) * dt
-        return f, process_noise(dt, self.settings.accel_noise_m_s2)
+        q = process_noise(dt, self.settings.accel_noise_m_s2)
+        drift = self.settings.navigation_drift_m2_s
+        if any(drift):
+            q[:3, :3] += np.diag(drift) * dt
+        return f, q
 
 
 _EYE3 = np.eye(3)
@@ -242,6 +251,8 @@ def camera_measurement(position_cam_m: np.ndarray, range_m: float, radius_px: fl
     los = position_cam_m / np.linalg.norm(position_cam_m)
     cov_cam = lateral ** 2 * np.eye(3) + (along ** 2 - lateral ** 2) * np.outer(los, los)
     cov = r_world_cam @ cov_cam @ r_world_cam.T * noise_scale ** 2
+    if settings.navigation_noise_m:
+        cov = cov + settings.navigation_noise_m ** 2 * _EYE3
     return PositionMeasurement(time_s, position, cov)
 
 
@@ -253,6 +264,7 @@ class NavigationUncertainty:
     position_std_m: float = 0.0
     attitude_std_rad: float = 0.0  # roll and pitch
     yaw_std_rad: float = 0.0
+    height_std_m: float | None = None  # None: as position_std_m
 
 
 def navigation_covariance(relative_ned_m: np.ndarray, nav: NavigationUncertainty) -> np.ndarray:
@@ -260,7 +272,8 @@ def navigation_covariance(relative_ned_m: np.ndarray, nav: NavigationUncertainty
     ``relative_ned_m`` from it: its position error, plus the target's lever arm turned by the
     attitude errors (a yaw error moves it horizontally across the line of sight; roll and pitch
     errors, across the line of sight in any direction)."""
-    cov = np.eye(3) * nav.position_std_m ** 2
+    height = nav.position_std_m if nav.height_std_m is None else nav.height_std_m
+    cov = np.diag([nav.position_std_m ** 2, nav.position_std_m ** 2, height ** 2])
     rel = np.asarray(relative_ned_m, dtype=float)
     distance = float(np.linalg.norm(rel))
     if distance > 1e-6 and nav.attitude_std_rad > 0.0:

@@ -23,6 +23,13 @@ coasting stretches included, against the target's true position and velocity the
   the ticks that had a usable (not stale) estimate;
 * ``within_2sigma`` — the share of those ticks whose error is inside ±2σ on every axis (a filter
   whose σ is honest has about 0.87 here: 0.954³);
+* ``rms_relative_position_error_m`` — the estimate's error relative to the vehicle: the
+  estimate minus where the vehicle's navigation put it, against the truth minus the vehicle's
+  true position. The estimate lives in the navigation's frame, which is off the true one by
+  the navigation's error (decimetres on GNSS): the absolute figures above include it (and so
+  does the σ of ``within_2sigma``), this one is what a relative behaviour (follow, land) flies;
+  ``relative_within_2sigma`` judges it against σ without the navigation's position part (in
+  one flight the navigation's error is one slow draw, so the absolute share is mostly 0 or 1);
 * ``coasting_share`` — ticks flown on a prediction more than three frame periods old, and
   ``rms_position_error_coasting_m`` their error; ``lost_share`` — ticks with no usable estimate;
 * ``at_update`` — the same errors right after each measurement update (the filter at its best;
@@ -393,7 +400,9 @@ def estimation_metrics(log: Mapping[str, Sequence[Mapping]],
     rate = (cams.get(target.camera) or {}).get("rate_hz") or 30.0
     coast_after_s = 3.0 / rate
     coasting = usable.age > coast_after_s
+    relative = _relative_error(log, usable.columns(), truth) if len(usable) else None
     result = {**(_errors(usable.columns(), truth) if len(usable) else {}),
+              **(relative or {}),
               "ticks": ticks,
               "lost_share": 1.0 - len(usable) / ticks,
               "coasting_share": int(coasting.sum()) / ticks,
@@ -402,6 +411,51 @@ def estimation_metrics(log: Mapping[str, Sequence[Mapping]],
                   if coasting.any() else None,
               "at_update": at_update}
     return result
+
+
+def _navigation_std(log: Mapping[str, Sequence[Mapping]]) -> np.ndarray | None:
+    """The navigation's position σ (N, E, D) the flight's configuration gave its estimates."""
+    for plan in log.get(ch.MISSION_PLAN, []):
+        nav = ((plan.get("config") or {}).get("estimation") or {}).get("navigation") or {}
+        p = nav.get("position_std_m")
+        if p is not None:
+            h = nav.get("height_std_m", p)
+            return np.array([p, p, h], dtype=float)
+    return None
+
+
+def _relative_error(log: Mapping[str, Sequence[Mapping]],
+                    columns: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+                    truth: _TruthInterp) -> dict | None:
+    """The estimate's error relative to the vehicle (see the module's docstring): its RMS,
+    and the share within ±2σ on every axis, σ without the navigation's position error (which
+    the relative error does not contain)."""
+    nav_t, nav_p = [], []
+    for r in log.get(ch.VEHICLE_STATE, []):
+        p = r.get("position_ned_m")
+        if p is not None and all(v is not None and math.isfinite(v) for v in p):
+            nav_t.append(r["time_s"])
+            nav_p.append(p)
+    table = truth_table(log)
+    vehicle = table.has_vehicle
+    if len(nav_t) < 2 or vehicle.sum() < 2:
+        return None
+    times, position = columns[0], columns[1]
+    nav_t, nav_p = np.asarray(nav_t, dtype=float), np.asarray(nav_p, dtype=float)
+    true_t, true_p = table.t[vehicle], table.p[vehicle]
+
+    def at(t, p):
+        return np.stack([np.interp(times, t, p[:, i]) for i in range(3)], axis=1)
+
+    target, _ = truth.at(times)
+    err = (position - at(nav_t, nav_p)) - (target - at(true_t, true_p))
+    out = {"rms_relative_position_error_m": float(np.sqrt(np.mean(np.sum(err ** 2, axis=1))))}
+    nav_std = _navigation_std(log)
+    if nav_std is not None:
+        std = np.sqrt(np.maximum(columns[3] ** 2 - nav_std ** 2, 0.0))
+        out["relative_within_2sigma"] = float(np.mean(np.all(np.abs(err) <= 2.0 * std,
+                                                             axis=1)))
+    return out
 
 
 def _scored_estimates(rows: Iterable[Mapping], scored) -> Estimates:

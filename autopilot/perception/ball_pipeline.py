@@ -51,13 +51,15 @@ def detector_settings(cfg: AppConfig) -> BallDetectorSettings:
 
 
 def filter_settings(cfg: AppConfig) -> TargetFilterSettings:
-    t = cfg.estimation.target
+    t, n = cfg.estimation.target, cfg.estimation.navigation
     return TargetFilterSettings(
         accel_noise_m_s2=t.accel_noise_m_s2, gate_chi2=t.gate_chi2,
         stale_after_s=t.stale_after_s, initial_velocity_std_m_s=t.initial_velocity_std_m_s,
         max_extrapolation_s=t.max_extrapolation_s, pixel_noise_px=t.pixel_noise_px,
         radius_noise_px=t.radius_noise_px, restart_after=t.restart_after,
-        confirm_after=t.confirm_after)
+        confirm_after=t.confirm_after, navigation_noise_m=n.position_noise_m,
+        navigation_drift_m2_s=(2.0 * n.position_std_m ** 2 / n.position_time_constant_s,) * 2
+        + (2.0 * n.height_std_m ** 2 / n.height_time_constant_s,))
 
 
 def navigation_settings(cfg: AppConfig) -> NavigationUncertainty:
@@ -65,7 +67,7 @@ def navigation_settings(cfg: AppConfig) -> NavigationUncertainty:
     # the camera's mount error turns its view as the vehicle's attitude error does
     return NavigationUncertainty(n.position_std_m,
                                  math.radians(math.hypot(n.attitude_std_deg, mount)),
-                                 math.radians(math.hypot(n.yaw_std_deg, mount)))
+                                 math.radians(math.hypot(n.yaw_std_deg, mount)), n.height_std_m)
 
 
 class BallPipeline:

@@ -174,16 +174,20 @@ class PadPipeline:
                 self._ranges.append((state.time_s, level))
         self._last_reading = r
 
-    def ground_at(self, time_s: float, max_gap_s: float = 0.5) -> float:
-        """The ground's level (local NED down) from the reading nearest ``time_s`` (NaN: none
-        that close)."""
-        best, gap = math.nan, max_gap_s
+    def ground_at(self, time_s: float, max_gap_s: float = 0.5, count: int = 5) -> float:
+        """The ground's level (local NED down): the median of the ``count`` readings nearest
+        ``time_s`` within ``max_gap_s`` (a lone outlier — a missed return read as the maximum
+        range, a short reading off debris — is voted out); NaN: none that close."""
+        near: list[tuple[float, float]] = []
         for t, level in reversed(self._ranges):
-            if abs(t - time_s) <= gap:
-                best, gap = level, abs(t - time_s)
+            if abs(t - time_s) <= max_gap_s:
+                near.append((abs(t - time_s), level))
             elif t < time_s - max_gap_s:
                 break
-        return best
+        if not near:
+            return math.nan
+        near.sort()
+        return float(np.median([level for _, level in near[:count]]))
 
     def hint(self, time_s: float, camera: CameraInfo) -> None:
         return None  # the whole frame is searched (colour masks and markers are cheap)

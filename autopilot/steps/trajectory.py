@@ -6,7 +6,10 @@ plan it logged (``/planning/path``) with the simulator's ground truth:
 
 * ``metrics.path`` (every one): cross-track error — the true position's distance from the
   planned path — RMS, 95th percentile and maximum (3D, and horizontal), the speed along the
-  path where the plan cruises, the time flown against the time planned;
+  path where the plan cruises, the time flown against the time planned; and ``*_nav_*`` the
+  same cross-track error as the vehicle's own navigation saw it (its telemetry positions: the
+  tracking the autopilot delivers, which the navigation's error — ``rms_navigation_error_m``,
+  telemetry against truth — then moves as a whole);
 * ``metrics.orbit``: the radius flown, the photos (how many of ``images``), and where the orbit's
   centre lies in each photo (pixels from the image centre, from the true pose and the camera's
   calibration);
@@ -214,6 +217,20 @@ def path_metrics(log: Records, intervals: list[tuple[float, float]], step: Mappi
         s_path = np.concatenate(([0.0], np.cumsum(seg)))
         v_at = np.interp(s_path[nearest], s_ref, v_ref)
         cruise = v_at >= 0.95 * speed
+    nav = _navigation(log, start, end)
+    nav_metrics = {}
+    if len(nav[0]) >= 2:
+        nav3 = cross_track_m(path, nav[1])
+        nav2 = cross_track_m(path[:, :2], nav[1][:, :2])
+        true_at = np.stack([np.interp(nav[0], truth.t, truth.p[:, i]) for i in range(3)], axis=1)
+        nav_err = np.linalg.norm(nav[1] - true_at, axis=1)
+        nav_metrics = {
+            "rms_cross_track_nav_m": _rms(nav3),
+            "p95_cross_track_nav_m": float(np.percentile(nav3, 95)),
+            "max_cross_track_nav_m": float(nav3.max()),
+            "rms_horizontal_cross_track_nav_m": _rms(nav2),
+            "rms_navigation_error_m": _rms(nav_err),
+        }
     out = {
         "rms_cross_track_m": _rms(err3),
         "p95_cross_track_m": float(np.percentile(err3, 95)),
@@ -226,8 +243,22 @@ def path_metrics(log: Records, intervals: list[tuple[float, float]], step: Mappi
         "flight_time_s": end - start,
         "planned_time_s": plan.get("duration_s"),
         "path_length_m": plan.get("length_m"),
+        **nav_metrics,
     }
     return out, plan, truth
+
+
+def _navigation(log: Records, start: float, end: float) -> tuple[np.ndarray, np.ndarray]:
+    """(times, positions) the vehicle reported between ``start`` and ``end`` (finite ones)."""
+    times, points = [], []
+    for r in log.get(ch.VEHICLE_STATE, []):
+        t = r["time_s"]
+        p = r.get("position_ned_m")
+        if start <= t <= end and p is not None and all(
+                v is not None and math.isfinite(v) for v in p):
+            times.append(t)
+            points.append(p)
+    return np.array(times, dtype=float), np.array(points, dtype=float).reshape(-1, 3)
 
 
 def _photos_of(log: Records, step: Mapping) -> list[Mapping]:

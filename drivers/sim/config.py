@@ -128,18 +128,55 @@ class WindConfig(_Model):
     gust_time_constant_s: Positive
 
 
-class EstimatorConfig(_Model):
-    """Error model of PX4's EKF output: slowly wandering errors (Gauss–Markov) that both the
-    flight controller and the telemetry see, as on a real vehicle."""
+class NavigationGradeConfig(_Model):
+    """Error model of one navigation grade (PX4's EKF output with that aiding): Gauss–Markov
+    processes (stationary σ, correlation time) that both the flight controller and the
+    telemetry see, plus white noise; an optical-flow grade also drifts with distance flown."""
 
-    position_error_m: NonNegative
+    #: horizontal position error wandering about the truth, per axis (absolute aiding: GNSS,
+    #: RTK); 0 for dead reckoning (optical flow), whose error is the drift below
+    horizontal_error_m: NonNegative
+    horizontal_time_constant_s: Positive
+    #: height error (barometer, or the RTK/GNSS height), wandering
+    height_error_m: NonNegative
+    height_time_constant_s: Positive
+    #: white noise on every position axis, each estimate
+    position_noise_m: NonNegative
+    #: the EKF output's smoothing of the aiding's errors (a first-order lag on the wandering
+    #: position and height errors: they move at centimetres per second, not in steps); 0: none
+    position_smoothing_s: NonNegative = 0.0
+    #: velocity error, per axis, wandering with its own (short) correlation time
     velocity_error_m_s: NonNegative
-    attitude_error_deg: NonNegative
+    velocity_time_constant_s: Positive
+    attitude_error_deg: NonNegative  # roll and pitch
     yaw_error_deg: NonNegative
-    error_time_constant_s: Positive
+    attitude_time_constant_s: Positive
+    #: dead reckoning on a flow sensor: the scale factor's error (σ, drawn once per flight) and
+    #: the heading error turn each metre flown into drift; a wandering velocity bias (σ, with
+    #: ``horizontal_time_constant_s``) drifts even in a hover. All 0: absolute aiding.
+    flow_scale_error: Annotated[float, Field(ge=0, le=0.5)] = 0.0
+    flow_velocity_bias_m_s: NonNegative = 0.0
+
+
+class EstimatorConfig(_Model):
+    """PX4's EKF output: ``grade`` chooses which of ``grades`` the vehicle navigates with (each
+    value there settable on its own)."""
+
+    grade: Literal["gnss", "rtk", "optical_flow"]
+    grades: dict[Literal["gnss", "rtk", "optical_flow"], NavigationGradeConfig]
     gyro_noise_rad_s: NonNegative
     #: Time after boot before the local position is valid (arming is refused until then).
     init_time_s: NonNegative
+
+    @model_validator(mode="after")
+    def _chosen_grade_given(self) -> EstimatorConfig:
+        if self.grade not in self.grades:
+            raise ValueError(f"grade {self.grade!r} has no entry in grades")
+        return self
+
+    @property
+    def chosen(self) -> NavigationGradeConfig:
+        return self.grades[self.grade]
 
 
 class TelemetryConfig(_Model):
@@ -149,9 +186,26 @@ class TelemetryConfig(_Model):
 
 
 class RangefinderConfig(_Model):
+    """Downward distance sensor (a single-beam lidar). Readings outside [min_m, max_m] are
+    absent (NaN), as PX4's ``distance_sensor`` marks them invalid."""
+
     min_m: NonNegative
     max_m: Positive
     noise_m: NonNegative
+    #: share of readings that are wrong: half read max_m (a missed return), half a random
+    #: distance short of the truth (dust, rotor-wash debris, a blade in the beam)
+    outlier_fraction: Fraction = 0.0
+    #: no return when the beam meets the (level) surface further than this from its normal:
+    #: the vehicle's tilt from vertical (specular and dark surfaces send too little back)
+    max_incidence_deg: Annotated[float, Field(gt=0, le=90)] = 90.0
+    #: share of readings lost at random (low-reflectivity patches, sunlight)
+    dropout_fraction: Fraction = 0.0
+
+    @model_validator(mode="after")
+    def _ordered(self) -> RangefinderConfig:
+        if self.min_m >= self.max_m:
+            raise ValueError(f"min_m ({self.min_m}) must be below max_m ({self.max_m})")
+        return self
 
 
 class UwbConfig(_Model):

@@ -39,30 +39,67 @@ class GaussMarkov:
 
 
 class EstimatorModel:
-    """PX4's EKF output as truth plus slowly wandering errors (and white gyro noise).
+    """PX4's EKF output as truth plus the errors of its navigation grade (and white gyro noise).
 
     The flight controller flies on this estimate and the telemetry reports it, so the vehicle
-    holds position to within the estimator's error, as a real one does.
+    holds position to within the estimator's error, as a real one does. With absolute aiding
+    (GNSS, RTK) the position error wanders about zero; on optical flow it is dead reckoning's
+    drift: the flow's scale error and the heading error act on every metre flown, and a
+    wandering velocity bias integrates even in a hover.
     """
 
     def __init__(self, cfg: EstimatorConfig, rng: np.random.Generator) -> None:
         self.cfg = cfg
+        g = self.grade = cfg.chosen
         self._rng = rng
-        tau = cfg.error_time_constant_s
-        tilt = math.radians(cfg.attitude_error_deg)
-        sigma = [cfg.position_error_m] * 3 + [cfg.velocity_error_m_s] * 3 + \
-            [tilt, tilt, math.radians(cfg.yaw_error_deg)]
-        taus = [tau] * 3 + [tau / 10.0] * 3 + [tau] * 3
+        tilt = math.radians(g.attitude_error_deg)
+        sigma = [g.horizontal_error_m] * 2 + [g.height_error_m] + [g.velocity_error_m_s] * 3 + \
+            [tilt, tilt, math.radians(g.yaw_error_deg)]
+        taus = [g.horizontal_time_constant_s] * 2 + [g.height_time_constant_s] + \
+            [g.velocity_time_constant_s] * 3 + [g.attitude_time_constant_s] * 3
+        smooth = g.position_smoothing_s
+        if smooth:  # the lag's output keeps the asked σ: var = σ_in² τ / (τ + T)
+            for i in range(3):
+                sigma[i] *= math.sqrt((taus[i] + smooth) / taus[i])
         self._errors = GaussMarkov(rng, np.array(sigma), np.array(taus))
+        self._position_error = self._errors.value[0:3].copy()
         self._q_err: tuple[float, ...] = (1.0, 0.0, 0.0, 0.0)
         self._noise: list[list[float]] = []
+        self._white = np.zeros(3)
+        # dead reckoning (only drawn when flown: the aided grades keep their sequences)
+        self._flow = bool(g.flow_scale_error or g.flow_velocity_bias_m_s)
+        self._drift = np.zeros(3)
+        self._flow_velocity_error = np.zeros(3)
+        if self._flow:
+            self._scale = g.flow_scale_error * float(rng.standard_normal())
+            self._bias = GaussMarkov(rng, np.full(2, g.flow_velocity_bias_m_s),
+                                     g.horizontal_time_constant_s)
         self.step(0.0)
 
-    def step(self, dt_s: float) -> None:
+    def step(self, dt_s: float, velocity_ned_m_s: np.ndarray | None = None) -> None:
+        """Advance the errors by ``dt_s``; ``velocity_ned_m_s`` (the true velocity) drives an
+        optical-flow grade's drift."""
         err = self._errors.step(dt_s)
+        smooth = self.grade.position_smoothing_s
+        if smooth:
+            a = math.exp(-dt_s / smooth)
+            self._position_error = a * self._position_error + (1.0 - a) * err[0:3]
+        else:
+            self._position_error = err[0:3]
         att = err[6:9]
         angle = float(np.sqrt(att @ att))
         self._q_err = tuple(quat_from_axis_angle(att, angle).tolist())
+        if self.grade.position_noise_m:
+            self._white = self.grade.position_noise_m * self._rng.standard_normal(3)
+        if self._flow:
+            bias = self._bias.step(dt_s)
+            v = np.zeros(2) if velocity_ned_m_s is None else np.asarray(velocity_ned_m_s)[:2]
+            # flow measures ground speed in the body frame, scaled by (1 + s); the estimated
+            # heading (off by ψ) turns it into NED: error = s·v + ψ × v (small angles)
+            psi = float(err[8])
+            rate = self._scale * v + psi * np.array([-v[1], v[0]]) + bias
+            self._flow_velocity_error[:2] = rate
+            self._drift[:2] += rate * dt_s
 
     def attitude(self, q: tuple[float, ...], rates: list[float]) -> tuple[tuple, list[float]]:
         """Estimated attitude and gyro from the true ones (plain floats, for the rate loop)."""
@@ -83,8 +120,14 @@ class EstimatorModel:
                  rates: np.ndarray) -> EstimatedState:
         err = self._errors.value
         q_est, gyro = self.attitude(q.tolist(), rates.tolist())
-        return EstimatedState(position + err[0:3], velocity + err[3:6], np.array(q_est),
-                              np.array(gyro))
+        return EstimatedState(position + self._position_error + self._white + self._drift,
+                              velocity + err[3:6] + self._flow_velocity_error,
+                              np.array(q_est), np.array(gyro))
+
+    @property
+    def position_error_ned_m(self) -> np.ndarray:
+        """The estimate's position error now (for tests and scoring)."""
+        return self._position_error + self._white + self._drift
 
 
 class Rangefinder:
@@ -116,9 +159,25 @@ class Rangefinder:
 
     def measure(self, model: mujoco.MjModel, data: mujoco.MjData) -> float:
         dist = self.true_range(model, data)
-        if not self.cfg.min_m <= dist <= self.cfg.max_m:
+        body_z = data.xmat[self._body_id].reshape(3, 3)[:, 2]
+        return self.reading(dist, float(body_z[2]))
+
+    def reading(self, dist: float, cos_incidence: float) -> float:
+        """What the sensor reports for a surface ``dist`` away along its beam, met at an angle
+        whose cosine is ``cos_incidence`` (its tilt from the vertical, on a level surface)."""
+        cfg = self.cfg
+        if cos_incidence < math.cos(math.radians(cfg.max_incidence_deg)):
             return math.nan
-        return dist + self.cfg.noise_m * float(self._rng.standard_normal())
+        if cfg.dropout_fraction and self._rng.random() < cfg.dropout_fraction:
+            return math.nan
+        if cfg.outlier_fraction and math.isfinite(dist) and \
+                self._rng.random() < cfg.outlier_fraction:
+            dist = cfg.max_m if self._rng.random() < 0.5 else \
+                cfg.min_m + (dist - cfg.min_m) * float(self._rng.random())
+            return dist if cfg.min_m <= dist <= cfg.max_m else math.nan
+        if not cfg.min_m <= dist <= cfg.max_m:
+            return math.nan
+        return dist + cfg.noise_m * float(self._rng.standard_normal())
 
 
 class BatteryModel:

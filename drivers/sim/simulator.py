@@ -391,7 +391,7 @@ class Simulator:
             self._check_stability()
             pos, vel, q, rates = self._truth_state()
             dt_outer = self._dt_ctrl * self._outer_div
-            self.estimator.step(dt_outer)
+            self.estimator.step(dt_outer, vel)
             if self.faults:
                 self._outer_faults(dt_outer)
             thrust = self.rotor_thrust_n

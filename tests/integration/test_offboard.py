@@ -75,7 +75,7 @@ def test_orbit_tracks_the_circle_and_takes_every_photo_facing_the_centre(tmp_pat
     assert orbit["radius_rms_error_m"] <= 0.10
     assert orbit["photos"] == orbit["images_planned"] == 8
     assert orbit["photos_with_gps"] == 8
-    # facing the centre: it is in every photo (the down camera, from 8 m at 3 m)
+    # facing the centre: it is in every photo (the down camera, from 10 m at 3 m)
     assert orbit["centre_in_frame"] == 8
     _check_photos(tmp_path, summary, 8)
     assert summary["mission_status"] == 9  # landing completed

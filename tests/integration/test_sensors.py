@@ -51,7 +51,7 @@ def test_estimate_is_close_to_truth_but_not_truth(sim_config):
             return np.array(errors)
 
     errors = run(main())
-    sigma = sim_config.estimator.position_error_m
+    sigma = sim_config.estimator.chosen.horizontal_error_m
     assert np.all(np.abs(errors) < 5 * sigma)
     assert np.any(np.abs(errors) > 1e-4)
 

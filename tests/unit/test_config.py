@@ -130,7 +130,7 @@ def kind_overlay(tmp_path, monkeypatch):
     """An ``ideal`` overlay that changes two keys, standing in for the shipped one."""
     overlay = tmp_path / "ideal.yaml"
     overlay.write_text("sim:\n  rangefinder: {noise_m: 0.0001}\n"
-                       "  estimator: {position_error_m: 0.001}\n")
+                       "  estimator: {grade: rtk}\n")
     import autopilot.config as config_module
 
     monkeypatch.setattr(config_module, "profile_path",
@@ -144,13 +144,13 @@ def test_a_profile_lays_its_overlay_under_what_the_user_sets(kind_overlay):
     assert ideal.sim.profile == "ideal"
     assert base.sim.profile == "realistic"
     assert ideal.sim.rangefinder.noise_m == 0.0001
-    assert ideal.sim.estimator.position_error_m == 0.001
+    assert ideal.sim.estimator.grade == "rtk"
     # what the overlay does not name stays as config.yaml has it
     assert ideal.sim.rangefinder.max_m == base.sim.rangefinder.max_m
     # each dimension is still settable on its own, whatever the profile
     mixed = load_config(overrides=["sim.profile=ideal", "sim.rangefinder.noise_m=0.3"])
     assert mixed.sim.rangefinder.noise_m == 0.3
-    assert mixed.sim.estimator.position_error_m == 0.001
+    assert mixed.sim.estimator.grade == "rtk"
 
 
 def test_a_missions_profile_and_its_own_keys(kind_overlay, tmp_path):
@@ -162,11 +162,11 @@ def test_a_missions_profile_and_its_own_keys(kind_overlay, tmp_path):
     plan = load_mission(str(mission))
     assert plan.config.sim.profile == "ideal"
     assert plan.config.sim.rangefinder.noise_m == 0.2  # the mission's key over the overlay
-    assert plan.config.sim.estimator.position_error_m == 0.001  # the overlay's
+    assert plan.config.sim.estimator.grade == "rtk"  # the overlay's
     # --set chooses over the mission
     plan = load_mission(str(mission), ["sim.profile=realistic"])
     assert plan.config.sim.profile == "realistic"
-    assert plan.config.sim.estimator.position_error_m != 0.001
+    assert plan.config.sim.estimator.grade != "rtk"
 
 
 def test_an_unknown_profile_is_refused_where_it_was_written():

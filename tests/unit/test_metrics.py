@@ -92,3 +92,45 @@ def test_the_estimate_is_scored_as_flown_coasting_and_lost_included():
     summary = mission_metrics(log)
     assert summary["estimation"]["ticks"] == 80
     assert [s["name"] for s in summary["steps"]] == ["follow_ball"]
+
+
+def test_cross_track_against_the_vehicles_navigation_and_against_truth():
+    """The vehicle tracks a straight path exactly as its navigation sees it, while that
+    navigation is 0.4 m off to the east: the cross-track error is 0 against its navigation and
+    0.4 m against the truth, and the navigation's error is reported."""
+    from autopilot.steps.trajectory import path_metrics
+
+    recs = {ch.PLANNED_PATH: [{"time_s": 0.0, "step_index": 1,
+                               "points_ned_m": [[0, 0, -3], [10, 0, -3]]}],
+            ch.GROUND_TRUTH: [], ch.VEHICLE_STATE: []}
+    for k in range(101):
+        t = 0.1 * k
+        recs[ch.GROUND_TRUTH].append({
+            "time_s": t, "vehicle_position_ned_m": [t, -0.4, -3],
+            "vehicle_attitude_q": [1, 0, 0, 0], "vehicle_velocity_ned_m_s": [1, 0, 0],
+            "bodies": {}})
+        recs[ch.VEHICLE_STATE].append({"time_s": t, "position_ned_m": [t, 0.0, -3]})
+    out, _, _ = path_metrics(recs, [(0.0, 10.0)], {"index": 1})
+    assert out["rms_cross_track_nav_m"] == pytest.approx(0.0, abs=1e-6)
+    assert out["rms_cross_track_m"] == pytest.approx(0.4, abs=1e-6)
+    assert out["rms_navigation_error_m"] == pytest.approx(0.4, abs=1e-6)
+
+
+def test_an_estimate_in_the_navigations_frame_is_also_scored_relative_to_the_vehicle():
+    """The navigation puts the vehicle 0.3 m north of where it is, so the ball (seen exactly)
+    is placed 0.3 m north of the truth: 0.3 m absolute error, none relative to the vehicle."""
+    log = _log()
+    log[ch.VEHICLE_STATE] = [{"time_s": 0.1 * k, "position_ned_m": [0.3, 0, -2]}
+                             for k in range(61)]
+    log[ch.CONTROL_TARGET] = [_tick(1.0 + 0.05 * k, 2.3) for k in range(80)]
+    e = estimation_metrics(log)
+    assert e["rms_position_error_m"] == pytest.approx(0.3)
+    assert e["rms_relative_position_error_m"] == pytest.approx(0.0, abs=1e-9)
+    assert "relative_within_2sigma" not in e  # (the log does not say the navigation's σ)
+    # σ 0.05 m of which the navigation's position is 0.045: 0.022 m relative; 5 cm off
+    log[ch.MISSION_PLAN][0]["config"] = {"estimation": {"navigation": {
+        "position_std_m": 0.045, "height_std_m": 0.045}}}
+    log[ch.CONTROL_TARGET] = [_tick(1.0 + 0.05 * k, 2.35 if k % 2 else 2.3)
+                              for k in range(80)]
+    e = estimation_metrics(log)
+    assert e["relative_within_2sigma"] == pytest.approx(0.5)
