@@ -97,17 +97,21 @@ class MonotonicClock(Clock):
 
 
 class PacedClock(MonotonicClock):
-    """Wall time, held back by the simulator when it cannot keep up (:meth:`hold_back`).
+    """Wall time, held back by the simulator when it cannot keep up.
 
-    It reads the wall clock less the time the simulator has lost to a slow CPU. Being held
-    back it never goes backwards: it stands still until the wall clock has caught up with the
-    shift. Read from any thread. Sleeps and timeouts wait until this clock (not the wall clock)
-    reaches their deadline, so a slowed world times out as slowly as it moves."""
+    It reads the wall clock less the time the simulator has lost to a slow CPU: while the
+    simulator computes a stretch of the world it is capped at that stretch's end
+    (:meth:`cap_at`: it stands still there if the computing takes longer than the stretch),
+    and time lost otherwise can be taken back (:meth:`hold_back`: it stands still until the
+    wall clock has caught up with the shift). It never goes backwards. Read from any thread.
+    Sleeps and timeouts wait until this clock (not the wall clock) reaches their deadline, so
+    a slowed world times out as slowly as it moves."""
 
     def __init__(self, start_s: float = 0.0) -> None:
         super().__init__(start_s)
         self._lock = threading.Lock()
         self._last = start_s
+        self._cap: float | None = None
         #: seconds this clock has been held back behind the wall clock in all
         self.held_back_s = 0.0
 
@@ -115,12 +119,27 @@ class PacedClock(MonotonicClock):
         with self._lock:
             super().restart(start_s)
             self._last = start_s
+            self._cap = None
             self.held_back_s = 0.0
 
     def now(self) -> float:
         with self._lock:
-            self._last = max(self._last, time.monotonic() - self._offset)
+            self._last = max(self._last, self._capped())
             return self._last
+
+    def cap_at(self, time_s: float | None) -> None:
+        """Never read past ``time_s`` until capped again (None: uncapped)."""
+        with self._lock:
+            self._capped()  # (the time spent at the old cap is held back before it goes)
+            self._cap = time_s
+
+    def _capped(self) -> float:
+        t = time.monotonic() - self._offset
+        if self._cap is not None and t > self._cap:
+            self._offset += t - self._cap
+            self.held_back_s += t - self._cap
+            t = self._cap
+        return t
 
     def hold_back(self, seconds: float) -> None:
         """The simulated world lost ``seconds`` to the CPU: its time runs that much later."""

@@ -13,9 +13,9 @@ never hopping the loop per physics step.
 * Real time: a :class:`~drivers.clock.PacedClock`; the simulator lives on one dedicated
   thread, the physics runs at most ``realtime_batch_s`` ahead of the wall clock, and outputs are
   published when they are due. That thread runs at a lower CPU priority, standing in for the
-  vehicle's own hardware: when the machine is busy the autopilot's work comes first. A batch
-  that takes longer to compute than the time it simulates holds the clock back by the
-  difference (a :class:`~drivers.clock.PacedClock`): on a CPU too slow or too busy for real
+  vehicle's own hardware: when the machine is busy the autopilot's work comes first. The clock
+  (a :class:`~drivers.clock.PacedClock`) does not run past the end of the batch being
+  computed, and time lost handing a batch over is taken back: on a CPU too slow or too busy for real
   time the simulated world slows down as a whole (its clock, telemetry and frames together),
   instead of its samples arriving ever older. Time lost elsewhere (the event loop stalled) is
   caught up, as a vehicle flies on while its autopilot stalls. Running below
@@ -168,8 +168,9 @@ class SimDriver(Vehicle):
         self._task = loop.create_task(run(), name="sim-driver")
         # as a real link: connected once the vehicle has been heard from
         async with contextlib.aclosing(self.telemetry()) as samples:
-            try:
-                await self._clock.wait_for(anext(samples), timeout_s)
+            try:  # (on the wall clock: a simulator that never steps must not hang us)
+                await asyncio.wait_for(anext(samples), timeout_s) if not self.lockstep \
+                    else await self._clock.wait_for(anext(samples), timeout_s)
             except (TimeoutError, StopAsyncIteration):
                 await self.close()
                 raise ConnectionLost(
@@ -453,8 +454,15 @@ class SimDriver(Vehicle):
 
     def _batch(self, until_s: float) -> list[SimOutput]:
         started = time.perf_counter()
-        self._drain_inbox()
-        outputs = self._sim.advance_to(until_s)
+        paced = isinstance(self._clock, PacedClock)
+        if paced:  # the world is not past this batch's end before the batch has computed it
+            self._clock.cap_at(until_s)
+        try:
+            self._drain_inbox()
+            outputs = self._sim.advance_to(until_s)
+        finally:
+            if paced:
+                self._clock.cap_at(None)
         self._batch_end = time.perf_counter()
         self._wall_busy_s += self._batch_end - started
         return outputs

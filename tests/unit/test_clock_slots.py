@@ -201,5 +201,13 @@ def test_a_paced_clock_held_back_stands_still_and_never_goes_back():
         assert clock.now() >= start + 0.1
         with pytest.raises(TimeoutError):
             await clock.wait_for(asyncio.Event().wait(), 0.05)
+        # capped (the simulator computing up to there), it stands at the cap however long
+        # the computing takes, and goes on from there when uncapped, without a jump
+        cap = clock.now() + 0.02
+        clock.cap_at(cap)
+        await asyncio.sleep(0.1)
+        assert clock.now() == cap
+        clock.cap_at(None)
+        assert clock.now() == pytest.approx(cap, abs=0.01)
 
     asyncio.run(main())
