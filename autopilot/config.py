@@ -45,9 +45,13 @@ class _Model(BaseModel):
 
 class RuntimeConfig(_Model):
     control_rate_hz: Annotated[float, Field(ge=5, le=200)]  # at least; also on every estimate
-    #: attitude or position older than this (by their capture times): no more motion
-    #: setpoints, HOLD, then the mission's fallback (as for a lost link)
-    telemetry_max_age_s: Annotated[float, Field(gt=0, le=10)]
+    #: nothing new (a newer position or attitude) received from the vehicle for this long,
+    #: judged on our clock at receipt: the vehicle is silent; no more motion setpoints, the
+    #: vehicle holds, the step waits
+    telemetry_silence_s: Annotated[float, Field(gt=0, le=10)]
+    #: a silence longer than this ends the step in the mission's fallback (as a lost link);
+    #: a shorter one resumes the step when telemetry comes back
+    telemetry_grace_s: Annotated[float, Field(ge=0, le=60)] = 2.0
     setpoint_rate_hz: Annotated[float, Field(ge=20, le=100)]  # streaming to the vehicle
     setpoint_expiry_s: Annotated[float, Field(gt=0, le=1)]  # a setpoint not renewed expires
     offboard_warmup_s: Annotated[float, Field(ge=0.1, le=2)]  # streaming before OFFBOARD
@@ -60,6 +64,11 @@ class RuntimeConfig(_Model):
 
     @model_validator(mode="after")
     def _stall_outlasts_setpoints(self) -> RuntimeConfig:
+        if self.telemetry_grace_s < self.telemetry_silence_s:
+            raise ValueError(
+                f"telemetry_grace_s ({self.telemetry_grace_s:g}) must be at least "
+                f"telemetry_silence_s ({self.telemetry_silence_s:g}): the grace counts from the "
+                "last telemetry received, and a silence starts after telemetry_silence_s")
         if self.loop_stall_s < self.setpoint_expiry_s:
             raise ValueError(
                 f"loop_stall_s ({self.loop_stall_s:g}) must be at least setpoint_expiry_s "

@@ -231,7 +231,15 @@ class Runtime:
         self._last_send_s = -math.inf
         self._stop_reason: str | None = None
         self._stop_requested = asyncio.Event()
-        self._stale = False  # the pose went stale: no more motion setpoints this run
+        self._stale = False  # telemetry lost (a silence past the grace): no more setpoints
+        #: when (our clock) a newer position / attitude than any before was last received
+        self._position_heard_s = -math.inf
+        self._attitude_heard_s = -math.inf
+        #: a silence under the grace: when it began (None: telemetry flowing), and whether
+        #: the vehicle was told to hold (the step then asks for OFFBOARD again on resuming)
+        self._silent_since: float | None = None
+        self._silence_held = False
+        self._tick_clock_s = -math.inf  # (the clock) the newest control tick
         self._sensors_started = False
         self._late_tasks: list[asyncio.Task] = []  # started during the run (ended with it)
         self._executor: MissionExecutor | None = None
@@ -396,29 +404,46 @@ class Runtime:
         deadline: float | None = None
         while not out.finished:
             source = await self._next_tick(period)
+            self._tick_clock_s = self.clock.now()
             inputs = self._inputs(self._state)
             self._log_control_target(inputs)
-            stale = self._telemetry_stale()
-            if stale is not None and not self._stale:
-                # flying blind: no motion setpoint may go out on an old pose; hold, and let
-                # the mission's fallback bring the vehicle down (as for a lost link)
+            if self._stale:
+                pass  # lost for good: the fallback flies on the vehicle's own modes
+            elif (silence := self._telemetry_silence()) is not None:
+                if self._silent_since is None:
+                    await self._hold_silent(silence, inputs)
+                if self._emergency is not None:  # the motors stop, whatever we know
+                    await self._emergency_stop(inputs)
+                    return
+                lost = silence > self.config.runtime.telemetry_grace_s
+                if not lost and not self._stop_requested.is_set():
+                    continue  # holding: the step waits for telemetry (or the grace's end)
+                # flying blind for longer than the grace (or asked to stop meanwhile): the
+                # mission's fallback brings the vehicle down, as for a lost link
                 self._stale = True
-                self._intent = None
-                self.manual = False  # the fallback flies, whatever the console asked
-                self._console_actions.clear()
-                self._event(self.clock.now(), "runtime",
-                            f"telemetry stale: {stale}; setpoints stopped")
+                why = f"telemetry lost: nothing new received for {silence:.2f} s " \
+                      f"(grace {self.config.runtime.telemetry_grace_s:g} s)"
+                self._event(self.clock.now(), "failsafe", why)
+                self.events.emit(Event("mission", "failsafe", self.clock.now(), why))
                 if executor.in_fallback:
                     # already coming down or home: a vehicle flying its own return or landing
                     # goes on with it (a hold would stop it); otherwise it lands where it is
                     if inputs.state.mode not in ReturnHome.RETURN_MODES:
                         await self._land_where_it_is()
                     continue
-                with contextlib.suppress(VehicleError, TimeoutError):
-                    await self.clock.wait_for(self.vehicle.hold(), 2.0)
-                out = executor.abort(f"telemetry stale: {stale}", inputs)
+                out = executor.abort(why, inputs)
                 await self._apply(out, None)
                 continue
+            elif self._silent_since is not None:
+                gap = min(self._position_heard_s, self._attitude_heard_s) - \
+                    self._silent_since
+                self._silent_since = None
+                # back within the grace: the step resumes from where the vehicle is (OFFBOARD
+                # asked again if it was told to hold)
+                self._resumed = self._resumed or self._silence_held
+                self._event(self.clock.now(), "runtime",
+                            f"telemetry back after {gap:.2f} s: {self._step or 'mission'} "
+                            "resumes")
             if self._land_retry_s is not None and self.clock.now() >= self._land_retry_s:
                 await self._land_where_it_is()
             self._publish_values(inputs)
@@ -735,8 +760,17 @@ class Runtime:
         failsafe may have acted): it fails into the fallback."""
         if self.clock.lockstep:  # simulated time waited for the loop: the flight lost nothing
             return
+        now = self.clock.now()
         text = f"event loop stalled for {seconds:.2f} s"
-        self._event(self.clock.now(), "runtime", text)
+        # the vehicle's own time since the last control tick: a real-time simulator slowed
+        # with a starved CPU (drivers/clock.py, PacedClock) may have waited for the loop, and
+        # then no setpoint lapsed on its clock; a real vehicle never waits
+        waited = now - self._tick_clock_s
+        if waited < self.config.runtime.setpoint_expiry_s:
+            self._event(now, "runtime", f"{text} (the vehicle's clock {waited:.2f} s: "
+                        "its world waited)")
+            return
+        self._event(now, "runtime", text)
         s = self._state
         if s is not None and s.in_air:
             self._fail_step(text)
@@ -1124,6 +1158,11 @@ class Runtime:
         async with contextlib.aclosing(self.vehicle.telemetry(buffer=64)) as samples:
             async for state in samples:
                 previous, self._state = self._state, state
+                now = self.clock.now()
+                if previous is None or state.time_s > previous.time_s:
+                    self._position_heard_s = now
+                if previous is None or state.attitude_time_s > previous.attitude_time_s:
+                    self._attitude_heard_s = now
                 self._state_events(previous, state)
                 ne = (round(float(state.position_ned_m[0]), 2),
                       round(float(state.position_ned_m[1]), 2))
@@ -1176,7 +1215,7 @@ class Runtime:
             intent = self._intent
             now = self.clock.now()
             if intent is not None and now < intent.expires_s and not self._stale and \
-                    now - self._last_send_s >= 0.9 * period and self._telemetry_stale() is None:
+                    now - self._last_send_s >= 0.9 * period and self._silent_since is None:
                 await self._send(intent)
 
     async def _send(self, intent: Intent) -> None:
@@ -1260,20 +1299,34 @@ class Runtime:
         else:
             self._land_retry_s = None
 
-    def _telemetry_stale(self) -> str | None:
-        """Why the newest pose is too old to fly on (None: it is fresh): position or attitude
-        captured longer ago than ``runtime.telemetry_max_age_s``."""
-        state = self._state
-        if state is None:
+    def _telemetry_silence(self) -> float | None:
+        """How long the vehicle has said nothing new (no newer position or attitude received),
+        on our clock; None while that is under ``runtime.telemetry_silence_s``. Judged on
+        arrival, not on the capture stamps' age: a vehicle whose clock lags ours (a starved
+        simulator) or a link with latency is not silent while its samples keep coming."""
+        if self._state is None:
             return None
+        silence = self.clock.now() - min(self._position_heard_s, self._attitude_heard_s)
+        return silence if silence > self.config.runtime.telemetry_silence_s else None
+
+    async def _hold_silent(self, silence: float, inputs: BehaviorInputs) -> None:
+        """A silence began: no motion setpoint goes out on an old pose. A vehicle flown by our
+        setpoints is told to HOLD (as PX4 holds on offboard loss); one flying its own mode
+        (takeoff, land, return) goes on with it."""
         now = self.clock.now()
-        limit = self.config.runtime.telemetry_max_age_s
-        ages = {"position": now - state.time_s, "attitude": now - state.attitude_time_s}
-        old = {name: age for name, age in ages.items() if age > limit}
-        if not old:
-            return None
-        return ", ".join(f"{name} {age:.2f} s old" for name, age in old.items()) + \
-            f" (limit {limit:g} s)"
+        self._silent_since = now - silence  # (the last news)
+        self._intent = None
+        self.manual = False  # the step (or the fallback) flies again after, whatever the keys
+        self._console_actions.clear()
+        self._silence_held = inputs.state.mode is FlightMode.OFFBOARD
+        grace = self.config.runtime.telemetry_grace_s
+        what = "holding" if self._silence_held else f"the vehicle's {inputs.state.mode.value} " \
+            "goes on"
+        self._event(now, "runtime", f"telemetry silent: nothing new for {silence:.2f} s; "
+                    f"setpoints stopped, {what} (up to {grace:g} s)")
+        if self._silence_held:
+            with contextlib.suppress(VehicleError, TimeoutError):
+                await self.clock.wait_for(self._perform(VehicleRequest(RequestKind.HOLD)), 2.0)
 
     def _inputs(self, state: VehicleState) -> BehaviorInputs:
         """What the behaviours see now: the vehicle, and the running step's percepts (its

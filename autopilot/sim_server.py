@@ -4,6 +4,12 @@ Runs the MuJoCo simulator in real time, with a mission's scenario in its world i
 given, behind :class:`~drivers.mavlink.face.MavlinkFace`. It runs until Ctrl-C / SIGTERM; if
 a client is still flying it, the vehicle is landed first (as stopping PX4 SITL would not do,
 but as a safe state demands).
+
+When the machine cannot run it in real time, the physics and telemetry come first: rendering is
+shed (frames skipped) while it is behind, and a warning says so every
+:data:`SLOW_WARNING_EVERY_S` (its boot clock then lags the wall clock, as no real flight
+controller's does). It prints :data:`READY` when the vehicle becomes armable, as PX4 SITL's
+commander does, so that scripts can wait for that line.
 """
 
 from __future__ import annotations
@@ -36,6 +42,10 @@ from drivers.sim.driver import SimDriver
 from drivers.video import VideoSender
 
 LAND_ON_EXIT_TIMEOUT_S = 60.0
+#: below real time, the warning is repeated this often (wall seconds) while it lasts
+SLOW_WARNING_EVERY_S = 10.0
+#: printed when the vehicle becomes armable (PX4 SITL's commander: "Ready for takeoff!")
+READY = "Ready for takeoff!"
 
 
 TRUTH_LOG = "truth.mcap"
@@ -73,7 +83,8 @@ async def serve(config: AppConfig, scenario: Scenario | None, *, instance: int =
         videos = video_destinations(config)
     sim_config, objects = build_world(scenario, with_instance_id(config.sim, instance),
                                       config.rover)
-    vehicle = SimDriver(sim_config, scenario=objects, lockstep=False)
+    vehicle = SimDriver(sim_config, scenario=objects, lockstep=False,
+                        warn_every_s=SLOW_WARNING_EVERY_S, shed_rendering=True)
     await vehicle.connect()
     face = MavlinkFace(vehicle, instance=instance, events=vehicle.events(), host=host,
                        signing=signing)
@@ -82,14 +93,18 @@ async def serve(config: AppConfig, scenario: Scenario | None, *, instance: int =
     stop = stop or asyncio.Event()
     streams: list[asyncio.Task] = []
 
+    def console_line(time_s: float, text: str) -> None:
+        wall = time.time()  # to line up with other processes' logs
+        stamp = time.strftime("%H:%M:%S", time.localtime(wall)) + f"{wall % 1:.3f}"[1:]
+        log(f"[{time_s:8.2f} s | {stamp}] {text}")
+
     async def log_events() -> None:  # the vehicle's console, as PX4's shell prints it
         async with contextlib.aclosing(vehicle.events()) as events:
             async for time_s, text in events:
-                wall = time.time()  # to line up with other processes' logs
-                stamp = time.strftime("%H:%M:%S", time.localtime(wall)) + f"{wall % 1:.3f}"[1:]
-                log(f"[{time_s:8.2f} s | {stamp}] {text}")
+                console_line(time_s, text)
 
     events = loop.create_task(log_events(), name="sim-events")
+    ready = loop.create_task(announce_ready(vehicle, console_line), name="sim-ready")
     truth_log: FlightLog | None = None
     truth: asyncio.Task | None = None
     photos: asyncio.Task | None = None
@@ -155,12 +170,24 @@ async def serve(config: AppConfig, scenario: Scenario | None, *, instance: int =
         if console_server is not None:
             await console_server.stop(graceful=False)
             await console_source.close()
-        await cancel_all(t for t in (*streams, events, truth, photos, console_task)
+        await cancel_all(t for t in (*streams, events, ready, truth, photos, console_task)
                          if t is not None)
         await face.close()
         await vehicle.close()
         if truth_log is not None:
             truth_log.close()
+
+
+async def announce_ready(vehicle: SimDriver, say: Callable[[float, str], None]) -> None:
+    """Say :data:`READY` each time the vehicle becomes armable (its preflight checks pass)
+    while disarmed: at boot, and again after a failure that stopped it from arming cleared."""
+    was_ready = False
+    async with contextlib.aclosing(vehicle.telemetry(buffer=1)) as states:
+        async for state in states:
+            ready = state.health.armable and not state.armed
+            if ready and not was_ready:
+                say(state.time_s, READY)
+            was_ready = ready or state.armed
 
 
 def with_instance_id(sim: SimConfig, instance: int) -> SimConfig:

@@ -2,6 +2,9 @@
 
 * :class:`MonotonicClock` — wall time (``time.monotonic``), for hardware and for the simulator
   running in real time.
+* :class:`PacedClock` — the real-time simulator's clock: wall time that the simulator holds back
+  when the CPU cannot step the world as fast as the wall clock runs, so that the world (its
+  clock, its telemetry and its frames) slows down together rather than falling behind its clock.
 * :class:`LockstepClock` — simulated time that only the simulator advances, as fast as the CPU
   allows. Time stands still while any coroutine still has work to do: the simulator advances it
   only once the event loop has gone idle and no blocking job started through
@@ -24,6 +27,7 @@ import contextlib
 import functools
 import heapq
 import itertools
+import threading
 import time
 from collections.abc import Awaitable, Callable
 from concurrent.futures import Executor
@@ -92,6 +96,67 @@ class MonotonicClock(Clock):
 
     async def wait_for(self, aw: Awaitable[T], timeout_s: float) -> T:
         return await asyncio.wait_for(aw, timeout_s)
+
+
+class PacedClock(MonotonicClock):
+    """Wall time, held back by the simulator when it cannot keep up.
+
+    It reads the wall clock less the time the simulator has lost to a slow CPU: while the
+    simulator computes a stretch of the world it is capped at that stretch's end
+    (:meth:`cap_at`: it stands still there if the computing takes longer than the stretch),
+    and time lost otherwise can be taken back (:meth:`hold_back`: it stands still until the
+    wall clock has caught up with the shift). It never goes backwards. Read from any thread.
+    Sleeps and timeouts wait until this clock (not the wall clock) reaches their deadline, so
+    a slowed world times out as slowly as it moves."""
+
+    def __init__(self, start_s: float = 0.0) -> None:
+        super().__init__(start_s)
+        self._lock = threading.Lock()
+        self._last = start_s
+        self._cap: float | None = None
+        #: seconds this clock has been held back behind the wall clock in all
+        self.held_back_s = 0.0
+
+    def restart(self, start_s: float = 0.0) -> None:
+        with self._lock:
+            super().restart(start_s)
+            self._last = start_s
+            self._cap = None
+            self.held_back_s = 0.0
+
+    def now(self) -> float:
+        with self._lock:
+            self._last = max(self._last, self._capped())
+            return self._last
+
+    def cap_at(self, time_s: float | None) -> None:
+        """Never read past ``time_s`` until capped again (None: uncapped)."""
+        with self._lock:
+            self._capped()  # (the time spent at the old cap is held back before it goes)
+            self._cap = time_s
+
+    def _capped(self) -> float:
+        t = time.monotonic() - self._offset
+        if self._cap is not None and t > self._cap:
+            self._offset += t - self._cap
+            self.held_back_s += t - self._cap
+            t = self._cap
+        return t
+
+    def hold_back(self, seconds: float) -> None:
+        """The simulated world lost ``seconds`` to the CPU: its time runs that much later."""
+        if seconds > 0.0:
+            with self._lock:
+                self._offset += seconds
+                self.held_back_s += seconds
+
+    async def sleep_until(self, time_s: float) -> None:
+        while (delay := time_s - self.now()) > 0.0:  # noqa: ASYNC110 - a clock, not an event
+            await asyncio.sleep(delay)
+        await asyncio.sleep(0)
+
+    async def wait_for(self, aw: Awaitable[T], timeout_s: float) -> T:
+        return await Clock.wait_for(self, aw, timeout_s)
 
 
 class LockstepClock(Clock):

@@ -10,10 +10,20 @@ never hopping the loop per physics step.
   worker thread would only add two thread hand-offs per batch (batches last at most one frame
   interval, so signals are still handled promptly). Runs as fast as the CPU allows and is
   deterministic for a given seed.
-* Real time: a :class:`~drivers.clock.MonotonicClock`; the simulator lives on one dedicated
+* Real time: a :class:`~drivers.clock.PacedClock`; the simulator lives on one dedicated
   thread, the physics runs at most ``realtime_batch_s`` ahead of the wall clock, and outputs are
   published when they are due. That thread runs at a lower CPU priority, standing in for the
-  vehicle's own hardware: when the machine is busy the autopilot's work comes first.
+  vehicle's own hardware: when the machine is busy the autopilot's work comes first. The clock
+  (a :class:`~drivers.clock.PacedClock`) does not run past the end of the batch being
+  computed, and time lost handing a batch over is taken back: on a CPU too slow or too busy for real
+  time the simulated world slows down as a whole (its clock, telemetry and frames together),
+  instead of its samples arriving ever older. Time lost elsewhere (the event loop stalled) is
+  caught up, as a vehicle flies on while its autopilot stalls. Running below
+  :data:`SLOW_FACTOR` of real time is said with a warning: once in process, and every
+  ``warn_every_s`` for a stand-alone vehicle (``autopilot sim``, whose clock then lags the wall
+  clock as no real flight controller's does), which may also shed rendering
+  (``shed_rendering``: every other frame is skipped while behind; physics and telemetry come
+  first).
 
 Setpoints go into a thread-safe inbox and take effect at the start of the next batch; commands
 first flush that inbox, so "stream setpoints, then start OFFBOARD" works as on PX4.
@@ -23,6 +33,8 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import logging
+import math
 import time
 from collections import deque
 from collections.abc import AsyncIterator, Mapping, Sequence
@@ -45,7 +57,7 @@ from drivers.base import (
     VehicleError,
     VehicleState,
 )
-from drivers.clock import Clock, LockstepClock, MonotonicClock
+from drivers.clock import Clock, LockstepClock, PacedClock
 from drivers.mission import MissionItem, MissionType
 from drivers.sim.camera import RenderingUnavailable, lower_thread_priority
 from drivers.sim.config import SimConfig
@@ -57,19 +69,44 @@ from drivers.sim.scenario import ScenarioObject
 from drivers.sim.simulator import GroundTruth, Photo, SimOutput, Simulator
 from drivers.slots import Broadcast
 
+log = logging.getLogger(__name__)
+
+#: below this share of real time (over :data:`PACE_WINDOW_S` of wall time) the simulator says so
+SLOW_FACTOR = 0.9
+#: the wall-clock window over which the real-time factor is measured
+PACE_WINDOW_S = 2.0
+#: a batch's outputs waiting longer than this for the event loop: the loop stalled (the CPU is
+#: not slow); half the runtime's loop_stall_s (its default 0.5 s)
+STALL_S = 0.25
+#: once behind, rendering stays shed for at least this long (simulated seconds): shedding makes
+#: the next batches fast, and frames flickering on and off every batch would help nobody
+SHED_HOLD_S = 0.5
+
 
 class SimDriver(Vehicle):
     #: cameras are rendered only while something subscribes to their frames
     renders_on_demand = True
 
     def __init__(self, config: SimConfig, *, scenario: Sequence[ScenarioObject] = (),
-                 seed: int | None = None, lockstep: bool = True) -> None:
+                 seed: int | None = None, lockstep: bool = True,
+                 warn_every_s: float | None = None, shed_rendering: bool = False) -> None:
         self.config = config
         self._scenario = list(scenario)
         self._seed = config.seed if seed is None else seed
         self.lockstep = lockstep
-        self._clock: LockstepClock | MonotonicClock = LockstepClock() if lockstep \
-            else MonotonicClock()
+        self._clock: LockstepClock | PacedClock = LockstepClock() if lockstep \
+            else PacedClock()
+        #: real time: say "simulator at 0.6× real time" once (None) or every this many seconds
+        self.warn_every_s = warn_every_s
+        #: real time: skip rendering frames while the simulator cannot keep up
+        self.shed_rendering = shed_rendering
+        #: real time: the newest real-time factor (simulated / wall seconds over
+        #: PACE_WINDOW_S), and the lowest seen
+        self.pace_factor = math.nan
+        self.slowest_pace_factor = math.nan
+        self._pace_window: tuple[float, float] | None = None  # (wall, simulated) at its start
+        self._slow_warned_s = -math.inf
+        self._shed_until_s = -math.inf
         self._cameras = {name: reported_camera_info(name, cam)
                          for name, cam in config.cameras.items() if cam.enabled}
         self._executor: ThreadPoolExecutor | None = None
@@ -96,6 +133,7 @@ class SimDriver(Vehicle):
         self.latest_state: VehicleState | None = None
         self._wall_start = 0.0
         self._wall_busy_s = 0.0
+        self._batch_end = 0.0  # (perf_counter) when the newest batch ended
 
     # ------------------------------------------------------------------------------------
     # Vehicle interface
@@ -130,8 +168,9 @@ class SimDriver(Vehicle):
         self._task = loop.create_task(run(), name="sim-driver")
         # as a real link: connected once the vehicle has been heard from
         async with contextlib.aclosing(self.telemetry()) as samples:
-            try:
-                await self._clock.wait_for(anext(samples), timeout_s)
+            try:  # (on the wall clock: a simulator that never steps must not hang us)
+                await asyncio.wait_for(anext(samples), timeout_s) if not self.lockstep \
+                    else await self._clock.wait_for(anext(samples), timeout_s)
             except (TimeoutError, StopAsyncIteration):
                 await self.close()
                 raise ConnectionLost(
@@ -415,10 +454,65 @@ class SimDriver(Vehicle):
 
     def _batch(self, until_s: float) -> list[SimOutput]:
         started = time.perf_counter()
-        self._drain_inbox()
-        outputs = self._sim.advance_to(until_s)
-        self._wall_busy_s += time.perf_counter() - started
+        paced = isinstance(self._clock, PacedClock)
+        if paced:  # the world is not past this batch's end before the batch has computed it
+            self._clock.cap_at(until_s)
+        try:
+            self._drain_inbox()
+            outputs = self._sim.advance_to(until_s)
+        finally:
+            if paced:
+                self._clock.cap_at(None)
+        self._batch_end = time.perf_counter()
+        self._wall_busy_s += self._batch_end - started
         return outputs
+
+    def _pace(self, simulated_s: float, cycle_s: float) -> None:
+        """Real time, after a cycle (a batch, and handing its outputs over) that simulated
+        ``simulated_s`` in ``cycle_s`` of wall time: hold the clock back by what the CPU lost,
+        measure the real-time factor, say when it is low, and shed rendering while behind (if
+        asked). Not counted (``cycle_s`` leaves it out): a hand-over from the simulator's thread
+        to the event loop longer than :data:`STALL_S`, which is the event loop stalling, not
+        the CPU being slow; that time is caught up, as a vehicle flies on while its autopilot
+        stalls."""
+        clock, sim = self._clock, self._sim
+        lost = cycle_s - simulated_s
+        behind = clock.now() - sim.time_s
+        if lost > 0.0 and behind > 0.0:  # (never held back behind the world's own time)
+            clock.hold_back(min(lost, behind))
+            if self.shed_rendering:
+                self._shed_until_s = sim.time_s + SHED_HOLD_S
+        if self.shed_rendering:
+            sim.shed_rendering = sim.time_s < self._shed_until_s
+        wall = time.perf_counter()
+        if self._pace_window is None:
+            self._pace_window = (wall, sim.time_s)
+            return
+        wall0, sim0 = self._pace_window
+        if wall - wall0 < PACE_WINDOW_S:
+            return
+        self._pace_window = (wall, sim.time_s)
+        self.pace_factor = factor = (sim.time_s - sim0) / (wall - wall0)
+        if not factor >= self.slowest_pace_factor:
+            self.slowest_pace_factor = factor
+        if factor >= SLOW_FACTOR:
+            return
+        if self.warn_every_s is None:
+            if self._slow_warned_s > -math.inf:
+                return
+            log.warning("simulator at %.1f× real time: this machine cannot run it in real time "
+                        "now; the simulated world (its clock, telemetry and frames) slows down "
+                        "with it", factor)
+        elif wall - self._slow_warned_s >= self.warn_every_s:
+            shed = sum(cam.shed for cam in sim.cameras.values())
+            log.warning("simulator at %.1f× real time: the vehicle's clock lags the wall clock "
+                        "by %.1f s in all (no real flight controller's does)%s", factor,
+                        clock.held_back_s,
+                        f"; {shed} frames not rendered to keep up" if self.shed_rendering
+                        else "")
+        else:
+            return
+        self._slow_warned_s = wall
 
     def _broadcasts(self) -> list[Broadcast]:
         return [self._telemetry, self._truth, self._events, self._mission_events, self._photos,
@@ -469,11 +563,18 @@ class SimDriver(Vehicle):
         loop = asyncio.get_running_loop()
         sim = self._sim
         batch_s = self.config.realtime_batch_s
+        cycle_start = time.perf_counter()
         try:
             while True:
                 target = min(sim.next_event_s(), sim.time_s + batch_s)
+                started_s = sim.time_s
                 outputs = await loop.run_in_executor(self._executor, self._batch, target)
+                resumed = time.perf_counter()
+                handover = resumed - self._batch_end
+                stalled = handover if handover > STALL_S else 0.0
+                self._pace(sim.time_s - started_s, resumed - cycle_start - stalled)
                 await clock.sleep_until(sim.time_s)
+                cycle_start = time.perf_counter()  # (waiting for the clock is no loss)
                 self._publish(outputs)
         except asyncio.CancelledError:
             raise

@@ -186,6 +186,9 @@ class Simulator:
         self._capture_models = {name: CaptureModel(name, config.cameras[name], self.seed)
                                 for name in self.cameras}
         self._rig = CameraRig(self.model, self.seed)
+        #: real time, behind the wall clock: every other frame due is skipped, not rendered
+        #: (the physics and telemetry come first; set by the driver)
+        self.shed_rendering = False
         self._moving = [obj for obj in self.scenario if obj.moves]
         #: the rover (a scenario with one), its UWB anchors and its own telemetry
         self.rover: Rover | None = next((o for o in self.scenario if isinstance(o, Rover)),
@@ -361,7 +364,10 @@ class Simulator:
         for name, cam in self.cameras.items():
             sched = self._cam_schedules[name]
             if k >= sched.next_step:
-                if cam.active and not (self.faults and self.faults.camera(
+                if cam.active and self.shed_rendering and cam.may_shed:
+                    cam.shed += 1  # every other frame: the video goes on at half its rate
+                    cam.may_shed = False
+                elif cam.active and not (self.faults and self.faults.camera(
                         "camera_dropout", name, self._fault_time(t))):
                     capture = self._capture_models[name].next()
                     if capture.dropped:
@@ -370,6 +376,7 @@ class Simulator:
                         due = t + cam.latency_s + capture.delay_s
                         if motion is None:
                             motion = self._vehicle_motion()
+                        cam.may_shed = True
                         pending = self._rig.submit(self.data, cam, t,
                                                    due - self.cfg.realtime_render_lead_s,
                                                    motion, capture.gain)

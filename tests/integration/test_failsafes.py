@@ -208,6 +208,31 @@ def test_watchdog_measures_lag_and_reports_a_stall_while_it_lasts(caplog):
     assert dog.lag_percentile_ms(100) > 400.0
 
 
+def test_a_stall_the_vehicle_waited_for_does_not_fail_the_step():
+    """Real time, flying: a loop stall fails the step when the vehicle's clock ran on through
+    it (setpoints lapsed there), not when the vehicle's world waited (a real-time simulator
+    slowed with a starved CPU: its clock stood still with the loop)."""
+    from types import SimpleNamespace
+
+    from autopilot.runtime import Runtime
+
+    def runtime(clock_now, last_tick):
+        failed, events = [], []
+        rt = SimpleNamespace(
+            clock=SimpleNamespace(lockstep=False, now=lambda: clock_now),
+            config=SimpleNamespace(runtime=SimpleNamespace(setpoint_expiry_s=0.3)),
+            _tick_clock_s=last_tick, _state=SimpleNamespace(in_air=True),
+            _event=lambda t, kind, text: events.append(text), _fail_step=failed.append)
+        Runtime._on_loop_stall(rt, 0.8)
+        return failed, events
+
+    failed, events = runtime(10.05, 10.0)  # the vehicle's clock: 0.05 s through a 0.8 s stall
+    assert failed == []
+    assert "its world waited" in events[0]
+    failed, _ = runtime(10.85, 10.0)  # a vehicle whose clock ran on (any real one)
+    assert failed == ["event loop stalled for 0.80 s"]
+
+
 @pytest.mark.long
 def test_a_stalled_event_loop_in_real_time_ends_in_the_fallback(monkeypatch, tmp_path):
     """Real time: the loop blocks for 1.5 s while following; setpoints stop, the vehicle's
@@ -225,10 +250,11 @@ def test_a_stalled_event_loop_in_real_time_ends_in_the_fallback(monkeypatch, tmp
 
     monkeypatch.setattr(Runtime, "_next_tick", stalling)
     summary, orphans = _fly([], tmp_path, realtime=True)
-    # back from the stall, the pose it has is 1.5 s old: the stale-telemetry failsafe or the
-    # stall's own (whichever the control tick meets first) stops the step
+    # back from the stall the step does not resume: the stall's own failsafe stops it (the
+    # telemetry queued meanwhile arrives at once, so the vehicle is not silent past its
+    # telemetry_grace_s; the silence guard holds the step at most)
     assert summary["status"] in ("failed", "aborted")
-    assert "event loop stalled" in summary["reason"] or "telemetry stale" in summary["reason"]
+    assert "event loop stalled" in summary["reason"] or "telemetry lost" in summary["reason"]
     assert orphans == []
     log = read_log(tmp_path / "flight.mcap")
     texts = [e["text"] for e in log[ch.MISSION_EVENTS]]

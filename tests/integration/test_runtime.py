@@ -147,8 +147,9 @@ def test_stale_telemetry_during_the_return_home_does_not_stop_it(monkeypatch, tm
     log = read_log(tmp_path / "flight.mcap")
     events = [(e["time_s"], e["text"]) for e in log[ch.MISSION_EVENTS]]
     assert "fallback return_home started" in [text for _, text in events]
-    stale_at = next(t for t, text in events if text.startswith("telemetry stale"))
+    stale_at = next(t for t, text in events if text.startswith("telemetry silent"))
     assert stale_at > probe.seen["stopped_s"]
+    assert "the vehicle's return goes on" in next(text for t, text in events if t == stale_at)
     assert not [text for t, text in events if t >= stale_at and text.startswith("request")]
     # the simulated flight stack's own record: it returned and landed, never held
     after = [r for r in log[ch.GROUND_TRUTH] if r["time_s"] >= stale_at]
@@ -217,9 +218,12 @@ def test_stalled_control_stops_setpoints_and_the_vehicle_fails_safe(monkeypatch)
 
 
 def test_stale_telemetry_stops_setpoints_holds_and_lands(monkeypatch, tmp_path):
-    """The vehicle keeps flying but its telemetry stops (a stalled telemetry link): the runtime
-    must not fly on the old pose. It stops the motion setpoints, commands HOLD and lands."""
-    limit = load_mission("follow_ball").config.runtime.telemetry_max_age_s
+    """The vehicle keeps flying but its telemetry stops for good (a stalled telemetry link):
+    the runtime must not fly on the old pose. Silent for ``telemetry_silence_s``, it stops the
+    motion setpoints and commands HOLD; past ``telemetry_grace_s`` the step ends in the
+    fallback, which lands."""
+    runtime_cfg = load_mission("follow_ball").config.runtime
+    limit, grace = runtime_cfg.telemetry_silence_s, runtime_cfg.telemetry_grace_s
 
     async def stop_telemetry(runtime, probe, _task):
         await runtime.clock.sleep_until(12.0)  # following by then
@@ -234,20 +238,24 @@ def test_stale_telemetry_stops_setpoints_holds_and_lands(monkeypatch, tmp_path):
     summary, orphans = _fly([], tmp_path)
     assert probe.seen["step"] == "follow_ball"
     assert summary["status"] == "failed"
+    assert "telemetry lost" in summary["reason"]
     assert orphans == []
     from autopilot.flightlog.log import read_log
 
     log = read_log(tmp_path / "flight.mcap")
     stopped = probe.seen["stopped_s"]
     events = [(e["time_s"], e["text"]) for e in log[ch.MISSION_EVENTS]]
-    stale_at = next(t for t, text in events if text.startswith("telemetry stale"))
-    # noticed within the age limit plus a control period, not later
-    assert 0.0 < stale_at - stopped <= limit + 0.1
-    # no motion setpoint computed after that ...
-    assert all(sp["time_s"] <= stale_at for sp in log[ch.SETPOINTS])
+    silent_at = next(t for t, text in events if text.startswith("telemetry silent"))
+    lost_at = next(t for t, text in events if text.startswith("telemetry lost"))
+    # noticed within the silence limit plus a control period, not later; the step waited
+    # out the grace (counted from the last sample received) and no longer
+    assert 0.0 < silent_at - stopped <= limit + 0.1
+    assert grace - 0.1 <= lost_at - stopped <= grace + 0.1
+    # no motion setpoint computed after the silence began ...
+    assert all(sp["time_s"] <= silent_at for sp in log[ch.SETPOINTS])
     # ... HOLD, then the fallback's LAND; the vehicle (seen in the ground truth) came down
-    texts = [text for t, text in events if t >= stale_at]
-    assert "request hold" in texts
-    assert "request land" in texts
+    texts = [text for t, text in events if t >= silent_at]
+    assert texts.index("request hold") < texts.index("request land")
+    assert not [text for text in texts if text.startswith("telemetry back")]
     truth = log[ch.GROUND_TRUTH][-1]
     assert truth["vehicle_position_ned_m"][2] > -0.2  # on the ground

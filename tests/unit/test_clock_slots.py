@@ -180,3 +180,34 @@ def test_lockstep_budget_must_not_be_negative():
             await LockstepClock().run_blocking(lambda: None, budget_s=-1.0)
 
     asyncio.run(main())
+
+
+def test_a_paced_clock_held_back_stands_still_and_never_goes_back():
+    from drivers.clock import PacedClock
+
+    async def main():
+        clock = PacedClock(10.0)
+        before = clock.now()
+        clock.hold_back(0.2)  # the world lost 0.2 s to the CPU
+        during = [clock.now() for _ in range(100)]
+        assert all(t == before for t in during) or min(during) >= before
+        await asyncio.sleep(0.05)
+        assert clock.now() == pytest.approx(before, abs=1e-3)  # still standing
+        assert clock.held_back_s == pytest.approx(0.2)
+        # sleeps and timeouts are on this clock: a 0.1 s sleep from now ends when it reads
+        # now + 0.1, not 0.1 s of wall time later
+        start = clock.now()
+        await clock.sleep(0.1)
+        assert clock.now() >= start + 0.1
+        with pytest.raises(TimeoutError):
+            await clock.wait_for(asyncio.Event().wait(), 0.05)
+        # capped (the simulator computing up to there), it stands at the cap however long
+        # the computing takes, and goes on from there when uncapped, without a jump
+        cap = clock.now() + 0.02
+        clock.cap_at(cap)
+        await asyncio.sleep(0.1)
+        assert clock.now() == cap
+        clock.cap_at(None)
+        assert clock.now() == pytest.approx(cap, abs=0.01)
+
+    asyncio.run(main())
