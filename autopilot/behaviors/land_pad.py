@@ -3,10 +3,11 @@
 Phases (each shown as the step's phase):
 
 ``searching``
-    Not seen yet: climb (or stay) at ``search_altitude_m`` above the take-off point, then fly a
-    square spiral around where the search began, out to ``search_radius_m``, legs a camera
-    footprint apart; then wait over the start. Not found within ``search_timeout_s``: the step
-    fails (the mission's fallback lands where it is).
+    Not seen yet: the shared search (:mod:`autopilot.control.search`): climb (or stay) at
+    ``search_altitude_m`` above the take-off point, then fly an expanding square around where
+    the search began, out to ``search_radius_m``, its rings a camera footprint apart; then wait
+    over the start. Not found within ``search_timeout_s``: the step fails (the mission's
+    fallback lands where it is).
 ``aligning``
     Over the pad's estimate at the current height until within ``acceptance_radius_m`` for
     ``settle_s`` (PX4's ``PLD_HACC_RAD``).
@@ -62,6 +63,7 @@ from autopilot.behaviors.base import (
     VehicleRequest,
 )
 from autopilot.config import ColorName
+from autopilot.control.search import Search, SearchSettings, ring_spacing_m
 from autopilot.estimation.range_median import RangeMedian
 from drivers.base import FlightMode, Setpoint, VehicleState
 from drivers.geometry import quat_to_matrix
@@ -100,7 +102,8 @@ class LandPadParams(Params):
 @dataclass(frozen=True, slots=True)
 class LandPadSettings:
     lost_after_s: float  # no fresh estimate this long: lost
-    #: the down camera's footprint on the ground (shorter side) per metre of height
+    #: the width of ground the down camera sees per metre of height
+    #: (:func:`~autopilot.planning.footprint.footprint_width_per_m`)
     footprint_per_m: float = 1.2
 
 
@@ -118,27 +121,6 @@ def height_above(state: VehicleState, pad_down_m: float | None,
     return ground - float(state.position_ned_m[2])
 
 
-def square_spiral(centre_ne, spacing_m: float, radius_m: float) -> list[np.ndarray]:
-    """Corners of a square spiral out from ``centre_ne``, legs ``spacing_m`` apart, out to
-    ``radius_m`` (ending back at the centre)."""
-    centre = np.asarray(centre_ne, dtype=float)
-    points = [centre]
-    if radius_m <= 0.0 or spacing_m <= 0.0:
-        return points
-    x = y = 0.0
-    leg, k = spacing_m, 0
-    dirs = ((1, 0), (0, 1), (-1, 0), (0, -1))
-    while leg <= 2.0 * radius_m + 1e-9:
-        for _ in range(2):
-            dx, dy = dirs[k % 4]
-            x, y = x + dx * leg, y + dy * leg
-            k += 1
-            points.append(centre + np.array([x, y]))
-        leg += spacing_m
-    points.append(centre)
-    return points
-
-
 class LandPad(Behavior):
     name = "land_pad"
 
@@ -149,8 +131,7 @@ class LandPad(Behavior):
         self.retries = 0
         self._start = 0.0
         self._phase_since = 0.0
-        self._search_start = 0.0
-        self._waypoints: list[np.ndarray] = []
+        self._search = Search(self._search_settings())
         self._hold = np.zeros(3)
         self._yaw = 0.0
         self._z_ref = 0.0
@@ -183,12 +164,14 @@ class LandPad(Behavior):
         return t is not None and not t.stale and t.confirmed \
             and t.age_s <= self.settings.lost_after_s
 
-    def _start_search(self, inputs: BehaviorInputs, centre_ne) -> None:
+    def _search_settings(self) -> SearchSettings:
         p = self.params
-        self._search_start = inputs.now_s
-        spacing = 0.8 * self.settings.footprint_per_m * p.search_altitude_m
-        self._waypoints = square_spiral(centre_ne, min(spacing, max(p.search_radius_m, 1e-3)),
-                                        p.search_radius_m)
+        spacing = ring_spacing_m(self.settings.footprint_per_m, p.search_altitude_m, p.size_m)
+        return SearchSettings(p.search_altitude_m, p.search_radius_m, spacing,
+                              p.search_speed_m_s, p.search_timeout_s)
+
+    def _start_search(self, inputs: BehaviorInputs, centre_ne) -> None:
+        self._search.start(inputs.now_s, centre_ne)
         self._set_phase("searching", inputs.now_s)
 
     # -- lifecycle -----------------------------------------------------------------------
@@ -242,26 +225,11 @@ class LandPad(Behavior):
         p, s, now = self.params, inputs.state, inputs.now_s
         if fresh:
             return self._start_aligning(inputs, dt)
-        if now - self._search_start > p.search_timeout_s:
+        command = self._search.update(now, s.position_ned_m)
+        if command.timed_out:
             return self._out(self._setpoint(self._hold_here(s), now), Status.FAILED,
                              reason=f"pad not found in {p.search_timeout_s:g} s")
-        z_search = -p.search_altitude_m
-        if abs(float(s.position_ned_m[2]) - z_search) > 0.3 and len(self._waypoints) > 0 \
-                and self._waypoints[0] is not None:
-            # climb (or descend) to the search altitude where the search began
-            here = self._waypoints[0]
-            return self._out(self._setpoint((here[0], here[1], z_search), now))
-        while len(self._waypoints) > 1 and np.linalg.norm(
-                s.position_ned_m[:2] - self._waypoints[0]) < 0.3:
-            self._waypoints.pop(0)
-        goal = self._waypoints[0]
-        # towards the next corner at the search speed (a moving position setpoint)
-        here = np.asarray(s.position_ned_m[:2], dtype=float)
-        step = goal - here
-        dist = float(np.linalg.norm(step))
-        lead = min(dist, p.search_speed_m_s * 1.0)
-        target = here + (step / dist * lead if dist > 1e-6 else 0.0)
-        return self._out(self._setpoint((target[0], target[1], z_search), now))
+        return self._out(self._setpoint(command.position_ned_m, now))
 
     def _start_aligning(self, inputs: BehaviorInputs, dt: float) -> BehaviorOutput:
         """The pad is seen (first, or again): over it at this height."""

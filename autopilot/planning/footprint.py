@@ -38,3 +38,29 @@ def ground_footprint(intrinsics: CameraIntrinsics, rotation_body_cam: np.ndarray
         return None
     scale = height / rays[:, 2]
     return origin[:2] + rays[:, :2] * scale[:, None]
+
+
+def footprint_width_per_m(intrinsics: CameraIntrinsics, rotation_body_cam: np.ndarray,
+                          position_body_m: np.ndarray) -> float:
+    """How wide a strip of ground a camera sees under a level vehicle, per metre of height:
+    the diameter of the largest circle around the point under the vehicle that lies wholly
+    inside the image's outline on the ground (lens and mount included). A circle, because it
+    holds at any heading; 0 when the camera does not see the ground under the vehicle.
+
+    For a camera looking straight down this is the image's shorter side on the ground; the
+    outline scales with the camera's height, so one metre gives the figure for any height."""
+    height_m = 1.0  # of the camera (a camera below the body's origin sees from lower down)
+    vehicle = np.array([0.0, 0.0, -height_m - float(np.asarray(position_body_m)[2])])
+    outline = ground_footprint(intrinsics, rotation_body_cam, position_body_m, vehicle,
+                               np.array([1.0, 0.0, 0.0, 0.0]))
+    if outline is None:
+        return 0.0
+    a, b = outline, np.roll(outline, -1, axis=0)
+    # inside: the outline winds the same way round the nadir at every edge
+    cross = (b[:, 0] - a[:, 0]) * (-a[:, 1]) - (b[:, 1] - a[:, 1]) * (-a[:, 0])
+    if not (np.all(cross > 0) or np.all(cross < 0)):
+        return 0.0
+    edge = b - a
+    t = np.clip(np.einsum("ij,ij->i", -a, edge) / np.einsum("ij,ij->i", edge, edge), 0.0, 1.0)
+    nearest = a + edge * t[:, None]
+    return 2.0 * float(np.min(np.linalg.norm(nearest, axis=1))) / height_m

@@ -25,7 +25,7 @@ from autopilot.flightlog import records as ch
 from autopilot.flightlog.metrics import FollowedTarget, estimation_metrics, in_image, project_target
 from autopilot.flightlog.truth import truth_table
 from autopilot.perception.image_pipeline import image_spec
-from autopilot.steps.follow_ball import camera_of
+from autopilot.steps.land_pad import search_footprint_per_m
 from autopilot.steps.registry import StepContext, StepKind, register
 from drivers.geometry import quat_to_matrix
 
@@ -35,9 +35,10 @@ SETTLE_S = 3.0
 
 def _behavior(params: HoverImageParams, ctx: StepContext) -> HoverImage:
     config = ctx.config
-    camera_of(ctx, config.perception.image.camera, "perception.image.camera")
+    footprint = search_footprint_per_m(ctx, config.perception.image.camera,
+                                       "perception.image.camera")
     f = config.control.follow
-    return HoverImage(params, HoverSettings(f.lost_after_s, f.lost_timeout_s))
+    return HoverImage(params, HoverSettings(f.lost_after_s, f.lost_timeout_s, footprint))
 
 
 def _yaw(q) -> float:

@@ -16,10 +16,12 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from autopilot.behaviors.land_pad import LandPad, LandPadParams, LandPadSettings
+from autopilot.config import ConfigError, Problem
 from autopilot.flightlog import records as ch
 from autopilot.flightlog.metrics import FollowedTarget, estimation_metrics, phase_entries
 from autopilot.flightlog.truth import truth_table
 from autopilot.perception.pad_pipeline import pad_spec
+from autopilot.planning.footprint import footprint_width_per_m
 from autopilot.steps.follow_ball import camera_of
 from autopilot.steps.registry import StepContext, StepKind, register
 
@@ -27,11 +29,24 @@ from autopilot.steps.registry import StepContext, StepKind, register
 _REST_BAND_M = 0.015
 
 
+def search_footprint_per_m(ctx: StepContext, name: str, key: str) -> float:
+    """The width of ground camera ``name`` sees under the vehicle per metre of height, what a
+    down-camera step's search spaces its rings by; a camera that does not see the ground under
+    the vehicle cannot search."""
+    camera = camera_of(ctx, name, key)
+    width = footprint_width_per_m(camera.intrinsics, camera.rotation_body_cam,
+                                  camera.position_body_m)
+    if width <= 0.0:
+        raise ConfigError([Problem("config", None, key,
+                                   f"camera {name!r} does not see the ground under the vehicle "
+                                   "(a down-camera step searches with it)")])
+    return width
+
+
 def _behavior(params: LandPadParams, ctx: StepContext) -> LandPad:
     config = ctx.config
-    camera = camera_of(ctx, config.perception.pad.camera, "perception.pad.camera")
-    intr = camera.intrinsics
-    footprint = min(intr.width_px / intr.fx, intr.height_px / intr.fy)
+    footprint = search_footprint_per_m(ctx, config.perception.pad.camera,
+                                       "perception.pad.camera")
     return LandPad(params, LandPadSettings(config.control.follow.lost_after_s, footprint))
 
 

@@ -9,6 +9,7 @@ from collections.abc import AsyncIterator
 import numpy as np
 
 from autopilot.flight_ops import stream_setpoints, wait_for_state
+from autopilot.flightlog import records as ch
 from drivers.base import FlightMode, Setpoint
 from drivers.sim.driver import SimDriver
 
@@ -100,3 +101,13 @@ async def record_truth(driver: SimDriver, duration_s: float):
     with contextlib.suppress(asyncio.CancelledError):
         await task
     return samples
+
+
+def searched(log, step: str) -> dict:
+    """What the step's search did, from the flight log: how far from where the step began its
+    setpoints went, and the highest they went (m above the take-off point)."""
+    points = np.array([r["position_ned_m"] for r in log[ch.SETPOINTS]
+                       if r.get("step") == step and r.get("phase") == "searching"])
+    start = points[0]
+    return {"out_m": float(np.max(np.hypot(*(points[:, :2] - start[:2]).T))),
+            "up_m": float(-np.min(points[:, 2]))}

@@ -1,15 +1,19 @@
 """land_pad (seed 001) through the runtime on the lockstep clock: the down camera finds the
 red pad, the vehicle descends onto it and lands on it; the logged frames replay through the
-detector to the same detections. A pad that is not there is not found: the fallback lands."""
+detector to the same detections. A pad 4 m off is searched for and landed on; a pad that is
+not there is not found: the fallback lands."""
 
 import asyncio
 
 import pytest
 
+from autopilot.flightlog.log import read_log
 from autopilot.mission import load_mission
 from autopilot.replay import replay
 from autopilot.report.html import write_report
 from autopilot.run import fly
+
+from .simtools import searched
 
 
 def test_land_pad_closed_loop_and_replay(tmp_path):
@@ -38,6 +42,20 @@ def test_land_pad_closed_loop_and_replay(tmp_path):
     # and a pipeline told the pad is blue finds nothing in the same frames
     blind = replay(tmp_path, ["perception.pad.hsv_ranges=[[[100, 120, 60], [125, 255, 255]]]"])
     assert blind["metrics"]["landing"]["detected_frames"] == 0
+
+
+def test_a_pad_4_m_away_is_searched_for_and_landed_on(tmp_path):
+    plan = load_mission("land_pad", ["scenario.pad.north_east_m=[-4, 0]"])
+    summary = asyncio.run(fly(plan, tmp_path))
+    assert summary["status"] == "completed"
+    landing = summary["metrics"]["landing"]
+    assert landing["landed"]
+    assert landing["error_m"] <= 0.05
+    assert landing["retries"] == 0
+    # climbed to the search altitude and flew out along the square before it had the pad
+    flown = searched(read_log(tmp_path / "flight.mcap"), "land_pad")
+    assert flown["up_m"] == pytest.approx(6.0)
+    assert flown["out_m"] > 3.0
 
 
 def test_a_pad_that_is_not_there_is_not_found_and_the_fallback_lands():

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from autopilot.behaviors.base import BehaviorInputs, RequestKind, Status
-from autopilot.behaviors.land_pad import LandPad, LandPadParams, LandPadSettings, square_spiral
+from autopilot.behaviors.land_pad import LandPad, LandPadParams, LandPadSettings
 from autopilot.config import ConfigError
 from autopilot.estimation.target import TargetEstimate
 from autopilot.mission import load_mission
@@ -33,18 +33,6 @@ def _fly(behavior, t, pos, target=None, vel=(0.0, 0.0, 0.0), **state):
                                           target=target))
 
 
-def test_square_spiral_covers_the_search_area_and_returns():
-    corners = square_spiral((1.0, 2.0), 2.0, 4.0)
-    assert corners[0] == pytest.approx((1.0, 2.0))
-    assert corners[-1] == pytest.approx((1.0, 2.0))
-    reach = np.abs(np.array(corners) - (1.0, 2.0)).max(axis=0)
-    assert (reach >= 4.0).all()
-    assert (reach <= 6.0).all()
-    legs = np.linalg.norm(np.diff(np.array(corners[:-1]), axis=0), axis=1)
-    assert legs[:4] == pytest.approx([2.0, 2.0, 4.0, 4.0])
-    assert square_spiral((0.0, 0.0), 2.0, 0.0) == [pytest.approx((0.0, 0.0))]
-
-
 def test_searches_at_the_search_altitude_then_fails_when_nothing_is_found():
     land = _landing(search_altitude_m=6.0, search_timeout_s=20.0, search_radius_m=4.0)
     out = land.activate(BehaviorInputs(0.0, vehicle_state(0.0, pos=(0.0, 0.0, -3.0))))
@@ -52,9 +40,11 @@ def test_searches_at_the_search_altitude_then_fails_when_nothing_is_found():
     out = _fly(land, 0.1, (0.0, 0.0, -3.0))
     assert out.phase == "searching"
     assert out.setpoint.position_ned_m == pytest.approx((0.0, 0.0, -6.0))  # climb first
-    out = _fly(land, 5.0, (0.0, 0.0, -6.0))  # then out along the spiral
-    assert out.setpoint.position_ned_m[2] == pytest.approx(-6.0)
-    assert np.hypot(*out.setpoint.position_ned_m[:2]) > 0.5
+    out = _fly(land, 5.0, (0.0, 0.0, -6.0))  # then out along the expanding square
+    assert out.phase == "searching"
+    assert out.setpoint.position_ned_m == pytest.approx((2.0, 0.0, -6.0))  # north, 2 m ahead
+    # one ring (6 m up the camera sees 0.8 × (1.2 × 6 − 0.8) = 5.1 m wide: ≥ the radius)
+    assert [tuple(c) for c in land._search.waypoints[1:3]] == [(4.0, 0.0), (4.0, 4.0)]
     out = _fly(land, 20.5, (1.0, 1.0, -6.0))
     assert out.status is Status.FAILED
     assert "not found" in out.reason
