@@ -15,7 +15,9 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from autopilot.behaviors.base import Behavior
 from autopilot.behaviors.land_pad import LandPad, LandPadParams, LandPadSettings
+from autopilot.behaviors.land_pad_seed001 import Seed001LandPad
 from autopilot.flightlog import records as ch
 from autopilot.flightlog.metrics import FollowedTarget, estimation_metrics, phase_entries
 from autopilot.flightlog.truth import truth_table
@@ -27,15 +29,26 @@ from autopilot.steps.registry import StepContext, StepKind, register
 _REST_BAND_M = 0.015
 
 
-def _behavior(params: LandPadParams, ctx: StepContext) -> LandPad:
+#: the step's landers (``lander``): ours, and seed 001's own logic (a baseline)
+LANDERS = {
+    "ours": lambda params, settings, camera: LandPad(params, settings),
+    "seed001": Seed001LandPad,
+}
+
+
+def _behavior(params: LandPadParams, ctx: StepContext) -> Behavior:
     config = ctx.config
     camera = camera_of(ctx, config.perception.pad.camera, "perception.pad.camera")
     intr = camera.intrinsics
     footprint = min(intr.width_px / intr.fx, intr.height_px / intr.fy)
-    return LandPad(params, LandPadSettings(config.control.follow.lost_after_s, footprint))
+    settings = LandPadSettings(config.control.follow.lost_after_s, footprint)
+    return LANDERS[params.lander](params, settings, camera)
 
 
 def _spec(params: LandPadParams, config):
+    if params.lander == "seed001" and params.method == "px4_precland":
+        raise ValueError("lander: seed001 lands with its own logic: method px4_precland "
+                         "does not apply (use method: offboard)")
     if config.perception.pad.detector == "seed001" and params.pad != "circle":
         raise ValueError(f"pad: {params.pad} cannot be found by perception.pad.detector "
                          "seed001 (template matching of a disc): use a circle pad or the "
