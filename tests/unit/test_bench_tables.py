@@ -110,3 +110,19 @@ def test_results_of_rows_flown_apart_are_pooled_into_one_table():
     page = tables.render(parts)
     assert "flown as 3 processes" in page
     assert page.count("| ours |") == 1
+
+
+def test_offboard_never_leaves_a_run_without_its_figure_out_of_the_worst():
+    from autopilot.bench import offboard
+
+    keys = (*offboard.METRICS["orbit"], "real_time_factor")
+    full = {"seed": 1, "status": "completed", **dict.fromkeys(keys, 0.05)}
+    short = {"seed": 2, "status": "failed", **dict.fromkeys(keys)}
+    s = offboard._summarise([full, short], "orbit")
+    assert s["rms_cross_track_m_mean"] == pytest.approx(0.05)
+    assert s["rms_cross_track_m_n"] == 1
+    assert s["rms_cross_track_m_worst"] is None
+    table = offboard.format_table({"seeds": 2, "scenarios": {"orbit": {
+        "mission": "orbit", "overrides": [], "summary": {"ours": s},
+        "seed004_over_ours": None}}})
+    assert "0.050 [1] (fail)" in table
