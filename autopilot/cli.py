@@ -294,6 +294,8 @@ def build_parser() -> argparse.ArgumentParser:
                           help="one seed of a shortened default scenario (what CI flies)")
         down.add_argument("--row", dest="rows", action="append", default=None, metavar="NAME",
                           help="only this row (ours or a baseline; repeatable)")
+        down.add_argument("--seed-start", type=int, default=1, metavar="S",
+                          help="the first scenario seed (default 1)")
         down.add_argument("--set", dest="overrides", action="append", default=[],
                           metavar="KEY=VALUE", help="override a mission or configuration key")
 
@@ -1033,7 +1035,7 @@ def _bench(args: argparse.Namespace) -> int:
         if unknown:
             raise InputError(f"--row {unknown[0]}: no such row (known: {', '.join(rows)})")
         result = down.run_bench(args.bench, args.seeds, args.overrides, log, args.scenarios,
-                                quick=args.quick, rows=args.rows)
+                                quick=args.quick, rows=args.rows, seed_start=args.seed_start)
         print(json.dumps(result) if args.json else down.format_table(result))
         return EXIT_OK
 

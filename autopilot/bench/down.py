@@ -106,10 +106,10 @@ TIE_M = 0.02
 def run_bench(bench: str, seeds: int = 3, overrides: Sequence[str] = (),
               log: Callable[[str], None] = lambda message: None,
               scenarios: Sequence[str] | None = None, *, quick: bool = False,
-              rows: Sequence[str] | None = None) -> dict:
+              rows: Sequence[str] | None = None, seed_start: int = 1) -> dict:
     spec = BENCHES[bench]
     if quick:
-        seeds, scenarios = 1, ["default"]
+        seeds, scenarios, seed_start = 1, ["default"], 1
     results: dict[str, dict] = {}
     for scenario, scenario_overrides in spec.scenarios.items():
         if scenarios is not None and scenario not in scenarios:
@@ -119,7 +119,7 @@ def run_bench(bench: str, seeds: int = 3, overrides: Sequence[str] = (),
             if rows is not None and row not in rows:
                 continue
             runs[row] = []
-            for seed in range(1, seeds + 1):
+            for seed in range(seed_start, seed_start + seeds):
                 log(f"{scenario}: {row}, seed {seed} …")
                 plan = load_mission(spec.mission, [
                     *scenario_overrides, *(spec.quick if quick else ()), f"scenario.seed={seed}",
@@ -132,7 +132,8 @@ def run_bench(bench: str, seeds: int = 3, overrides: Sequence[str] = (),
             "overrides": list(scenario_overrides), "runs": runs, "summary": table,
             "baseline_over_ours": {r: ratio(table[r], table[first], spec.error)
                                    for r in table if r != first}}
-    return {"bench": bench, "mission": spec.mission, "seeds": seeds, "quick": quick,
+    return {"bench": bench, "mission": spec.mission, "seeds": seeds, "seed_start": seed_start,
+            "quick": quick,
             "overrides": list(overrides), "compared": spec.error,
             "rows": {r: list(o) for r, o in spec.rows.items() if rows is None or r in rows},
             "scenarios": results}
@@ -164,8 +165,10 @@ def merge(results: Sequence[dict]) -> dict:
             "overrides": data["overrides"], "runs": runs, "summary": table,
             "baseline_over_ours": {row: ratio(table[row], table[head], spec.error)
                                    for row in table if row != head}}
-    seeds = sorted({len(v) for d in scenarios.values() for v in d["runs"].values()})
-    return {**first, "seeds": seeds[-1] if seeds else first["seeds"],
+    seeds = sorted({r["seed"] for d in scenarios.values() for v in d["runs"].values()
+                    for r in v})
+    return {**first, "seeds": len(seeds) or first["seeds"],
+            "seed_start": seeds[0] if seeds else first.get("seed_start", 1),
             "rows": {row: list(o) for row, o in spec.rows.items()
                      if any(row in d["runs"] for d in scenarios.values())},
             "scenarios": scenarios}

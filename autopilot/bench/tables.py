@@ -35,6 +35,8 @@ def command_of(result: dict) -> str:
         parts.append("--quick")
     else:
         parts.append(f"--seeds {result['seeds']}")
+        if result.get("seed_start", 1) != 1:
+            parts.append(f"--seed-start {result['seed_start']}")
     parts += [f"--set {o}" for o in result.get("overrides") or ()]
     return " ".join(parts) + " --json"
 
