@@ -279,17 +279,25 @@ def build_parser() -> argparse.ArgumentParser:
         follow.add_argument("--set", dest="overrides", action="append", default=[],
                             metavar="KEY=VALUE", help="override a mission or configuration key")
 
-    for name, seed in (("hover_image", "seed 000's ORB 300 + FLANN + solvePnPRansac"),
-                       ("land_pad", "seed 001's multi-scale TM_CCOEFF template matching")):
+    for name, seed in (("hover_image", "seed 000's ORB 300 + FLANN + solvePnPRansac, flown "
+                                       "with our controller"),
+                       ("land_pad", "seed 001's multi-scale TM_CCOEFF template matching, "
+                                    "flown with our lander and with seed 001's own")):
         down = benches.add_parser(
             name, help=f"{name}: default and hard (gusts, target offset and turned"
-            f"{', decoys' if name == 'land_pad' else ''}) scenarios over a few seeds, our "
-            f"detector against {seed}, flown with our controller")
+            f"{', decoys' if name == 'land_pad' else ''}) scenarios over a few seeds, ours "
+            f"against {seed}; a run without its figure counts as a failure")
         down.add_argument("--json", action="store_true", help="print one JSON object on stdout")
         down.add_argument("--seeds", type=int, default=3, metavar="N",
                           help="scenario seeds per scenario and detector (default 3)")
         down.add_argument("--scenario", dest="scenarios", action="append", default=None,
                           metavar="NAME", help="only this scenario (repeatable)")
+        down.add_argument("--quick", action="store_true",
+                          help="one seed of a shortened default scenario (what CI flies)")
+        down.add_argument("--row", dest="rows", action="append", default=None, metavar="NAME",
+                          help="only this row (ours or a baseline; repeatable)")
+        down.add_argument("--seed-start", type=int, default=1, metavar="S",
+                          help="the first scenario seed (default 1)")
         down.add_argument("--set", dest="overrides", action="append", default=[],
                           metavar="KEY=VALUE", help="override a mission or configuration key")
 
@@ -1042,7 +1050,12 @@ def _bench(args: argparse.Namespace) -> int:
                              f"{', '.join(known)})")
         if args.seeds < 1:
             raise InputError(f"--seeds {args.seeds}: at least 1")
-        result = down.run_bench(args.bench, args.seeds, args.overrides, log, args.scenarios)
+        rows = down.BENCHES[args.bench].rows
+        unknown = [r for r in args.rows or () if r not in rows]
+        if unknown:
+            raise InputError(f"--row {unknown[0]}: no such row (known: {', '.join(rows)})")
+        result = down.run_bench(args.bench, args.seeds, args.overrides, log, args.scenarios,
+                                quick=args.quick, rows=args.rows, seed_start=args.seed_start)
         print(json.dumps(result) if args.json else down.format_table(result))
         return EXIT_OK
 

@@ -78,6 +78,9 @@ class LandPadParams(Params):
     ids: tuple[int, int, int, int, int] = (0, 1, 2, 3, 4)  # markers: centre first
     #: offboard: this step flies the descent; px4_precland: PX4's precision landing does
     method: Literal["offboard", "px4_precland"] = "offboard"
+    #: ours, or seed001: seed 001's own landing logic once the pad is seen (a baseline for
+    #: `autopilot bench land_pad`; :mod:`autopilot.behaviors.land_pad_seed001`)
+    lander: Literal["ours", "seed001"] = "ours"
     search_altitude_m: Annotated[float, Field(gt=0.5, le=100)] = 6.0  # PLD_SRCH_ALT
     search_timeout_s: Positive = 40.0  # PLD_SRCH_TOUT
     search_radius_m: Annotated[float, Field(ge=0, le=100)] = 4.0  # 0: climb and look only

@@ -60,6 +60,9 @@ def summarise(result: TrialsResult) -> dict:
            if r["metrics"].get("relative.rms_horizontal_error_m") is not None]
     within = [r["metrics"]["relative.within_2sigma"] for r in result.runs
               if r["metrics"].get("relative.within_2sigma") is not None]
+    # an estimate's RMS is only what it is over the ticks it had an estimate: shown with these
+    lost = [r["metrics"]["relative.lost_share"] for r in result.runs
+            if r["metrics"].get("relative.lost_share") is not None]
     worst = int(np.argmax(errors)) if errors else None
     return {
         "trials": len(result.runs),
@@ -74,6 +77,7 @@ def summarise(result: TrialsResult) -> dict:
         "mean_retries": float(np.mean(retries)) if retries else None,
         "median_touchdown_horizontal_speed_m_s": _percentile(speeds, 50),
         "median_relative_rms_error_m": _percentile(rel, 50),
+        "median_relative_lost_share": _percentile(lost, 50),
         "median_within_2sigma": _percentile(within, 50),
         "failing_seeds": [r["seed"] for r in result.failing],
         "replay": {str(r["seed"]): result.replay_command(r) for r in result.failing},
@@ -115,9 +119,10 @@ def format_table(result: dict) -> str:
             ("mean retries", "mean_retries", "{:.2f}"),
             ("touchdown h-speed (m/s)", "median_touchdown_horizontal_speed_m_s", "{:.2f}"),
             ("estimate rms (m)", "median_relative_rms_error_m", "{:.3f}"),
+            ("estimate lost share", "median_relative_lost_share", "{:.2f}"),
             ("within 2 sigma", "median_within_2sigma", "{:.2f}"))
     for label, key, fmt in rows:
-        lines.append(f"{label:26s}" + "".join(f"{cell(result[n][key], fmt):>16s}"
+        lines.append(f"{label:26s}" + "".join(f"{cell(result[n].get(key), fmt):>16s}"
                                                for n in names))
     for n in names:
         for seed, command in result[n]["replay"].items():

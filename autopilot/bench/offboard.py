@@ -82,7 +82,11 @@ def _summarise(runs: list[dict], mission: str) -> dict:
         worst = min if key in ("coverage", "photos", "centre_in_frame", "forward_overlap_min",
                                "side_overlap_min", "real_time_factor") else max
         out[f"{key}_mean"] = float(np.mean(values)) if values else None
-        out[f"{key}_worst"] = float(worst(values)) if values else None
+        out[f"{key}_n"] = len(values)
+        # a run without the figure (it never got that far) is never left out of the worst:
+        # the worst is then a failure (null), and the mean says over how many runs it is
+        out[f"{key}_worst"] = float(worst(values)) if values and len(values) == len(runs) \
+            else None
     return out
 
 
@@ -97,8 +101,10 @@ def format_table(result: dict) -> str:
         for tracker, s in data["summary"].items():
             cells = []
             for k in keys:
-                mean, worst = s[f"{k}_mean"], s[f"{k}_worst"]
-                cell = "n/a" if mean is None else f"{mean:.3f} ({worst:.3f})"
+                mean, worst, n = s[f"{k}_mean"], s[f"{k}_worst"], s.get(f"{k}_n", s["runs"])
+                cell = "n/a" if mean is None else (
+                    f"{mean:.3f}" + (f" ({worst:.3f})" if worst is not None
+                                     else f" [{n}] (fail)"))
                 cells.append(f"{cell:>{max(len(k), 15) + 2}}")
             ratio = data["seed004_over_ours"] if tracker == "seed004" else None
             lines.append(f"  {tracker:<9}{s['completed']:>6}/{s['runs']:<3}" + "".join(cells)

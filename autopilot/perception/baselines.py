@@ -12,10 +12,21 @@ report's advice for the reference, blurring it as the camera blurs, is followed:
 to 320 px wide, about its size in the frame from 1-2 m.
 
 ``Seed001PadDetector`` (seed 001, landing on a red pad): multi-scale template matching,
-``TM_CCOEFF`` over the colour frame, with one template (the pad as printed, reduced) at scales
-0.5-2; the best match over scales wins if it clears a confidence threshold. The report's
-threshold was an absolute ``TM_CCOEFF`` value tuned to its template; here it is the same idea
-made scale-free: the score over the template's own zero-mean energy at that scale must reach
+``TM_CCOEFF`` over the colour frame (the report's ``IMAGE_COMPARISON_TYPE = cv2.TM_CCOEFF``),
+with one template, the pad as printed, in copies on various scales ("a single template of
+relatively large size will be stored locally, copies will be made on various scales", its
+§1.3.6); the best match over scales wins if it clears a confidence threshold. The scales cover
+the pad's apparent size over the whole descent: from ``max_height_m`` above it (above the
+land_pad search altitude, 6 m) down to the height where the printed pad fills the frame's
+shorter side — the lowest a template can be matched at all (``matchTemplate`` needs the
+template inside the frame; with the shipped down camera, 80° over 640 px, about 0.8 m for the
+0.8 m disc) — in a geometric progression ``scale_step`` apart (1.25: 13 templates), the worst
+mismatch between the pad and the nearest template being the square root of that (±12 %; the
+report's own test used 0.5, 1, 1.5, 2 and found that the closest scale locates best; at a step
+of √2 rendered frames were missed at some heights). The scales are set from the camera's focal
+length and frame on the first frame. The report's threshold was an absolute ``TM_CCOEFF``
+value tuned to its template (``CONFIDENCE = 53500000.0``); here it is the same idea made
+scale-free: the score over the template's own zero-mean energy at that scale must reach
 ``min_confidence``. The pad's centre is the matched window's centre; its range, from the
 template's scale (the disc's apparent radius).
 """
@@ -108,28 +119,54 @@ class Seed001PadDetector:
 
     kind = "circle"
 
-    def __init__(self, color: str, diameter_m: float, *, base_diameter_px: int = 80,
-                 scales=(0.5, 0.75, 1.0, 1.25, 1.5, 2.0), min_confidence: float = 0.5) -> None:
+    def __init__(self, color: str, diameter_m: float, *, max_height_m: float = 10.0,
+                 scale_step: float = 1.25, min_confidence: float = 0.5) -> None:
+        if not scale_step > 1.0:
+            raise ValueError(f"scale_step {scale_step}: must be above 1")
         self.diameter_m = diameter_m
-        printed = circle_pad_texture(color, 512)
+        self.max_height_m = max_height_m
+        self.scale_step = scale_step
+        self.min_confidence = min_confidence
+        self._printed = circle_pad_texture(color, 1024)
+        self._for: tuple | None = None  # the camera the templates were made for
+        self._templates: list[tuple[np.ndarray, float, float]] = []
+
+    def disc_sizes_px(self, fx: float, frame_min_px: int) -> list[float]:
+        """The disc's apparent diameters the templates are made at, for a camera of focal
+        length ``fx`` (px) whose frame's shorter side is ``frame_min_px``: from the pad seen
+        from ``max_height_m`` to the pad as printed filling the frame's shorter side."""
+        smallest = fx * self.diameter_m / self.max_height_m
+        largest = frame_min_px / CIRCLE_BOARD_RATIO
+        if largest <= smallest:
+            return [largest]
+        n = math.ceil(math.log(largest / smallest) / math.log(self.scale_step) - 1e-9)
+        return [smallest * (largest / smallest) ** (k / n) for k in range(n + 1)]
+
+    def height_range_m(self, fx: float, frame_min_px: int) -> tuple[float, float]:
+        """The heights over the pad (lowest, highest) the templates were made for."""
+        sizes = self.disc_sizes_px(fx, frame_min_px)
+        return fx * self.diameter_m / sizes[-1], fx * self.diameter_m / sizes[0]
+
+    def _prepare(self, camera: CameraInfo, h: int, w: int) -> None:
+        key = (camera.intrinsics.fx, h, w)
+        if self._for == key:
+            return
         self._templates = []
-        for scale in scales:
-            disc_px = base_diameter_px * scale
-            side = max(8, round(disc_px * CIRCLE_BOARD_RATIO))
-            t = cv2.resize(printed, (side, side), interpolation=cv2.INTER_AREA)
+        for disc_px in self.disc_sizes_px(camera.intrinsics.fx, min(h, w)):
+            side = min(min(h, w), max(8, round(disc_px * CIRCLE_BOARD_RATIO)))
+            t = cv2.resize(self._printed, (side, side), interpolation=cv2.INTER_AREA)
             zero_mean = t.astype(np.float64) - t.reshape(-1, 3).mean(axis=0)
             energy = float(np.sum(zero_mean ** 2))
-            self._templates.append((t, disc_px / 2.0, energy))
-        self.min_confidence = min_confidence
+            self._templates.append((t, side / CIRCLE_BOARD_RATIO / 2.0, energy))
+        self._for = key
 
     def detect(self, image_bgr: np.ndarray, camera: CameraInfo,
                time_s: float) -> PadDetection | None:
         h, w = image_bgr.shape[:2]
+        self._prepare(camera, h, w)
         best = None
         for template, radius_px, energy in self._templates:
             th, tw = template.shape[:2]
-            if th > h or tw > w:
-                continue
             res = cv2.matchTemplate(image_bgr, template, cv2.TM_CCOEFF)
             _, max_val, _, max_loc = cv2.minMaxLoc(res)
             confidence = max_val / energy if energy > 0 else 0.0

@@ -4,7 +4,9 @@ Its behaviour is :class:`~autopilot.behaviors.hover_image.HoverImage`, its pipel
 pipeline on ``perception.image.camera`` (the down camera), looking for the step's ``image``
 (``size_m`` wide). Its metrics (``metrics.hover``) score the vehicle's true pose against the
 hover point over the image's true pose (simulator ground truth), from the moment the image was
-first found plus a settling time, and the detector's rate and cost.
+first found plus a settling time (and, as ``rms_horizontal_error_from_start_m``, from the
+step's start: the approach included, so finding the image late costs), the time it took to
+find it (``found_after_s``), and the detector's rate and cost.
 """
 
 from __future__ import annotations
@@ -68,13 +70,17 @@ def hover_metrics(log: Mapping[str, Sequence[Mapping]], intervals: list[tuple[fl
     found = next((f["time_s"] for f in frames if f["detected"] and running(f["time_s"])), None)
     start = (found + SETTLE_S) if found is not None else None
     horizontal, vertical, yaw_errors = array("d"), array("d"), array("d")
+    from_start = array("d")  # the whole step, the approach (and the search) included
     for i, t in enumerate(truth.t):
-        if start is None or t < start or not running(t):
+        if not running(t):
             continue
         heading = _yaw(truth.q[i])
         goal = hover_point(truth.p[i], heading, params)
         vehicle = truth.vehicle_p[i]
-        horizontal.append(float(np.hypot(*(vehicle[:2] - goal[:2]))))
+        from_start.append(float(np.hypot(*(vehicle[:2] - goal[:2]))))
+        if start is None or t < start:
+            continue
+        horizontal.append(from_start[-1])
         vertical.append(float(vehicle[2] - goal[2]))
         want = heading + math.radians(params.yaw_deg)
         yaw_errors.append(math.degrees(math.remainder(_yaw(truth.vehicle_q[i]) - want,
@@ -103,6 +109,7 @@ def hover_metrics(log: Mapping[str, Sequence[Mapping]], intervals: list[tuple[fl
         return float(np.sqrt(np.mean(np.square(values)))) if values else None
 
     hover = {
+        "rms_horizontal_error_from_start_m": rms(from_start),
         "rms_horizontal_error_m": rms(horizontal),
         "p95_horizontal_error_m": float(np.percentile(horizontal, 95)) if horizontal else None,
         "max_horizontal_error_m": max(horizontal) if horizontal else None,

@@ -15,7 +15,9 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from autopilot.behaviors.base import Behavior
 from autopilot.behaviors.land_pad import LandPad, LandPadParams, LandPadSettings
+from autopilot.behaviors.land_pad_seed001 import Seed001LandPad
 from autopilot.config import ConfigError, Problem
 from autopilot.flightlog import records as ch
 from autopilot.flightlog.metrics import FollowedTarget, estimation_metrics, phase_entries
@@ -43,14 +45,26 @@ def search_footprint_per_m(ctx: StepContext, name: str, key: str) -> float:
     return width
 
 
-def _behavior(params: LandPadParams, ctx: StepContext) -> LandPad:
+#: the step's landers (``lander``): ours, and seed 001's own logic (a baseline)
+LANDERS = {
+    "ours": lambda params, settings, camera: LandPad(params, settings),
+    "seed001": Seed001LandPad,
+}
+
+
+def _behavior(params: LandPadParams, ctx: StepContext) -> Behavior:
     config = ctx.config
+    camera = camera_of(ctx, config.perception.pad.camera, "perception.pad.camera")
     footprint = search_footprint_per_m(ctx, config.perception.pad.camera,
                                        "perception.pad.camera")
-    return LandPad(params, LandPadSettings(config.control.follow.lost_after_s, footprint))
+    settings = LandPadSettings(config.control.follow.lost_after_s, footprint)
+    return LANDERS[params.lander](params, settings, camera)
 
 
 def _spec(params: LandPadParams, config):
+    if params.lander == "seed001" and params.method == "px4_precland":
+        raise ValueError("lander: seed001 lands with its own logic: method px4_precland "
+                         "does not apply (use method: offboard)")
     if config.perception.pad.detector == "seed001" and params.pad != "circle":
         raise ValueError(f"pad: {params.pad} cannot be found by perception.pad.detector "
                          "seed001 (template matching of a disc): use a circle pad or the "

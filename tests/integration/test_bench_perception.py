@@ -50,8 +50,9 @@ def test_down_camera_detectors_ours_and_the_seeds(quick):
         assert pad["ours"][height]["detection_rate"] == 1.0
         assert pad["ours"][height]["lateral_error_m_p50"] <= 0.01
     assert pad["ours"]["at_1m"]["detection_rate"] == 1.0
-    # seed 001's largest template is smaller than the disc seen from 1 m: not found there
-    assert pad["seed001"]["at_1m"]["detection_rate"] == 0.0
+    # seed 001's templates cover the descent down to the pad filling the frame (~0.8 m): found
+    # from 1 m too (the full bench: 14 frames in 15)
+    assert pad["seed001"]["at_1m"]["detection_rate"] > 0.0
     assert pad["seed001"]["at_3m"]["detection_rate"] == 1.0
 
 

@@ -1,0 +1,128 @@
+"""The down-camera benches' scoring (a run without its figure is a failure, never dropped) and
+the generated tables (autopilot.bench.tables)."""
+
+import json
+
+import pytest
+
+from autopilot.bench import down, tables
+
+
+def _summary(status="completed", error=0.02, on_pad=True, lost=0.1):
+    landing = {"error_m": error, "on_pad": on_pad, "retries": 0, "found_after_s": 3.0,
+               "time_to_land_s": 12.0, "touchdown_speed_m_s": 0.4}
+    return {"status": status, "metrics": {
+        "landing": landing,
+        "estimation": {"rms_position_error_m": 0.03, "lost_share": lost}}}
+
+
+def test_a_run_without_its_figure_or_off_the_pad_is_a_failure():
+    spec = down.BENCHES["land_pad"]
+    ok = down.score_run(spec, _summary(), 1)
+    assert ok["success"]
+    assert ok["estimate_lost_share"] == pytest.approx(0.1)
+    never_landed = down.score_run(spec, _summary(status="failed", error=None), 2)
+    assert not never_landed["success"]
+    assert "no error_m" in never_landed["failure"]
+    off_pad = down.score_run(spec, _summary(error=0.6, on_pad=False), 3)
+    assert not off_pad["success"]
+    assert "on_pad" in off_pad["failure"]
+    empty = down.score_run(spec, {"status": "failed", "metrics": {}}, 4)
+    assert not empty["success"]
+
+
+def test_failures_count_as_infinite_in_the_median_and_worst():
+    spec = down.BENCHES["land_pad"]
+    runs = [down.score_run(spec, _summary(error=e), k) for k, e in enumerate((0.01, 0.03), 1)]
+    s = down.summarise(runs, spec)
+    assert s["error_m_median_all"] == pytest.approx(0.03)  # (the higher of two)
+    assert s["error_m_worst_all"] == pytest.approx(0.03)
+    runs.append(down.score_run(spec, _summary(status="failed", error=None), 3))
+    s = down.summarise(runs, spec)
+    assert s["failed"] == 1
+    assert s["runs"] == 3
+    assert s["error_m_median_all"] == pytest.approx(0.03)
+    assert s["error_m_worst_all"] is None  # "fail", never the worst of the others
+    assert s["error_m_n"] == 2  # the mean's count says it left one out
+    runs.append(down.score_run(spec, _summary(status="failed", error=0.5, on_pad=False), 4))
+    s = down.summarise(runs, spec)
+    assert s["error_m_median_all"] is None  # half failed: the median is a failure
+
+
+def _result():
+    spec = down.BENCHES["land_pad"]
+    rows = {"ours": [down.score_run(spec, _summary(error=0.015), 1)],
+            "seed001_detector_lander": [
+                down.score_run(spec, _summary(status="failed", error=None), 1)],
+            "seed001_detector": [down.score_run(spec, _summary(error=0.03), 1)]}
+    table = {r: down.summarise(v, spec) for r, v in rows.items()}
+    return {"bench": "land_pad", "mission": "land_pad", "seeds": 1, "quick": False,
+            "overrides": [], "compared": "error_m", "rows": {},
+            "scenarios": {"default": {
+                "overrides": [], "runs": rows, "summary": table,
+                "baseline_over_ours": {r: down.ratio(table[r], table["ours"], "error_m")
+                                       for r in table if r != "ours"}}}}
+
+
+def test_quick_checks_find_a_comparison_pointing_the_wrong_way():
+    result = _result()
+    assert down.quick_checks(result) == []  # ours best; a failed baseline is worse
+    s = result["scenarios"]["default"]["summary"]
+    s["seed001_detector"]["error_m_median_all"] = 0.01  # a tie (within TIE_M) is fine
+    assert down.quick_checks(result) == []
+    s["seed001_detector_lander"]["error_m_median_all"] = 0.01  # "better" expected: not
+    assert any("seed001_detector_lander" in p for p in down.quick_checks(result))
+    s["ours"]["error_m_median_all"] = None
+    assert any("ours failed" in p for p in down.quick_checks(result))
+    result["scenarios"]["default"]["runs"]["seed001_detector"][0]["scored"] = False
+    assert any("seed001_detector did not fly" in p for p in down.quick_checks(result))
+
+
+def test_tables_are_generated_from_the_json(tmp_path):
+    f = tmp_path / "land_pad.json"
+    f.write_text(json.dumps(_result()))
+    page = tables.render([json.loads(f.read_text())], "2 seeds on a busy machine")
+    assert page.startswith("# Benchmarks")
+    assert "2 seeds on a busy machine" in page
+    assert "| seed 001's detector and landing logic | 0/1 | fail (fail) |" in page
+    assert "| ours | 1/1 | 0.015 (0.015) |" in page
+    assert "2.0×" in page  # 0.030 ÷ 0.015
+    assert "∞" in page
+    assert "0.030 m (10%)" in page  # the estimate's RMS with its lost share
+    assert "Failed runs: seed 001's detector and landing logic, seed 1" in page
+    assert "Command: `autopilot bench land_pad --seeds 1 --json`" in page
+    with pytest.raises(ValueError, match="no table"):
+        tables.render([{"bench": "nope"}])
+
+
+def test_results_of_rows_flown_apart_are_pooled_into_one_table():
+    whole = _result()
+    parts = []
+    for row in ("seed001_detector", "ours", "seed001_detector_lander"):
+        part = json.loads(json.dumps(whole))
+        for key in ("runs", "summary"):
+            part["scenarios"]["default"][key] = {row: whole["scenarios"]["default"][key][row]}
+        parts.append(part)
+    merged = down.merge(parts)
+    data = merged["scenarios"]["default"]
+    assert list(data["summary"]) == ["ours", "seed001_detector", "seed001_detector_lander"]
+    assert data["baseline_over_ours"]["seed001_detector"] == pytest.approx(2.0)
+    page = tables.render(parts)
+    assert "flown as 3 processes" in page
+    assert page.count("| ours |") == 1
+
+
+def test_offboard_never_leaves_a_run_without_its_figure_out_of_the_worst():
+    from autopilot.bench import offboard
+
+    keys = (*offboard.METRICS["orbit"], "real_time_factor")
+    full = {"seed": 1, "status": "completed", **dict.fromkeys(keys, 0.05)}
+    short = {"seed": 2, "status": "failed", **dict.fromkeys(keys)}
+    s = offboard._summarise([full, short], "orbit")
+    assert s["rms_cross_track_m_mean"] == pytest.approx(0.05)
+    assert s["rms_cross_track_m_n"] == 1
+    assert s["rms_cross_track_m_worst"] is None
+    table = offboard.format_table({"seeds": 2, "scenarios": {"orbit": {
+        "mission": "orbit", "overrides": [], "summary": {"ours": s},
+        "seed004_over_ours": None}}})
+    assert "0.050 [1] (fail)" in table
