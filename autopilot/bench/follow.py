@@ -152,3 +152,48 @@ def format_table(result: dict) -> str:
 
 def _fmt(value) -> str:
     return "n/a" if value is None else f"{value:.3f}"
+
+
+def merge(results: Sequence[dict]) -> dict:
+    """One result from several runs of the same follow bench (its scenarios flown as separate
+    processes, ``--scenario``), in the bench's order of scenarios."""
+    first = results[0]
+    for r in results[1:]:
+        for key in ("bench", "quick", "overrides"):
+            if r.get(key) != first.get(key):
+                raise ValueError(f"cannot merge {first['bench']} results with different {key}")
+    pooled = {name: data for r in results for name, data in r["scenarios"].items()}
+    order = [s for s in BENCHES[first["bench"]].scenarios if s in pooled]
+    return {**first, "scenarios": {s: pooled[s] for s in order},
+            "scenarios_flown": order}
+
+
+def format_markdown(result: dict) -> list[str]:
+    """The bench's tables as Markdown (for :mod:`autopilot.bench.tables`). A run that did not
+    complete, or has no range error, is a failure in the ratio column, never dropped."""
+    quick = f" (quick variant: the step cut to {result['step_duration_s']:g} s)" \
+        if result.get("quick") else ""
+    controllers = result.get("controllers") or {}
+    out = [f"### `{result['bench']}`", "",
+           f"One seed per scenario{quick}. `rms_range_error_m`: RMS of the standoff error over "
+           "the follow step (truth); `max_lost_s`: the longest stretch without a detection; "
+           "÷ ours: the controller's range RMS over ours (\"fail\": the run did not complete or "
+           "has no figure).", ""]
+    out += [f"- `{c}`: {text}" for c, text in controllers.items()]
+    for scenario, data in result["scenarios"].items():
+        where = ", ".join(f"`{o}`" for o in data["overrides"]) or "as shipped"
+        out += ["", f"**{scenario}** ({where})", ""]
+        head = ["", "status", *(f"`{m}`" for m in METRICS), "÷ ours"]
+        out.append("| " + " | ".join(head) + " |")
+        out.append("|" + " --- |" * len(head))
+        first = next(iter(data["runs"]))
+        for controller, run in data["runs"].items():
+            ratio = data["baseline_rms_over_ours"].get(controller)
+            failed = run["status"] != "completed" or run.get("rms_range_error_m") is None
+            shown = "—" if controller == first else (
+                "fail" if failed or ratio is None else f"{ratio:.1f}×")
+            cells = [_fmt(run.get(m)) for m in METRICS]
+            out.append("| " + " | ".join([f"`{controller}`", run["status"], *cells, shown])
+                       + " |")
+    out.append("")
+    return out

@@ -19,10 +19,12 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
-from autopilot.bench import down
+from autopilot.bench import down, follow
 
 #: bench name → its Markdown formatter (lines)
 FORMATTERS: dict[str, Callable[[dict], list[str]]] = {
+    "follow_ball": follow.format_markdown,
+    "follow_marker": follow.format_markdown,
     "hover_image": down.format_markdown,
     "land_pad": down.format_markdown,
 }
@@ -33,6 +35,8 @@ def command_of(result: dict) -> str:
     parts = ["autopilot bench", result["bench"]]
     if result.get("quick"):
         parts.append("--quick")
+    elif "seeds" not in result:  # one seed per scenario (the follow benches)
+        parts += [f"--scenario {s}" for s in result.get("scenarios_flown") or ()]
     else:
         parts.append(f"--seeds {result['seeds']}")
         if result.get("seed_start", 1) != 1:
@@ -43,6 +47,8 @@ def command_of(result: dict) -> str:
 
 #: bench name → how several of its results (rows or scenarios flown apart) become one
 MERGERS: dict[str, Callable[[list[dict]], dict]] = {
+    "follow_ball": follow.merge,
+    "follow_marker": follow.merge,
     "hover_image": down.merge,
     "land_pad": down.merge,
 }

@@ -126,3 +126,33 @@ def test_offboard_never_leaves_a_run_without_its_figure_out_of_the_worst():
         "mission": "orbit", "overrides": [], "summary": {"ours": s},
         "seed004_over_ours": None}}})
     assert "0.050 [1] (fail)" in table
+
+
+def _follow_result(scenario, seed_status="completed", seed_rms=0.4):
+    def run(status, rms):
+        return {"status": status, "detection_rate": 1.0, "rms_range_error_m": rms,
+                "rms_image_error_px": 10.0, "max_lost_s": 0.04, "target_speed_mps_rms": 1.0}
+    return {"bench": "follow_ball", "mission": "follow_ball", "overrides": [], "quick": False,
+            "step_duration_s": None, "controllers": {"estimator": "ours", "seed001": "s1"},
+            "scenarios": {scenario: {
+                "overrides": [], "runs": {"estimator": run("completed", 0.04),
+                                          "seed001": run(seed_status, seed_rms)},
+                "baseline_rms_over_ours": {"seed001": None if seed_rms is None
+                                           else seed_rms / 0.04}}}}
+
+
+def test_follow_tables_pool_scenarios_and_show_a_failed_baseline_as_a_failure(tmp_path):
+    files = []
+    for i, result in enumerate([_follow_result("figure8_2mps_gusts", "failed", 0.9),
+                                _follow_result("default")]):
+        files.append(tmp_path / f"{i}.json")
+        files[-1].write_text(json.dumps(result))
+    page = tables.render([json.loads(f.read_text()) for f in files])
+    # the bench's order of scenarios, whatever order they were flown in
+    assert page.index("**default**") < page.index("**figure8_2mps_gusts**")
+    default, figure8 = page.split("**figure8_2mps_gusts**")
+    assert "| `seed001` | completed |" in default
+    assert "10.0×" in default
+    assert "| `seed001` | failed |" in figure8
+    assert figure8.split("| `seed001` | failed |")[1].split("\n")[0].rstrip().endswith("fail |")
+    assert "--scenario default --scenario figure8_2mps_gusts" in page
