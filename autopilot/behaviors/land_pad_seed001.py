@@ -26,12 +26,12 @@ AR.Drone's land does); otherwise it goes on steering. It acts on the newest dete
 also when the pad is no longer seen, as the seed's nodes keep their last message. It never
 descends under its own control: it lands from the height it found the pad at.
 
-Commands are in the seed's units, applied through a tilt model of the AR.Drone (as the
-simulator it flew, tum_simulator, and ardrone_autonomy define ``/cmd_vel``): a linear x/y of
-``c`` tilts the vehicle by ``c`` × the maximum tilt (``euler_angle_max``, 0.21 rad by default),
-accelerating it by g·tan(tilt) against a linear drag that gives the AR.Drone 2.0's 5 m/s top
-speed at the maximum tilt; a zero command is the AR.Drone's hover mode (it brakes to a stop).
-The modelled velocity is flown as a body-frame velocity setpoint, the height and heading kept.
+Commands are in the seed's units, applied through the AR.Drone tilt model the follow
+baselines fly too (:mod:`autopilot.control.ardrone`, as tum_simulator and ardrone_autonomy
+define ``/cmd_vel``): a linear x/y of ``c`` tilts the vehicle by ``c`` × the maximum tilt
+(``euler_angle_max``, 12° by default), accelerating it by g·tan(tilt) against the AR.Drone's
+identified linear drag; a zero command is the AR.Drone's hover mode (it brakes to a stop).
+The modelled velocity is flown as a velocity setpoint, the height and heading kept.
 
 Before the first detection, the search is ours (the same :class:`LandPad` search for both
 landers), so that the comparison is of what each does once it sees the pad.
@@ -40,7 +40,6 @@ landers), so that the comparison is of what each does once it sees the pad.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -53,6 +52,7 @@ from autopilot.behaviors.base import (
     VehicleRequest,
 )
 from autopilot.behaviors.land_pad import LandPad, LandPadParams, LandPadSettings
+from autopilot.control.ardrone import ArDroneTiltModel, Twist
 from drivers.base import CameraInfo, Setpoint
 
 #: the report's constants (§2.6.2, the stationary follower of the lander's time)
@@ -60,37 +60,6 @@ IGNORE_DISTANCE_PX = 20.0
 COMMAND = 0.1
 REPORT_IMAGE_WIDTH_PX = 640.0  # CENTER = (320, 180): a 640 x 360 image
 WAIT_S = 1.0  # rospy.sleep(1.) after an action (§2.3)
-
-#: the AR.Drone's limits (ardrone_autonomy's defaults; Parrot's AR.Drone 2.0 figures)
-MAX_TILT_RAD = 0.21  # euler_angle_max
-TOP_SPEED_M_S = 5.0
-GRAVITY_M_S2 = 9.81
-
-
-@dataclass
-class TiltModel:
-    """AR.Drone horizontal response to ``/cmd_vel`` linear x/y (fractions of the maximum
-    tilt): dv/dt = g·tan(c·θmax) − k·v, k = g·tan(θmax) / top speed; c = 0: hover mode, which
-    brakes to a stop."""
-
-    velocity_m_s: np.ndarray
-
-    @property
-    def drag_per_s(self) -> float:
-        return GRAVITY_M_S2 * math.tan(MAX_TILT_RAD) / TOP_SPEED_M_S
-
-    def step(self, command: np.ndarray, dt: float) -> np.ndarray:
-        command = np.clip(np.asarray(command, dtype=float), -1.0, 1.0)
-        if not command.any():
-            self.velocity_m_s = np.zeros(2)
-            return self.velocity_m_s
-        accel = GRAVITY_M_S2 * np.tan(command * MAX_TILT_RAD)
-        # exact over dt for constant accel: v → a/k + (v − a/k)·e^(−k dt)
-        k = self.drag_per_s
-        terminal = accel / k
-        self.velocity_m_s = terminal + (self.velocity_m_s - terminal) * math.exp(-k * dt)
-        return self.velocity_m_s
-
 
 def seed_command(center_px: tuple[float, float], camera: CameraInfo) -> np.ndarray:
     """The seed's command (body forward, right), as fractions of the maximum tilt, for the
@@ -115,8 +84,8 @@ class Seed001LandPad(Behavior):
         self.camera = camera
         self._search = LandPad(params, settings)
         self.phase = "searching"
-        self._tilt = TiltModel(np.zeros(2))
-        self._start = self._last = 0.0
+        self._tilt = ArDroneTiltModel()
+        self._start = 0.0
         self._hover_since: float | None = None
         self._landing_since = 0.0
 
@@ -125,13 +94,11 @@ class Seed001LandPad(Behavior):
                               reason=reason)
 
     def activate(self, inputs: BehaviorInputs) -> BehaviorOutput:
-        self._start = self._last = inputs.now_s
+        self._start = inputs.now_s
         return self._search.activate(inputs)
 
     def update(self, inputs: BehaviorInputs) -> BehaviorOutput:
         now, s = inputs.now_s, inputs.state
-        dt = min(max(now - self._last, 0.0), 0.5)
-        self._last = now
         if self.phase == "landing":
             if not s.armed and not s.in_air:
                 return self._out(None, Status.SUCCEEDED)
@@ -155,5 +122,6 @@ class Seed001LandPad(Behavior):
             elif now - self._hover_since >= WAIT_S:
                 self.phase, self._landing_since = "landing", now
                 return self._out(None, requests=(VehicleRequest(RequestKind.LAND),))
-        v = self._tilt.step(command, dt)
-        return self._out(Setpoint.velocity_body(float(v[0]), float(v[1]), 0.0, time_s=now))
+        # cmd_vel: linear.x forward, linear.y LEFT (the command here is forward, right)
+        twist = Twist(linear_x=float(command[0]), linear_y=-float(command[1]))
+        return self._out(self._tilt.step(twist, now, s.yaw_rad, s.velocity_ned_m_s))

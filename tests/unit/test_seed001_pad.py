@@ -11,12 +11,11 @@ from autopilot.behaviors.land_pad import LandPadParams, LandPadSettings
 from autopilot.behaviors.land_pad_seed001 import (
     COMMAND,
     IGNORE_DISTANCE_PX,
-    MAX_TILT_RAD,
     WAIT_S,
     Seed001LandPad,
-    TiltModel,
     seed_command,
 )
+from autopilot.control.ardrone import ArDroneLimits, ArDroneTiltModel, Twist
 from autopilot.mission import load_mission
 from autopilot.perception.baselines import Seed001PadDetector
 from autopilot.perception.pad import CIRCLE_BOARD_RATIO, PadDetection, pad_texture
@@ -123,16 +122,23 @@ def test_command_is_the_reports_sign_rule_with_its_dead_band():
 
 def test_commands_are_tilt_fractions_through_the_ardrone_tilt_model():
     """``/cmd_vel`` linear x/y are "the amount of tilt to apply", a fraction of the maximum
-    (§3.2); zeros are the AR.Drone's hover mode."""
-    model = TiltModel(np.zeros(2))
-    v = model.step(np.array([0.1, 0.0]), 0.05)
-    assert v[0] == pytest.approx(9.81 * math.tan(0.1 * MAX_TILT_RAD) * 0.05, rel=0.02)
+    (§3.2); zeros are the AR.Drone's hover mode (the follow baselines' model)."""
+    limits = ArDroneLimits()
+    model = ArDroneTiltModel(limits)
+    model.step(Twist(linear_x=0.1), 0.0, 0.0, np.zeros(3))
+    v = model.step(Twist(linear_x=0.1), 0.05, 0.0, np.zeros(3)).velocity_m_s
+    assert v[0] == pytest.approx(9.81 * math.tan(0.1 * limits.euler_angle_max_rad) * 0.05,
+                                 rel=0.02)
+    t = 0.05
     for _ in range(2000):
-        v = model.step(np.array([0.1, -0.1]), 0.05)
-    terminal = 9.81 * math.tan(0.1 * MAX_TILT_RAD) / model.drag_per_s
-    assert v == pytest.approx((terminal, -terminal), rel=1e-3)
-    assert 0.4 < terminal < 0.6  # a tenth of the tilt: about a tenth of the 5 m/s top speed
-    assert model.step(np.zeros(2), 0.05) == pytest.approx((0.0, 0.0))
+        t += 0.05
+        v = model.step(Twist(linear_x=0.1, linear_y=0.1), t, 0.0, np.zeros(3)).velocity_m_s
+    terminal = limits.terminal_speed_m_s(0.1)
+    assert v[:2] == pytest.approx((terminal, -terminal), rel=1e-3)  # + linear_y: left (west)
+    for _ in range(10):  # hover mode: brakes to a stop
+        t += 0.05
+        v = model.step(Twist(), t, 0.0, np.zeros(3)).velocity_m_s
+    assert v == pytest.approx((0.0, 0.0, 0.0))
 
 
 def _pad_seen(t, u, v):
@@ -160,15 +166,19 @@ def test_steers_toward_the_pad_then_waits_and_lands_when_it_is_below():
     cam = _down_camera().intrinsics
     land.activate(BehaviorInputs(0.0, vehicle_state(0.0, pos=(0.0, 0.0, -6.0))))
     t, out = 0.0, None
-    for _ in range(20):  # the pad ahead and to the right: forward and right, never down
+    for k in range(20):  # the pad ahead and to the right: forward and right, never down
         t += 0.05
         out = land.update(BehaviorInputs(t, vehicle_state(t, pos=(0.0, 0.0, -6.0)),
                                          percept=_pad_seen(t, cam.cx + 80, cam.cy - 60)))
         assert out.phase == "steering"
-        assert out.setpoint.frame is SetpointFrame.BODY_FRD
-        fwd, right, down = out.setpoint.velocity_m_s
-        assert fwd > 0.0
-        assert right > 0.0
+        assert out.setpoint.frame is SetpointFrame.LOCAL_NED
+        north, east, down = out.setpoint.velocity_m_s  # heading north: forward, right
+        accel_north, accel_east, _ = out.setpoint.acceleration_m_s2
+        assert accel_north > 0.0
+        assert accel_east > 0.0
+        if k:  # (from the vehicle's measured velocity, at rest, on the first)
+            assert north > 0.0
+            assert east > 0.0
         assert down == 0.0
     # below the drone: hover, wait WAIT_S, then land (never a descent of its own)
     start = t
@@ -179,7 +189,8 @@ def test_steers_toward_the_pad_then_waits_and_lands_when_it_is_below():
         if out.requests:
             break
         assert out.phase == "waiting"
-        assert out.setpoint.velocity_m_s == pytest.approx((0.0, 0.0, 0.0))
+        if t - start > 0.2:  # the hover mode has braked the slow drift to a stop
+            assert out.setpoint.velocity_m_s == pytest.approx((0.0, 0.0, 0.0))
         assert t - start < WAIT_S + 0.1
     assert t - start >= WAIT_S - 1e-9
     assert out.requests[0].kind is RequestKind.LAND
@@ -211,7 +222,7 @@ def test_keeps_acting_on_its_last_detection_when_the_pad_is_gone():
     out = land.update(BehaviorInputs(0.2, vehicle_state(0.2, pos=(0.0, 0.0, -6.0)),
                                      percept=gone))
     assert out.phase == "steering"
-    assert out.setpoint.velocity_m_s[1] < 0.0  # still left
+    assert out.setpoint.velocity_m_s[1] < 0.0  # still left (west, heading north)
 
 
 def test_the_lander_is_selectable_in_the_mission():
