@@ -109,8 +109,12 @@ class PacedClock(MonotonicClock):
     Sleeps and timeouts wait until this clock (not the wall clock) reaches their deadline, so
     a slowed world times out as slowly as it moves."""
 
-    def __init__(self, start_s: float = 0.0) -> None:
+    def __init__(self, start_s: float = 0.0, slack_s: float = 0.0) -> None:
         super().__init__(start_s)
+        #: how far past its cap the clock may run before it stands still: a world that far
+        #: behind catches up by itself on its next stretches (one slow stretch, e.g. one that
+        #: renders a frame, is no slow CPU)
+        self.slack_s = slack_s
         self._lock = threading.Lock()
         self._last = start_s
         self._cap: float | None = None
@@ -137,10 +141,11 @@ class PacedClock(MonotonicClock):
 
     def _capped(self) -> float:
         t = time.monotonic() - self._offset
-        if self._cap is not None and t > self._cap:
-            self._offset += t - self._cap
-            self.held_back_s += t - self._cap
-            t = self._cap
+        if self._cap is not None and t > self._cap + self.slack_s:
+            limit = self._cap + self.slack_s
+            self._offset += t - limit
+            self.held_back_s += t - limit
+            t = limit
         return t
 
     def hold_back(self, seconds: float) -> None:

@@ -81,6 +81,8 @@ STALL_S = 0.25
 #: once behind, rendering stays shed for at least this long (simulated seconds): shedding makes
 #: the next batches fast, and frames flickering on and off every batch would help nobody
 SHED_HOLD_S = 0.5
+#: a world this far behind the wall clock catches up by itself; beyond it the clock is held back
+CATCH_UP_S = 0.1
 
 
 class SimDriver(Vehicle):
@@ -95,7 +97,7 @@ class SimDriver(Vehicle):
         self._seed = config.seed if seed is None else seed
         self.lockstep = lockstep
         self._clock: LockstepClock | PacedClock = LockstepClock() if lockstep \
-            else PacedClock()
+            else PacedClock(slack_s=CATCH_UP_S)
         #: real time: say "simulator at 0.6× real time" once (None) or every this many seconds
         self.warn_every_s = warn_every_s
         #: real time: skip rendering frames while the simulator cannot keep up
@@ -478,10 +480,17 @@ class SimDriver(Vehicle):
         clock, sim = self._clock, self._sim
         lost = cycle_s - simulated_s
         behind = clock.now() - sim.time_s
-        if lost > 0.0 and behind > 0.0:  # (never held back behind the world's own time)
-            clock.hold_back(min(lost, behind))
-            if self.shed_rendering:
-                self._shed_until_s = sim.time_s + SHED_HOLD_S
+        # a world a little behind catches up on the next batches, as it always did (a batch
+        # that renders a frame may take longer than the 10 ms it simulates on any machine);
+        # only what is beyond CATCH_UP_S is held back, and never behind the world's own time
+        excess = behind - CATCH_UP_S
+        if lost > 0.0 and excess > 0.0:
+            clock.hold_back(min(lost, excess))
+        # shed while the last measured real-time factor is low, not on one slow batch (a batch
+        # that renders a frame may take longer than the 10 ms it simulates on any machine, and
+        # the next ones make it up)
+        if self.shed_rendering and self.pace_factor < SLOW_FACTOR:
+            self._shed_until_s = sim.time_s + SHED_HOLD_S
         if self.shed_rendering:
             sim.shed_rendering = sim.time_s < self._shed_until_s
         wall = time.perf_counter()

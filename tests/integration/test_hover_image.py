@@ -33,7 +33,9 @@ def test_hover_image_closed_loop_and_replay(tmp_path):
     assert again["metrics"]["hover"]["detection_rate"] == hover["detection_rate"]
     assert again["metrics"]["hover"]["frames_in_view"] == hover["frames_in_view"]
     flown, replayed = summary["metrics"]["estimation"], again["metrics"]["estimation"]
-    assert replayed["at_update"]["estimates"] == flown["at_update"]["estimates"]
+    # (one marginal frame may go the other way on the JPEG: README's "within 1 %")
+    assert replayed["at_update"]["estimates"] == pytest.approx(
+        flown["at_update"]["estimates"], abs=max(1, 0.01 * flown["at_update"]["estimates"]))
     # (the replay reads the logged JPEGs: points tracked between full detections move by
     # fractions of a pixel with the compression, a few millimetres here)
     assert replayed["rms_position_error_m"] == pytest.approx(flown["rms_position_error_m"],
@@ -41,9 +43,9 @@ def test_hover_image_closed_loop_and_replay(tmp_path):
 
 
 @pytest.mark.parametrize(("north_east", "search"), [
-    ((1.2, -1.6), False),  # 2 m away: in view from the hover height
+    pytest.param((1.2, -1.6), False, marks=pytest.mark.long),  # 2 m: in view at once
     ((-2.0, 3.46), True),  # 4 m: out of view until the search's first ring
-    ((4.0, -3.0), True),  # 5 m: its second ring
+    pytest.param((4.0, -3.0), True, marks=pytest.mark.long),  # 5 m: its second ring
 ])
 def test_an_image_2_to_5_m_away_is_found_and_hovered_over(tmp_path, north_east, search):
     n, e = north_east

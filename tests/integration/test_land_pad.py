@@ -32,7 +32,9 @@ def test_land_pad_closed_loop_and_replay(tmp_path):
     assert again["frames"]["replayed"] == again["frames"]["in_flight"] == landing["frames"]
     assert again["metrics"]["landing"]["detected_frames"] == landing["detected_frames"]
     flown, replayed = summary["metrics"]["estimation"], again["metrics"]["estimation"]
-    assert replayed["at_update"]["estimates"] == flown["at_update"]["estimates"]
+    # (one marginal frame may go the other way on the JPEG: README's "within 1 %")
+    assert replayed["at_update"]["estimates"] == pytest.approx(
+        flown["at_update"]["estimates"], abs=max(1, 0.01 * flown["at_update"]["estimates"]))
     assert replayed["rms_position_error_m"] == pytest.approx(flown["rms_position_error_m"],
                                                              rel=0.05)
     # the report's panels over the pad: a picture each, none empty
