@@ -339,6 +339,10 @@ class Runtime:
         cameras = self.vehicle.cameras
         for camera in cameras.values():
             self.log.write(ch.CAMERA_INFO, self.clock.now(), ch.camera_info_record(camera))
+        true_cameras = getattr(self.vehicle, "true_cameras", None)  # the simulator: scoring
+        if callable(true_cameras):
+            for camera in true_cameras().values():
+                self.log.write(ch.CAMERA_TRUTH, self.clock.now(), ch.camera_info_record(camera))
         behaviors = [build_behavior(step, self.config, cameras) for step in self.plan.steps]
         self._executor = MissionExecutor(behaviors)
         self.values.clear()

@@ -1,4 +1,12 @@
-"""Shared fixtures: the shipped configuration, loaded once per session."""
+"""Shared fixtures: the configuration, loaded once per session.
+
+``app_config`` / ``sim_config`` are the shipped configuration in the **ideal** world
+(``sim.profile=ideal``: RTK-grade navigation, the camera's true calibration, no dropped
+frames): the simulator's and the detectors' geometry tests compare renders and responses
+against truth to the pixel or the centimetre, which the realistic world's fitted calibrations
+and GNSS wander would blur. Tests of the realistic world (the shipped default) use
+``realistic_app_config`` / ``realistic_sim_config``, and missions flown through
+``load_mission`` get the default unless a test pins ``sim.profile=ideal`` itself."""
 
 from __future__ import annotations
 
@@ -6,10 +14,26 @@ import pytest
 
 from autopilot.config import AppConfig, load_config
 
+#: what the geometry tests pin (see the module's docstring)
+IDEAL = ("sim.profile=ideal",)
+
 
 @pytest.fixture(scope="session")
 def app_config() -> AppConfig:
-    return load_config()
+    return load_config(overrides=IDEAL)
+
+
+@pytest.fixture(scope="session")
+def realistic_app_config() -> AppConfig:
+    """The shipped configuration as it flies by default (the realistic world)."""
+    config = load_config()
+    assert config.sim.profile == "realistic"
+    return config
+
+
+@pytest.fixture(scope="session")
+def realistic_sim_config(realistic_app_config):
+    return realistic_app_config.sim
 
 
 @pytest.fixture(scope="session")

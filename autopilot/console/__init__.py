@@ -336,6 +336,9 @@ class Console:
             await asyncio.gather(*tasks, return_exceptions=True)
 
     def close(self) -> None:
+        """The run is over: each camera's producer stops and its viewers' streams end (their
+        responses finish, so the server closes them cleanly instead of cancelling them)."""
         for feed in self._feeds.values():
             feed._stop()
+            feed.frames.close()
         self._pool.shutdown(wait=False, cancel_futures=True)

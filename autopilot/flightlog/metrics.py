@@ -178,6 +178,17 @@ def _intrinsics(cam: Mapping) -> CameraIntrinsics:
                             cam["cx"], cam["cy"], tuple(cam.get("distortion") or (0.0,) * 5))
 
 
+def scoring_camera(log: Mapping[str, Sequence[Mapping]], name: str) -> Mapping | None:
+    """The camera to score a detection with: as it really was (the simulator's true
+    intrinsics and mount, ``/sim/camera_info``), else as its frames reported it (a log from a
+    real vehicle, or from before the realistic world's calibration and mount errors)."""
+    for topic in (ch.CAMERA_TRUTH, ch.CAMERA_INFO):
+        cam = next((c for c in log.get(topic, []) if c["name"] == name), None)
+        if cam is not None:
+            return cam
+    return None
+
+
 def pixel_of(cam: Mapping, point_cam_m) -> tuple[float, float]:
     """Pixel of a point in a camera's optical frame, lens distortion applied (as the camera
     info record describes it)."""
@@ -220,8 +231,7 @@ def follow_metrics(log: Mapping[str, Sequence[Mapping]],
             return {}
         intervals, target = found
     frames = log.get(ch.detection_topic(target.pipeline), [])
-    cams = {c["name"]: c for c in log.get(ch.CAMERA_INFO, [])}
-    cam = cams.get(target.camera)
+    cam = scoring_camera(log, target.camera)
     track = truth_table(log).body(target.truth_body)
     truth = TruthTrack(track)
     if not intervals or cam is None or not truth.ok:

@@ -32,6 +32,7 @@ SETPOINTS = "/control/setpoint"
 MISSION_EVENTS = "/mission/events"
 MISSION_PLAN = "/mission/plan"
 GROUND_TRUTH = "/sim/ground_truth"
+CAMERA_TRUTH = "/sim/camera_info"  # the cameras as they really are (scoring only)
 TIME_SYNC = "/vehicle/time_sync"
 PLANNED_PATH = "/planning/path"  # a trajectory step's plan, when it starts
 PHOTOS = "/photos"  # photos taken by the steps (orbit, survey)
@@ -83,6 +84,9 @@ SCHEMAS: dict[str, dict] = {
     CAMERA_INFO: _obj("CameraInfo", name=_STR, width_px=_INT, height_px=_INT, fx=_NUM, fy=_NUM,
                       cx=_NUM, cy=_NUM, distortion={"type": "array", "items": _NUM},
                       rotation_body_cam=_vec(9), position_body_m=_vec(3), rate_hz=_NUM),
+    CAMERA_TRUTH: _obj("CameraTruth", name=_STR, width_px=_INT, height_px=_INT, fx=_NUM,
+                       fy=_NUM, cx=_NUM, cy=_NUM, distortion={"type": "array", "items": _NUM},
+                       rotation_body_cam=_vec(9), position_body_m=_vec(3), rate_hz=_NUM),
     VEHICLE_STATE: _obj("VehicleState", time_s=_NUM, position_ned_m=_vec(3),
                         velocity_ned_m_s=_vec(3), attitude_q=_vec(4), yaw_rad=_NUM,
                         angular_velocity_frd_rad_s=_vec(3), armed=_BOOL, mode=_STR,

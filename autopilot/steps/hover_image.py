@@ -24,7 +24,13 @@ from autopilot.behaviors.hover_image import (
     hover_point,
 )
 from autopilot.flightlog import records as ch
-from autopilot.flightlog.metrics import FollowedTarget, estimation_metrics, in_image, project_target
+from autopilot.flightlog.metrics import (
+    FollowedTarget,
+    estimation_metrics,
+    in_image,
+    project_target,
+    scoring_camera,
+)
 from autopilot.flightlog.truth import truth_table
 from autopilot.perception.image_pipeline import image_spec
 from autopilot.steps.land_pad import search_footprint_per_m
@@ -85,8 +91,7 @@ def hover_metrics(log: Mapping[str, Sequence[Mapping]], intervals: list[tuple[fl
         want = heading + math.radians(params.yaw_deg)
         yaw_errors.append(math.degrees(math.remainder(_yaw(truth.vehicle_q[i]) - want,
                                                       2.0 * math.pi)))
-    cams = {c["name"]: c for c in log.get(ch.CAMERA_INFO, [])}
-    cam = cams.get(p["camera"])
+    cam = scoring_camera(log, p["camera"])
     in_view = detected = 0
     times_ms = array("d")
     if cam is not None:

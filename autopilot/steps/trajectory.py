@@ -41,7 +41,7 @@ from autopilot.behaviors.trajectory import (
 from autopilot.config import AppConfig
 from autopilot.estimation.pose_history import slerp
 from autopilot.flightlog import records as ch
-from autopilot.flightlog.metrics import _intrinsics, project_target
+from autopilot.flightlog.metrics import _intrinsics, project_target, scoring_camera
 from autopilot.flightlog.truth import truth_table
 from autopilot.planning.footprint import ground_footprint
 from autopilot.planning.trajectory import Limits, cross_track_m, resample
@@ -266,7 +266,7 @@ def _photos_of(log: Records, step: Mapping) -> list[Mapping]:
 
 
 def _camera(log: Records, name: str) -> Mapping | None:
-    return next((c for c in log.get(ch.CAMERA_INFO, []) if c["name"] == name), None)
+    return scoring_camera(log, name)
 
 
 def orbit_metrics(log: Records, intervals: list[tuple[float, float]], step: Mapping) -> dict:

@@ -64,7 +64,7 @@ from drivers.sim.config import SimConfig
 from drivers.sim.flight.flight_stack import CommandRejected
 from drivers.sim.flight.navigator import MissionStatus, NavEvent
 from drivers.sim.flight.params import SPECS, ParamSpec, config_defaults
-from drivers.sim.model import reported_camera_info
+from drivers.sim.model import reported_camera_info, true_camera_info
 from drivers.sim.scenario import ScenarioObject
 from drivers.sim.simulator import GroundTruth, Photo, SimOutput, Simulator
 from drivers.slots import Broadcast
@@ -363,6 +363,13 @@ class SimDriver(Vehicle):
     # ------------------------------------------------------------------------------------
     # Simulator-only extras (ground truth is for scoring and tests, never for the autopilot)
     # ------------------------------------------------------------------------------------
+
+    def true_cameras(self) -> Mapping[str, CameraInfo]:
+        """The cameras as they really are — true intrinsics, the mount with its error — where
+        :attr:`cameras` is what their frames report (a fitted calibration, the nominal mount).
+        For the log's scoring only (what a detection should have found)."""
+        return {name: true_camera_info(name, self.config.cameras[name], self.config.seed)
+                for name in self._cameras}
 
     def ground_truth(self, buffer: int = 256) -> AsyncIterator[GroundTruth]:
         """Ground-truth samples at ``sim.ground_truth_rate_hz`` (buffered: for loggers)."""

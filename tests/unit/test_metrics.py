@@ -66,6 +66,29 @@ def test_a_target_behind_the_camera_counts_as_the_worst_image_error():
     assert behind["frames_in_view"] == len(frames) - sum(t >= 3.0 for t in frames)
 
 
+def test_detections_are_scored_against_the_camera_as_it_really_was():
+    """The realistic world's camera is mounted off its nominal angles (its frames report the
+    nominal mount): a detection where the ball really appeared is a hit, scored through the
+    true mount the simulator logs, not a miss against the nominal one."""
+    import dataclasses
+
+    import cv2
+    import numpy as np
+
+    nominal = front_camera()
+    off = cv2.Rodrigues(np.radians([0.0, 3.0, 0.0]))[0]  # 3° about the optical y axis
+    true = dataclasses.replace(nominal, rotation_body_cam=nominal.rotation_body_cam @ off)
+    log = _log()
+    p_cam = off.T @ np.array([0.0, 0.0, 2.0])  # the ball, 2 m ahead, in the true optical frame
+    u = nominal.intrinsics.fx * p_cam[0] / p_cam[2] + nominal.intrinsics.cx
+    for rec in log[ch.detection_topic("ball")]:
+        rec["u_px"] = float(u)  # where the ball really is in the image: ~17 px off centre
+    assert abs(u - 319.5) > 10
+    assert follow_metrics(log)["detection_rate"] == 0.0  # judged with the nominal mount
+    log[ch.CAMERA_TRUTH] = [ch.clean(ch.camera_info_record(true))]
+    assert follow_metrics(log)["detection_rate"] == 1.0  # with the true one
+
+
 def _tick(t, north, *, present=True, age=0.0, stale=False, std=0.05):
     record = {"time_s": t, "pipeline": "ball", "step": "follow_ball", "step_index": 1,
               "present": present}
