@@ -129,6 +129,7 @@ def score_run(summary: dict, seed: int) -> dict:
         **{k: follow.get(k) for k in METRICS},
         "estimate_rms_m": estimation.get("rms_relative_position_error_m"),
         "estimate_lost_share": estimation.get("lost_share"),
+        "estimate_within_2sigma": estimation.get("relative_within_2sigma"),
         "real_time_factor": summary["metrics"]["sim"]["real_time_factor"],
         "reason": summary.get("reason"),
         "follow_time_s": follow.get("follow_time_s"),
@@ -152,7 +153,7 @@ def summarise(runs: list[dict]) -> dict:
                               for r in runs if not r["success"]],
                  "rms_range_error_m_median_all": median if math.isfinite(median) else None,
                  "rms_range_error_m_worst_all": worst if math.isfinite(worst) else None}
-    for key in (*METRICS, "estimate_rms_m", "estimate_lost_share"):
+    for key in (*METRICS, "estimate_rms_m", "estimate_lost_share", "estimate_within_2sigma"):
         values = [r[key] for r in runs if r.get(key) is not None]
         out[f"{key}_mean"] = float(np.mean(values)) if values else None
         out[f"{key}_n"] = len(values)
@@ -266,14 +267,15 @@ def format_markdown(result: dict) -> list[str]:
            "median (worst) over all runs, a failed run (not completed, or no figure) counted "
            "as infinite (\"fail\"); the other figures: means over the runs that have them "
            "([n] when not all); `max_lost_s`: the longest stretch without a detection; the "
-           "estimate's RMS relative to the vehicle (truth) with its lost share; ÷ ours: the "
-           "median range RMS over ours.", ""]
+           "estimate's RMS relative to the vehicle (truth) with its lost share, and the share "
+           "of control ticks whose relative error was within its ±2σ on every axis (an honest "
+           "σ gives about 0.87); ÷ ours: the median range RMS over ours.", ""]
     out += [f"- `{c}`: {text}" for c, text in controllers.items()]
     for scenario, data in result["scenarios"].items():
         where = ", ".join(f"`{o}`" for o in data["overrides"]) or "as shipped"
         out += ["", f"**{scenario}** ({where})", ""]
         head = ["", "ok", "`rms_range_error_m`", *(f"`{m}`" for m in keys),
-                "estimate RMS (lost)", "÷ ours"]
+                "estimate RMS (lost)", "within 2σ", "÷ ours"]
         out.append("| " + " | ".join(head) + " |")
         out.append("|" + " --- |" * len(head))
         first = next(iter(data["summary"]))
@@ -286,8 +288,10 @@ def format_markdown(result: dict) -> list[str]:
             est = _cell(s, "estimate_rms_m", "{:.3f} m")
             lost = s["estimate_lost_share_mean"]
             est += "" if lost is None else f" ({lost:.0%})"
+            within = _cell(s, "estimate_within_2sigma", "{:.2f}")
             out.append("| " + " | ".join([f"`{controller}`", f"{s['succeeded']}/{s['runs']}",
-                                           _median_worst(s), *cells, est, shown]) + " |")
+                                           _median_worst(s), *cells, est, within, shown])
+                       + " |")
         fails = [f"`{c}`, seed {f['seed']}: {f['why']}"
                  for c, s in data["summary"].items() for f in s["failures"]]
         if fails:
