@@ -275,7 +275,15 @@ def build_parser() -> argparse.ArgumentParser:
         follow.add_argument("--scenario", dest="scenarios", action="append", default=None,
                             metavar="NAME", help="only this scenario (repeatable)")
         follow.add_argument("--quick", action="store_true",
-                            help="the default scenario only, the step shortened to 10 s (CI)")
+                            help="one seed of the default scenario, the step shortened to 10 s "
+                            "(CI)")
+        follow.add_argument("--seeds", type=int, default=3, metavar="N",
+                            help="scenario seeds per scenario and controller (default 3)")
+        follow.add_argument("--seed-start", type=int, default=1, metavar="S",
+                            help="the first scenario seed (default 1)")
+        follow.add_argument("--row", dest="rows", action="append", default=None,
+                            metavar="NAME", help="only this controller (ours or a seed rule; "
+                            "repeatable)")
         follow.add_argument("--set", dest="overrides", action="append", default=[],
                             metavar="KEY=VALUE", help="override a mission or configuration key")
 
@@ -1035,8 +1043,16 @@ def _bench(args: argparse.Namespace) -> int:
         if unknown:
             raise InputError(f"--scenario {unknown[0]}: no such scenario (known: "
                              f"{', '.join(known)})")
+        if args.seeds < 1:
+            raise InputError(f"--seeds {args.seeds}: at least 1")
+        controllers = follow.BENCHES[args.bench].controllers
+        unknown = [r for r in args.rows or () if r not in controllers]
+        if unknown:
+            raise InputError(f"--row {unknown[0]}: no such controller (known: "
+                             f"{', '.join(controllers)})")
         result = follow.run_bench(args.bench, args.mission, args.overrides, log,
-                                  args.scenarios, quick=args.quick)
+                                  args.scenarios, quick=args.quick, seeds=args.seeds,
+                                  seed_start=args.seed_start, controllers=args.rows)
         print(json.dumps(result) if args.json else follow.format_table(result))
         return EXIT_OK
 

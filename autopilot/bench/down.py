@@ -184,7 +184,8 @@ def score_run(spec: DownBench, summary: dict, seed: int) -> dict:
     out = {"seed": seed, "status": summary.get("status"), "scored": bool(group),
            **{k: _number(group.get(k)) for k in spec.metrics},
            "estimate_rms_m": _number(estimation.get("rms_position_error_m")),
-           "estimate_lost_share": _number(estimation.get("lost_share"))}
+           "estimate_lost_share": _number(estimation.get("lost_share")),
+           "estimate_within_2sigma": _number(estimation.get("relative_within_2sigma"))}
     problems = []
     if out["status"] != "completed":
         problems.append(f"status {out['status']}")
@@ -214,7 +215,8 @@ def summarise(runs: list[dict], spec: DownBench) -> dict:
                               if not r["success"]],
                  f"{spec.error}_median_all": median if math.isfinite(median) else None,
                  f"{spec.error}_worst_all": worst if math.isfinite(worst) else None}
-    for key in (*spec.metrics, "estimate_rms_m", "estimate_lost_share"):
+    for key in (*spec.metrics, "estimate_rms_m", "estimate_lost_share",
+                "estimate_within_2sigma"):
         values = [r[key] for r in runs if r[key] is not None]
         out[f"{key}_mean"] = float(np.mean(values)) if values else None
         out[f"{key}_n"] = len(values)
@@ -311,12 +313,15 @@ def format_markdown(result: dict) -> list[str]:
            f"{result['seeds']} seed(s) per scenario{quick}{extra}. "
            f"`{e}`: median (worst) over all runs, a failed run counted as infinite (\"fail\"); "
            "the other figures: means over the runs that have them ([n] when not all); the "
-           "estimate's RMS against truth with its lost share.", ""]
+           "estimate's RMS against truth with its lost share, and the share of control ticks "
+           "whose error relative to the vehicle was within its ±2σ on every axis (an honest σ "
+           "gives about 0.87).", ""]
     for scenario, data in result["scenarios"].items():
         where = ", ".join(f"`{o}`" for o in data["overrides"]) or "as shipped"
         out.append(f"**{scenario}** ({where})")
         out.append("")
-        head = ["", "ok", f"`{e}`", *(f"`{k}`" for k in keys), "estimate RMS (lost)", "÷ ours"]
+        head = ["", "ok", f"`{e}`", *(f"`{k}`" for k in keys), "estimate RMS (lost)",
+                "within 2σ", "÷ ours"]
         out.append("| " + " | ".join(head) + " |")
         out.append("|" + " --- |" * len(head))
         first = next(iter(data["summary"]))
@@ -331,9 +336,11 @@ def format_markdown(result: dict) -> list[str]:
             r = data["baseline_over_ours"].get(row)
             shown = "—" if row == first else (
                 f"{r:.1f}×" if r is not None else ("∞" if med is None else "n/a"))
+            within = _cell(s.get("estimate_within_2sigma_mean"),
+                           s.get("estimate_within_2sigma_n", 0), s["runs"], "{:.2f}")
             out.append("| " + " | ".join([ROW_LABELS.get(row, row),
                                            f"{s['succeeded']}/{s['runs']}", err, *cells, est,
-                                           shown]) + " |")
+                                           within, shown]) + " |")
         fails = [f"{ROW_LABELS.get(row, row)}, seed {f['seed']}: {f['why']}"
                  for row, s in data["summary"].items() for f in s["failures"]]
         if fails:

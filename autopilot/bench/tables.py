@@ -35,15 +35,23 @@ def command_of(result: dict) -> str:
     parts = ["autopilot bench", result["bench"]]
     if result.get("quick"):
         parts.append("--quick")
-    elif "seeds" not in result:  # one seed per scenario (the follow benches)
-        parts += [f"--scenario {s}" for s in result.get("scenarios_flown") or ()]
     else:
-        parts.append(f"--seeds {result['seeds']}")
+        parts.append(f"--seeds {result.get('seeds', 1)}")
         if result.get("seed_start", 1) != 1:
             parts.append(f"--seed-start {result['seed_start']}")
+        every = SCENARIOS[result["bench"]]
+        flown = list(result.get("scenarios") or ())
+        if flown and set(flown) != set(every):
+            parts += [f"--scenario {s}" for s in flown]
     parts += [f"--set {o}" for o in result.get("overrides") or ()]
     return " ".join(parts) + " --json"
 
+
+#: bench name → its scenarios (all of them: the command names none)
+SCENARIOS: dict[str, tuple[str, ...]] = {
+    **{name: tuple(b.scenarios) for name, b in follow.BENCHES.items()},
+    **{name: tuple(b.scenarios) for name, b in down.BENCHES.items()},
+}
 
 #: bench name → how several of its results (rows or scenarios flown apart) become one
 MERGERS: dict[str, Callable[[list[dict]], dict]] = {
@@ -61,17 +69,18 @@ def render(results: list[dict], note: str = "") -> str:
     if note:
         lines += ["", note]
     lines.append("")
-    by_bench: dict[str, list[dict]] = {}
+    # one table per bench and set of overrides (e.g. each sensor profile), in input order
+    by_bench: dict[tuple[str, tuple[str, ...]], list[dict]] = {}
     for result in results:
         bench = result.get("bench")
         if bench not in FORMATTERS:
             raise ValueError(f"no table for bench {bench!r} (known: {', '.join(FORMATTERS)})")
-        by_bench.setdefault(bench, []).append(result)
-    for bench, group in by_bench.items():
+        by_bench.setdefault((bench, tuple(result.get("overrides") or ())), []).append(result)
+    for (bench, _), group in by_bench.items():
         result = MERGERS[bench](group) if len(group) > 1 else group[0]
         lines += FORMATTERS[bench](result)
         lines += [f"Command: `{command_of(result)}`"
-                  + (f" (flown as {len(group)} processes, a row or scenario each)"
+                  + (f" (flown as {len(group)} processes, pooled)"
                      if len(group) > 1 else ""), ""]
     return "\n".join(lines).rstrip() + "\n"
 

@@ -17,11 +17,14 @@ def test_quick_bench_baselines_fly_and_ours_is_better(bench):
     assert result["step_duration_s"] == QUICK_DURATION_S
     assert list(result["scenarios"]) == ["default"]
     data = result["scenarios"]["default"]
-    runs = data["runs"]
+    assert result["seeds"] == 1
+    runs = {c: v[0] for c, v in data["runs"].items()}
+    assert all(len(v) == 1 for v in data["runs"].values())
     ours, *baselines = BENCHES[bench].controllers
     assert list(runs) == [ours, *baselines]
     for controller, run in runs.items():
         assert run["status"] == "completed", (controller, run["reason"])
+        assert run["success"], controller
         assert run["follow_time_s"] == pytest.approx(QUICK_DURATION_S, abs=0.2), controller
         assert run["detection_rate"] >= 0.9, (controller, run["detection_rate"])
         assert run["max_lost_s"] < 1.0, controller
@@ -34,7 +37,7 @@ def test_quick_bench_baselines_fly_and_ours_is_better(bench):
 def test_quick_flag_reaches_the_bench(capsys, monkeypatch):
     seen = {}
 
-    def fake_run_bench(bench, mission, overrides, log, scenarios, quick=False):
+    def fake_run_bench(bench, mission, overrides, log, scenarios, quick=False, **kw):
         seen.update(bench=bench, quick=quick)
         return {"bench": bench, "scenarios": {}, "quick": quick, "step_duration_s": 10.0}
 

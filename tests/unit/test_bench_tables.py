@@ -90,7 +90,7 @@ def test_tables_are_generated_from_the_json(tmp_path):
     assert "∞" in page
     assert "0.030 m (10%)" in page  # the estimate's RMS with its lost share
     assert "Failed runs: seed 001's detector and landing logic, seed 1" in page
-    assert "Command: `autopilot bench land_pad --seeds 1 --json`" in page
+    assert "Command: `autopilot bench land_pad --seeds 1 --scenario default --json`" in page
     with pytest.raises(ValueError, match="no table"):
         tables.render([{"bench": "nope"}])
 
@@ -128,17 +128,22 @@ def test_offboard_never_leaves_a_run_without_its_figure_out_of_the_worst():
     assert "0.050 [1] (fail)" in table
 
 
-def _follow_result(scenario, seed_status="completed", seed_rms=0.4):
+def _follow_result(scenario, seed_status="completed", seed_rms=0.4, seed=1):
+    from autopilot.bench import follow
+
     def run(status, rms):
-        return {"status": status, "detection_rate": 1.0, "rms_range_error_m": rms,
-                "rms_image_error_px": 10.0, "max_lost_s": 0.04, "target_speed_mps_rms": 1.0}
+        follow_metrics = {"detection_rate": 1.0, "rms_range_error_m": rms,
+                          "rms_image_error_px": 10.0, "max_lost_s": 0.04,
+                          "target_speed_mps_rms": 1.0}
+        return follow.score_run({"status": status, "metrics": {
+            "follow": follow_metrics, "sim": {"real_time_factor": 3.0},
+            "estimation": {"rms_relative_position_error_m": 0.05, "lost_share": 0.02}}}, seed)
+    runs = {"estimator": [run("completed", 0.04)], "seed001": [run(seed_status, seed_rms)]}
     return {"bench": "follow_ball", "mission": "follow_ball", "overrides": [], "quick": False,
+            "seeds": 1, "seed_start": seed,
             "step_duration_s": None, "controllers": {"estimator": "ours", "seed001": "s1"},
-            "scenarios": {scenario: {
-                "overrides": [], "runs": {"estimator": run("completed", 0.04),
-                                          "seed001": run(seed_status, seed_rms)},
-                "baseline_rms_over_ours": {"seed001": None if seed_rms is None
-                                           else seed_rms / 0.04}}}}
+            "scenarios": {scenario: follow._scenario_result([], runs,
+                                                            follow.BENCHES["follow_ball"])}}
 
 
 def test_follow_tables_pool_scenarios_and_show_a_failed_baseline_as_a_failure(tmp_path):
@@ -151,8 +156,28 @@ def test_follow_tables_pool_scenarios_and_show_a_failed_baseline_as_a_failure(tm
     # the bench's order of scenarios, whatever order they were flown in
     assert page.index("**default**") < page.index("**figure8_2mps_gusts**")
     default, figure8 = page.split("**figure8_2mps_gusts**")
-    assert "| `seed001` | completed |" in default
+    assert "| `seed001` | 1/1 | 0.400 (0.400) |" in default
     assert "10.0×" in default
-    assert "| `seed001` | failed |" in figure8
-    assert figure8.split("| `seed001` | failed |")[1].split("\n")[0].rstrip().endswith("fail |")
+    assert "0.050 m (2%)" in default  # the estimate's RMS with its lost share
+    assert "| `seed001` | 0/1 | fail (fail) |" in figure8
+    assert figure8.split("| `seed001` | 0/1 |")[1].split("\n")[0].rstrip().endswith("∞ |")
+    assert "Failed runs: `seed001`, seed 1: failed" in figure8
     assert "--scenario default --scenario figure8_2mps_gusts" in page
+
+
+def test_follow_seeds_flown_apart_are_pooled_and_profiles_kept_apart():
+    from autopilot.bench import follow
+
+    a = _follow_result("default", seed_rms=0.2, seed=1)
+    b = _follow_result("default", seed_rms=0.6, seed=2)
+    merged = follow.merge([b, a])
+    data = merged["scenarios"]["default"]
+    assert [r["seed"] for r in data["runs"]["seed001"]] == [1, 2]
+    assert data["summary"]["seed001"]["rms_range_error_m_median_all"] == pytest.approx(0.6)
+    assert merged["seeds"] == 2
+    ideal = _follow_result("default", seed=1)
+    ideal["overrides"] = ["sim.profile=ideal"]
+    page = tables.render([a, b, ideal])
+    assert page.count("### `follow_ball`") == 2  # the ideal world in a table of its own
+    assert "--seeds 2" in page
+    assert "--set sim.profile=ideal" in page
