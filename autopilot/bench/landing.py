@@ -89,7 +89,8 @@ def run_bench(trials: int, rover_speed_m_s: float, overrides: Sequence[str] = ()
               log: Callable[[str], None] = lambda _: None, *, workers: int | None = None,
               cluster: str | None = None, strategies: Sequence[str] | None = None,
               seed_start: int = 0) -> dict:
-    out: dict = {"mission": MISSION, "rover_speed_m_s": rover_speed_m_s, "trials": trials,
+    out: dict = {"bench": "landing", "mission": MISSION, "rover_speed_m_s": rover_speed_m_s,
+                 "trials": trials,
                  "seeds": [seed_start, seed_start + trials - 1], "overrides": list(overrides)}
     for name in strategies or STRATEGIES:
         log(f"{name}: {trials} trials at {rover_speed_m_s:g} m/s")

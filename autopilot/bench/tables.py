@@ -19,7 +19,19 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
-from autopilot.bench import down, follow
+from autopilot.bench import down, follow, landing, offboard
+
+
+def _preformatted(bench: str, format_table: Callable[[dict], str],
+                  about: str) -> Callable[[dict], list[str]]:
+    """A bench whose table is its own text table (``format_table``), shown as it prints it."""
+    def lines(result: dict) -> list[str]:
+        extra = "; overrides: " + ", ".join(f"`{o}`" for o in result["overrides"]) \
+            if result.get("overrides") else ""
+        return [f"### `{bench}`", "", about + extra + ".", "", "```",
+                format_table(result), "```", ""]
+    return lines
+
 
 #: bench name → its Markdown formatter (lines)
 FORMATTERS: dict[str, Callable[[dict], list[str]]] = {
@@ -27,13 +39,27 @@ FORMATTERS: dict[str, Callable[[dict], list[str]]] = {
     "follow_marker": follow.format_markdown,
     "hover_image": down.format_markdown,
     "land_pad": down.format_markdown,
+    "offboard": _preformatted(
+        "offboard", offboard.format_table,
+        "Orbit and survey, our tracker against seed 004's PID; mean (worst) over the seeds; "
+        "`rms_cross_track_m` against truth (the navigation's error included), "
+        "`rms_cross_track_nav_m` against the vehicle's own navigation (what the tracker "
+        "controls)"),
+    "landing": _preformatted(
+        "landing", landing.format_table,
+        "Landing on the moving rover: ours against seed 004's fused filter and gain-scheduled "
+        "PID, and ours without the tag, in the same trials; a trial that did not land on the "
+        "deck counts in the success rate and as infinite in the error percentiles"),
 }
 
 
 def command_of(result: dict) -> str:
     """The command that reproduces a result (its bench, seeds, variant and overrides)."""
     parts = ["autopilot bench", result["bench"]]
-    if result.get("quick"):
+    if result["bench"] == "landing":
+        parts += [f"--trials {result['trials']}", f"--rover-speed {result['rover_speed_m_s']:g}"]
+        parts += [f"--strategy {n}" for n in landing.STRATEGIES if n in result]
+    elif result.get("quick"):
         parts.append("--quick")
     else:
         parts.append(f"--seeds {result.get('seeds', 1)}")
@@ -51,6 +77,7 @@ def command_of(result: dict) -> str:
 SCENARIOS: dict[str, tuple[str, ...]] = {
     **{name: tuple(b.scenarios) for name, b in follow.BENCHES.items()},
     **{name: tuple(b.scenarios) for name, b in down.BENCHES.items()},
+    "offboard": tuple(offboard.SCENARIOS),
 }
 
 #: bench name → how several of its results (rows or scenarios flown apart) become one
@@ -75,8 +102,10 @@ def render(results: list[dict], note: str = "") -> str:
         bench = result.get("bench")
         if bench not in FORMATTERS:
             raise ValueError(f"no table for bench {bench!r} (known: {', '.join(FORMATTERS)})")
-        by_bench.setdefault((bench, tuple(result.get("overrides") or ())), []).append(result)
-    for (bench, _), group in by_bench.items():
+        key = (bench, tuple(result.get("overrides") or ()),
+               None if bench in MERGERS else len(by_bench))  # (each its own table)
+        by_bench.setdefault(key, []).append(result)
+    for (bench, _, _), group in by_bench.items():
         result = MERGERS[bench](group) if len(group) > 1 else group[0]
         lines += FORMATTERS[bench](result)
         lines += [f"Command: `{command_of(result)}`"

@@ -181,3 +181,27 @@ def test_follow_seeds_flown_apart_are_pooled_and_profiles_kept_apart():
     assert page.count("### `follow_ball`") == 2  # the ideal world in a table of its own
     assert "--seeds 2" in page
     assert "--set sim.profile=ideal" in page
+
+
+def test_offboard_and_landing_tables_are_their_own_text_tables():
+    from autopilot.bench import landing, offboard
+
+    keys = (*offboard.METRICS["orbit"], "real_time_factor")
+    run = {"seed": 1, "status": "completed", **dict.fromkeys(keys, 0.05)}
+    s = offboard._summarise([run], "orbit")
+    result = {"bench": "offboard", "seeds": 1, "overrides": ["sim.profile=ideal"],
+              "scenarios": {"orbit": {"mission": "orbit", "overrides": [],
+                                      "summary": {"ours": s}, "seed004_over_ours": None}}}
+    summary = {"success_rate": 0.98, "median_error_m": 0.04, "replay": {}}
+    land = {"bench": "landing", "mission": "land_on_rover", "rover_speed_m_s": 0.0,
+            "trials": 50, "seeds": [0, 49], "overrides": [], "ours": summary,
+            "seed004": {**summary, "success_rate": 0.5}}
+    page = tables.render([result, land, {**land, "rover_speed_m_s": 1.5}])
+    assert "```\norbit and survey: 1 seeds per scenario" in page
+    assert "overrides: `sim.profile=ideal`" in page
+    assert "`autopilot bench offboard --seeds 1 --scenario orbit --set sim.profile=ideal" in page
+    # two landing results (a static and a moving rover): two tables, never pooled
+    assert page.count("### `landing`") == 2
+    assert "autopilot bench landing --trials 50 --rover-speed 0 --strategy ours " \
+           "--strategy seed004 --json" in page
+    assert landing.format_table(land) in page
