@@ -297,6 +297,11 @@ def orbit_metrics(log: Records, intervals: list[tuple[float, float]], step: Mapp
             r = np.hypot(truth.p[on, 0] - look[0], truth.p[on, 1] - look[1])
             radius = {"radius_mean_m": float(r.mean()),
                       "radius_rms_error_m": _rms(r - params["radius_m"])}
+            # ... and as the vehicle's navigation had it (the centre is given in its frame)
+            nav_t, nav_p = _navigation(log, t0, t1)
+            if len(nav_t):
+                r = np.hypot(nav_p[:, 0] - look[0], nav_p[:, 1] - look[1])
+                radius["radius_rms_error_nav_m"] = _rms(r - params["radius_m"])
     finite = [o for o in offsets if math.isfinite(o)]
     orbit = {
         **path,
@@ -401,7 +406,12 @@ def goto_metrics(log: Records, intervals: list[tuple[float, float]], step: Mappi
     if plan is None or truth is None:
         return {}
     end = np.array(plan["points_ned_m"][-1], dtype=float)
-    return {"goto": {**path, "final_error_m": float(np.linalg.norm(truth.p[-1] - end))}}
+    out = {**path, "final_error_m": float(np.linalg.norm(truth.p[-1] - end))}
+    # where the vehicle's navigation put it at the end (the goal is given in its frame)
+    nav_t, nav_p = _navigation(log, float(plan["time_s"]), intervals[-1][1])
+    if len(nav_t):
+        out["final_error_nav_m"] = float(np.linalg.norm(nav_p[-1] - end))
+    return {"goto": out}
 
 
 # ------------------------------------------------------------------------------------------

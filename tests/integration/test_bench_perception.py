@@ -33,11 +33,24 @@ def test_marker_pose_against_truth(quick):
 
 
 def test_ball_against_truth(quick):
+    # the shipped (realistic) camera: a fitted calibration and the codec's JPEG (its 4:2:0
+    # chroma moves the ball's edge by a few tenths of a pixel: range from apparent size
+    # carries it, ~4 % at 4 m where the ball is ~10 px across)
     ball = quick["ball"]
     assert ball["at_1m"]["detection_rate"] == 1.0
     assert ball["at_2m"]["centre_error_px_p50"] <= 1.5
-    assert ball["at_4m"]["range_error_pct_p50"] <= 3.0
+    assert ball["at_4m"]["range_error_pct_p50"] <= 6.0
     assert ball["all"]["frames"] == 5 * 6
+
+
+def test_ball_geometry_on_the_ideal_camera():
+    """The detector's own geometry, on the true calibration and without the codec."""
+    from autopilot.config import load_config
+
+    ball = run_bench(quick=True, detectors=["ball"],
+                     config=load_config(overrides=["sim.profile=ideal"]))["ball"]
+    assert ball["at_2m"]["centre_error_px_p50"] <= 1.5
+    assert ball["at_4m"]["range_error_pct_p50"] <= 3.0
 
 
 def test_down_camera_detectors_ours_and_the_seeds(quick):

@@ -42,7 +42,9 @@ def test_follow_marker_closed_loop(marker_flight):
     assert follow["standoff_m"] == 1.0
     est = summary["metrics"]["estimation"]
     assert est["lost_share"] == 0.0
-    assert est["rms_position_error_m"] <= 0.06
+    # relative to the vehicle (what following flies); against truth the GNSS navigation's
+    # decimetres come on top
+    assert est["rms_relative_position_error_m"] <= 0.08
     # the marker pipeline ran on the front camera, logged on its own topic
     log = read_log(run_dir / "flight.mcap")
     frames = log[ch.detection_topic("marker")]

@@ -52,8 +52,9 @@ def test_a_pad_4_m_away_is_searched_for_and_landed_on(tmp_path):
     assert summary["status"] == "completed"
     landing = summary["metrics"]["landing"]
     assert landing["landed"]
-    assert landing["error_m"] <= 0.05
-    assert landing["retries"] == 0
+    assert landing["on_pad"]
+    assert landing["error_m"] <= 0.10  # the realistic world's target
+    assert landing["retries"] <= 1  # (a dropped or blurred frame near the ground may cost one)
     # climbed to the search altitude and flew out along the square before it had the pad
     flown = searched(read_log(tmp_path / "flight.mcap"), "land_pad")
     assert flown["up_m"] == pytest.approx(6.0)

@@ -16,7 +16,10 @@ def test_replay_without_overrides_reproduces_the_flight(logged_flight):
     assert result["frames"]["replayed"] == result["frames"]["in_flight"] == \
         summary["stats"]["frames"]
     flown, again = summary["metrics"]["follow"], result["metrics"]["follow"]
-    assert again["detection_rate"] == flown["detection_rate"]  # exactly
+    # the realistic camera's frames passed its codec (JPEG q75, 4:2:0) before the flight's
+    # detector; the log keeps them re-encoded (q95, 4:4:4): a marginal frame or two may go
+    # the other way (README: a replay reproduces the flight within 1 %)
+    assert again["detection_rate"] == pytest.approx(flown["detection_rate"], abs=0.01)
     assert again["frames_in_view"] == flown["frames_in_view"]
     assert again["false_detection_rate"] == flown["false_detection_rate"]
     est_flown, est_again = summary["metrics"]["estimation"], result["metrics"]["estimation"]
@@ -59,8 +62,8 @@ def test_replay_json_is_shaped_like_summary(logged_flight, capsys):
     assert out["status"] == "replayed"
     assert out["mission"] == summary["mission"]
     assert set(out["metrics"]) == {"follow", "estimation"}
-    assert out["metrics"]["follow"]["detection_rate"] == \
-        summary["metrics"]["follow"]["detection_rate"]
+    assert out["metrics"]["follow"]["detection_rate"] == pytest.approx(
+        summary["metrics"]["follow"]["detection_rate"], abs=0.01)  # (the codec: see above)
 
 
 def test_replay_of_a_log_cut_short(logged_flight, tmp_path):

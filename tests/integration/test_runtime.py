@@ -27,25 +27,29 @@ def test_follow_ball_closed_loop(tmp_path):
     assert orphans == []
     assert summary["status"] == "completed"
     follow = summary["metrics"]["follow"]
-    # the README's figures (detection 1.000, RMS range error 0.031 m, over 60 s) with about
-    # twice their room, so a regression fails
+    # the shipped (realistic) world: the README's figures (detection 0.999, RMS range error
+    # 0.042 m over 60 s; the target ≤ 0.10 m) with about twice their room
+    assert summary["sim"]["profile"] == "realistic"
     assert follow["detection_rate"] >= 0.98
-    assert follow["rms_range_error_m"] <= 0.07
+    assert follow["rms_range_error_m"] <= 0.09
     assert follow["max_lost_s"] <= 0.5
     assert follow["false_detection_rate"] == 0.0
-    # the estimate the controller flew on, at every control tick: honest σ (an overconfident
-    # filter scores far below 0.8, a timid one at 1.0), never lost. Its errors wander slowly
-    # (most of them are the vehicle's own navigation error), so the share is only meaningful
-    # over the whole minute: 10 s windows of this flight range from 0.63 to 1.0
+    # the estimate the controller flew on, at every control tick, never lost. Against truth it
+    # carries the GNSS navigation's decimetres (one slow draw in a minute); relative to the
+    # vehicle — what following flies — centimetres, and its σ never overconfident (an
+    # overconfident filter scores far below 0.8; ours is on the timid side, see the benches)
     est = summary["metrics"]["estimation"]
-    assert 0.8 <= est["within_2sigma"] <= 0.95
     assert est["lost_share"] == 0.0
-    assert est["rms_position_error_m"] <= 0.08
-    # lockstep: capture → setpoint is the camera's own latency plus the detection's charge
-    # (to the next 2 ms physics step); the rest of the pipeline takes no simulated time
+    assert est["rms_relative_position_error_m"] <= 0.12
+    assert est["relative_within_2sigma"] >= 0.8
+    assert 0.1 <= est["rms_position_error_m"] <= 1.5
+    # lockstep: capture → setpoint is the camera's own latency (with its jitter) plus the
+    # detection's charge (to the next 2 ms physics step); the rest takes no simulated time
     cfg = load_mission("follow_ball").config
-    expected_ms = 1e3 * (cfg.sim.cameras["front"].latency_s + detection_charge(cfg, ["ball"]))
-    assert summary["metrics"]["latency_ms"]["p95"] == pytest.approx(expected_ms, abs=2.0)
+    cam = cfg.sim.cameras["front"]
+    expected_ms = 1e3 * (cam.latency_s + detection_charge(cfg, ["ball"]))
+    p95 = summary["metrics"]["latency_ms"]["p95"]
+    assert expected_ms <= p95 <= expected_ms + 1e3 * 3 * cam.latency_jitter_s + 2.0
     on_disk = json.loads((tmp_path / "summary.json").read_text())
     for key in ("status", "mission", "driver", "sim_time_s", "wall_time_s"):
         assert key in on_disk
