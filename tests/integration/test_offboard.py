@@ -132,8 +132,11 @@ scenario: {ball: null}
         assert goto["final_error_m"] <= goto["final_error_nav_m"] + 3 * 0.5  # 3σ of GNSS
     log = read_log(tmp_path / "run" / "flight.mcap")
     first = next(r for r in log[ch.PLANNED_PATH] if r["step_index"] == 1)
-    # (home is where it armed: its estimate a few centimetres off the origin, resting on legs)
-    assert first["points_ned_m"][-1] == pytest.approx([6.0, -3.0, -4.0], abs=0.12)
+    # home is where it armed, as its navigation had it (on GNSS decimetres off the origin;
+    # its height resting on its legs): the goal is 6 m north, 3 m west and 4 m up from there
+    home = next(r["position_ned_m"] for r in log[ch.VEHICLE_STATE] if r["armed"])
+    assert first["points_ned_m"][-1] == pytest.approx(
+        [home[0] + 6.0, home[1] - 3.0, -4.0], abs=0.12)
     second = next(r for r in log[ch.PLANNED_PATH] if r["step_index"] == 2)
     assert second["points_ned_m"][-1] == pytest.approx([0.0, 0.0, -3.0], abs=0.12)
     statuses = [r["code"] for r in log[ch.MISSION_STATUS]]
