@@ -282,7 +282,7 @@ def format_table(result: dict) -> str:
         lines.append("")
         lines.append(f"{scenario} ({', '.join(data['overrides']) or 'as shipped'})")
         width = max(12, *(len(r) + 2 for r in data["summary"]))
-        lines.append(f"  {'':<{width}}{'ok':>6}{e:>{len(e) + 3}}" + "".join(
+        lines.append(f"  {'':<{width}}{'ok':>7}{e:>{len(e) + 10}}" + "".join(
             f"{k:>{len(k) + 2}}" for k in keys) + f"{'÷ ours':>9}")
         for row, s in data["summary"].items():
             med, worst = s[f"{e}_median_all"], s[f"{e}_worst_all"]
@@ -294,8 +294,8 @@ def format_table(result: dict) -> str:
             r = data["baseline_over_ours"].get(row)
             shown = "—" if row == next(iter(data["summary"])) else (
                 f"{r:.1f}×" if r is not None else ("∞" if med is None else "n/a"))
-            lines.append(f"  {row:<{width}}{s['succeeded']:>3}/{s['runs']:<2}"
-                         f"{err:>{len(e) + 3}}{cells}{shown:>9}")
+            lines.append(f"  {row:<{width}}{s['succeeded']:>3}/{s['runs']:<3}"
+                         f"{err:>{len(e) + 10}}{cells}{shown:>9}")
             for f in s["failures"]:
                 lines.append(f"  {'':<{width}}  failed seed {f['seed']}: {f['why']}")
     return "\n".join(lines)
