@@ -205,3 +205,14 @@ def test_offboard_and_landing_tables_are_their_own_text_tables():
     assert "autopilot bench landing --trials 50 --rover-speed 0 --strategy ours " \
            "--strategy seed004 --json" in page
     assert landing.format_table(land) in page
+
+
+def test_offboard_compares_trackers_against_the_navigation_when_it_has_it():
+    from autopilot.bench.offboard import seed004_over_ours
+
+    table = {"ours": {"rms_cross_track_m_mean": 0.32, "rms_cross_track_nav_m_mean": 0.05},
+             "seed004": {"rms_cross_track_m_mean": 0.33, "rms_cross_track_nav_m_mean": 0.07}}
+    assert seed004_over_ours(table) == pytest.approx(1.4)  # not 0.33/0.32: GNSS swamps both
+    for row in table.values():
+        del row["rms_cross_track_nav_m_mean"]
+    assert seed004_over_ours(table) == pytest.approx(0.33 / 0.32)
