@@ -217,7 +217,7 @@ def summarise(runs: list[dict], spec: DownBench) -> dict:
                  f"{spec.error}_worst_all": worst if math.isfinite(worst) else None}
     for key in (*spec.metrics, "estimate_rms_m", "estimate_lost_share",
                 "estimate_within_2sigma"):
-        values = [r[key] for r in runs if r[key] is not None]
+        values = [r[key] for r in runs if r.get(key) is not None]
         out[f"{key}_mean"] = float(np.mean(values)) if values else None
         out[f"{key}_n"] = len(values)
     return out

@@ -179,6 +179,7 @@ def test_follow_seeds_flown_apart_are_pooled_and_profiles_kept_apart():
     ideal["overrides"] = ["sim.profile=ideal"]
     page = tables.render([a, b, ideal])
     assert page.count("### `follow_ball`") == 2  # the ideal world in a table of its own
+    assert "### `follow_ball` — ideal world" in page
     assert "--seeds 2" in page
     assert "--set sim.profile=ideal" in page
 
