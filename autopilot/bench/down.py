@@ -35,6 +35,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from autopilot.bench.pooling import pool_runs
 from autopilot.mission import load_mission
 from autopilot.run import fly
 
@@ -147,16 +148,7 @@ def merge(results: Sequence[dict]) -> dict:
     summaries and ratios computed again, ours first."""
     first = results[0]
     spec = BENCHES[first["bench"]]
-    for r in results[1:]:
-        for key in ("bench", "quick", "overrides"):
-            if r.get(key) != first.get(key):
-                raise ValueError(f"cannot merge {first['bench']} results with different {key}")
-    pooled: dict[str, dict] = {}
-    for r in results:
-        for scenario, data in r["scenarios"].items():
-            into = pooled.setdefault(scenario, {"overrides": data["overrides"], "runs": {}})
-            for row, runs in data["runs"].items():
-                into["runs"].setdefault(row, []).extend(runs)
+    pooled = pool_runs(results)
     scenarios = {}
     for scenario in [s for s in spec.scenarios if s in pooled]:
         data = pooled[scenario]

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from autopilot.bench.pooling import pool_runs
 from autopilot.mission import load_mission
 from autopilot.run import fly
 
@@ -225,16 +226,7 @@ def merge(results: Sequence[dict]) -> dict:
     and ratios computed again, in the bench's order."""
     first = results[0]
     spec = BENCHES[first["bench"]]
-    for r in results[1:]:
-        for key in ("bench", "quick", "overrides"):
-            if r.get(key) != first.get(key):
-                raise ValueError(f"cannot merge {first['bench']} results with different {key}")
-    pooled: dict[str, dict] = {}
-    for r in results:
-        for scenario, data in r["scenarios"].items():
-            into = pooled.setdefault(scenario, {"overrides": data["overrides"], "runs": {}})
-            for controller, runs in data["runs"].items():
-                into["runs"].setdefault(controller, []).extend(runs)
+    pooled = pool_runs(results)
     order = [s for s in spec.scenarios if s in pooled]
     scenarios = {}
     for scenario in order:
