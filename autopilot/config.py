@@ -88,6 +88,7 @@ class BallPerceptionConfig(_Model):
     max_radius_px: Positive
     min_circularity: Annotated[float, Field(ge=0, le=1)]
     min_fill_ratio: Annotated[float, Field(ge=0, le=1)]
+    min_solidity: Annotated[float, Field(ge=0, le=1)] = 0.85  # blob area / its convex hull's
 
 
 class MarkerPerceptionConfig(_Model):
@@ -178,6 +179,11 @@ class ImageEstimationConfig(_Model):
     position_noise_px: Positive  # the image centre's bearing noise
     size_noise_px: Positive  # noise of its apparent width (range noise)
     heading_noise_deg: Positive  # of the direction of its top, one detection
+    #: learn the down camera's mount tilt from the image, which lies level
+    #: (:mod:`autopilot.estimation.level_mount`), after this many frames, to this σ at best
+    learn_mount: bool = True
+    mount_min_frames: Annotated[int, Field(ge=5, le=10_000)] = 30
+    mount_residual_std_deg: NonNegative = 0.3
 
 
 class TargetEstimationConfig(_Model):

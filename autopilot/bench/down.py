@@ -177,7 +177,9 @@ def score_run(spec: DownBench, summary: dict, seed: int) -> dict:
            **{k: _number(group.get(k)) for k in spec.metrics},
            "estimate_rms_m": _number(estimation.get("rms_position_error_m")),
            "estimate_lost_share": _number(estimation.get("lost_share")),
-           "estimate_within_2sigma": _number(estimation.get("relative_within_2sigma"))}
+           "estimate_within_2sigma": _number(estimation.get("relative_within_2sigma")),
+           "estimate_normalised_error_rms_ned":
+               estimation.get("relative_normalised_error_rms_ned")}
     problems = []
     if out["status"] != "completed":
         problems.append(f"status {out['status']}")

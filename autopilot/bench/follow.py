@@ -131,6 +131,8 @@ def score_run(summary: dict, seed: int) -> dict:
         "estimate_rms_m": estimation.get("rms_relative_position_error_m"),
         "estimate_lost_share": estimation.get("lost_share"),
         "estimate_within_2sigma": estimation.get("relative_within_2sigma"),
+        "estimate_normalised_error_rms_ned":
+            estimation.get("relative_normalised_error_rms_ned"),
         "real_time_factor": summary["metrics"]["sim"]["real_time_factor"],
         "reason": summary.get("reason"),
         "follow_time_s": follow.get("follow_time_s"),

@@ -30,6 +30,9 @@ coasting stretches included, against the target's true position and velocity the
   does the σ of ``within_2sigma``), this one is what a relative behaviour (follow, land) flies;
   ``relative_within_2sigma`` judges it against σ without the navigation's position part (in
   one flight the navigation's error is one slow draw, so the absolute share is mostly 0 or 1);
+  ``relative_normalised_error_rms_ned`` the RMS of that error ÷ σ per axis (N, E, D): about 1
+  on each axis where σ is honest, below where it is timid — over several seeds, since an error
+  that is a fixed bias in one flight (a camera's mount) is one draw per flight;
 * ``coasting_share`` — ticks flown on a prediction more than three frame periods old, and
   ``rms_position_error_coasting_m`` their error; ``lost_share`` — ticks with no usable estimate;
 * ``at_update`` — the same errors right after each measurement update (the filter at its best;
@@ -465,6 +468,10 @@ def _relative_error(log: Mapping[str, Sequence[Mapping]],
         std = np.sqrt(np.maximum(columns[3] ** 2 - nav_std ** 2, 0.0))
         out["relative_within_2sigma"] = float(np.mean(np.all(np.abs(err) <= 2.0 * std,
                                                              axis=1)))
+        ok = np.all(std > 0.0, axis=1)
+        if ok.any():  # N, E, D: 1.0 where σ is honest, below it where σ is timid
+            out["relative_normalised_error_rms_ned"] = np.sqrt(
+                np.mean((err[ok] / std[ok]) ** 2, axis=0)).tolist()
     return out
 
 

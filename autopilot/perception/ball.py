@@ -43,6 +43,10 @@ class BallDetectorSettings:
     max_radius_px: float = 240.0
     min_circularity: float = 0.8
     min_fill_ratio: float = 0.75
+    #: a blob covering at least this much of its convex hull is judged as its hull (a ball is
+    #: convex: a specular highlight or a shadow outside the colour range only bites its edge);
+    #: 1: never
+    min_solidity: float = 0.85
     max_axis_ratio: float = 1.6  # major/minor beyond what a sphere off-axis can produce
     min_polygon_vertices: int = 8  # of the outline simplified to 2 % of its length
     min_edge_arc: float = 0.75  # merged blobs: fraction of the circle the outline follows ...
@@ -142,10 +146,26 @@ class BallDetector:
                     height: int) -> BallCandidate | None:
         """The blob as one ball, if it passes the shape checks."""
         s = self.settings
+        outline = None  # the outline's points the fit may use (all of them unless bitten)
+        if s.min_solidity < 1.0:
+            hull = cv2.convexHull(contour)
+            hull_area = cv2.contourArea(hull)
+            if area < hull_area and area >= s.min_solidity * hull_area:
+                # judged as its hull, fitted to the outline where it is the hull's (the
+                # bite's edge is not the ball's)
+                original = contour.reshape(-1, 2)
+                on_hull = np.array([abs(cv2.pointPolygonTest(hull, (float(x), float(y)), True))
+                                    <= 1.0 for x, y in original])
+                outline = original[on_hull]
+                contour, area = hull, hull_area
         pts = contour.reshape(-1, 2)
         on_border = ((pts[:, 0] <= 0) | (pts[:, 1] <= 0) | (pts[:, 0] >= width - 1)
                      | (pts[:, 1] >= height - 1))
         cut = bool(on_border.any())
+        if outline is not None:  # the bitten blob's outline, where it is the ball's
+            pts = outline
+            on_border = ((pts[:, 0] <= 0) | (pts[:, 1] <= 0) | (pts[:, 0] >= width - 1)
+                         | (pts[:, 1] >= height - 1))
         if cut:
             inner = pts[~on_border]
             if len(inner) < 0.4 * len(pts) or len(inner) < 8:
@@ -153,6 +173,8 @@ class BallDetector:
             fit_pts = inner.astype(np.float32)
         else:
             fit_pts = pts.astype(np.float32)
+        if len(fit_pts) < 6:
+            return None
         (cu, cv_), (ax1, ax2), _ = cv2.fitEllipse(fit_pts)
         # contour points are pixel centres on the blob's edge: half a pixel inside it
         major, minor = max(ax1, ax2) / 2.0 + 0.5, min(ax1, ax2) / 2.0 + 0.5

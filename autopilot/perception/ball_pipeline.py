@@ -47,7 +47,7 @@ def detector_settings(cfg: AppConfig) -> BallDetectorSettings:
         hsv_ranges=ranges, diameter_m=ball.diameter_m, open_kernel_px=ball.open_kernel_px,
         close_kernel_px=ball.close_kernel_px, min_radius_px=ball.min_radius_px,
         max_radius_px=ball.max_radius_px, min_circularity=ball.min_circularity,
-        min_fill_ratio=ball.min_fill_ratio)
+        min_fill_ratio=ball.min_fill_ratio, min_solidity=ball.min_solidity)
 
 
 def filter_settings(cfg: AppConfig) -> TargetFilterSettings:
@@ -64,10 +64,12 @@ def filter_settings(cfg: AppConfig) -> TargetFilterSettings:
 
 def navigation_settings(cfg: AppConfig) -> NavigationUncertainty:
     n, mount = cfg.estimation.navigation, cfg.estimation.camera_mount_std_deg
-    # the camera's mount error turns its view as the vehicle's attitude error does
+    # the camera's mount error turns its view as the vehicle's attitude error does: σ per axis
+    # of a rotation about the camera, which moves a target across its line of sight in every
+    # direction (the attitude term; the yaw term is the heading's own error, counted once)
     return NavigationUncertainty(n.position_std_m,
                                  math.radians(math.hypot(n.attitude_std_deg, mount)),
-                                 math.radians(math.hypot(n.yaw_std_deg, mount)), n.height_std_m)
+                                 math.radians(n.yaw_std_deg), n.height_std_m)
 
 
 class BallPipeline:

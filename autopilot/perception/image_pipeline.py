@@ -17,6 +17,7 @@ import numpy as np
 
 from autopilot.config import AppConfig
 from autopilot.estimation.heading import HeadingFilter, HeadingSettings
+from autopilot.estimation.level_mount import LevelMountEstimator, LevelMountSettings
 from autopilot.estimation.pose_history import PoseHistory
 from autopilot.estimation.target import (
     TargetEstimate,
@@ -94,6 +95,12 @@ class ImagePipeline:
         set_ground_target_filters(self, cfg, cfg.estimation.image)
         self.history = PoseHistory()
         self.navigation = navigation_settings(cfg)
+        self._attitude_std_deg = cfg.estimation.navigation.attitude_std_deg
+        e = cfg.estimation.image
+        #: the down camera's mount tilt learned from the image, which lies level
+        self.mount = LevelMountEstimator(LevelMountSettings(
+            e.mount_min_frames, residual_std_deg=e.mount_residual_std_deg)) \
+            if e.learn_mount and cfg.estimation.camera_mount_std_deg > 0.0 else None
 
     def add_state(self, state: VehicleState) -> None:
         self.history.add(state)
@@ -110,19 +117,38 @@ class ImagePipeline:
         pose = self.history.pose_at(time_s)
         if pose is None:
             return None
+        nominal = camera
+        if self.mount is not None:
+            camera = self.mount.corrected(nominal)
         width_px = camera.intrinsics.fx * self.size_m / max(detection.range_m, 1e-6)
         meas = camera_measurement(detection.position_cam_m, detection.range_m, width_px / 2.0,
                                   camera, pose, self.filter_settings, time_s)
         result = self.filter.update(meas)
         if result.accepted:
-            r_world_cam = quat_to_matrix(pose.attitude_q) @ camera.rotation_body_cam
+            r_world_body = quat_to_matrix(pose.attitude_q)
+            if self.mount is not None:
+                self._learn_mount(r_world_body, nominal, detection.rotation_cam_image)
+            r_world_cam = r_world_body @ camera.rotation_body_cam
             heading = image_heading(r_world_cam @ detection.rotation_cam_image)
             if self.heading.innovation2(time_s, heading, self.heading_std_rad) <= \
                     self.heading.settings.gate_chi2:
                 self.heading.update(time_s, heading, self.heading_std_rad)
         est = self.target(time_s, pose.position_ned_m)
+        learned = self.mount.estimate() if self.mount is not None else None
         return estimate_record(self.name, time_s, result, meas, est,
-                               heading_rad=est.heading_rad, heading_std_rad=est.heading_std_rad)
+                               heading_rad=est.heading_rad, heading_std_rad=est.heading_std_rad,
+                               mount_tilt_deg=None if learned is None else list(learned.tilt_deg))
+
+    def _learn_mount(self, r_world_body: np.ndarray, camera: CameraInfo,
+                     r_cam_image: np.ndarray) -> None:
+        """One more frame of the level image for the mount's tilt; once learned, the
+        estimate's σ carries the learned tilt's uncertainty instead of the mount's."""
+        if not self.mount.add(r_world_body, camera, r_cam_image):
+            return
+        learned = self.mount.estimate()
+        if learned is not None:
+            self.navigation = dataclasses.replace(self.navigation, attitude_std_rad=math.radians(
+                math.hypot(self._attitude_std_deg, learned.std_deg)))
 
     def target(self, time_s: float, vehicle_position_ned_m=None) -> TargetEstimate | None:
         """The image at ``time_s``: its centre (σ including the vehicle's navigation errors)

@@ -1,6 +1,7 @@
 """The image pipeline on a synthetic view (the reference warped by the exact homography of a
 known camera pose, over a textured background): the image's centre and heading in the world."""
 
+import dataclasses
 import math
 
 import cv2
@@ -71,3 +72,53 @@ def test_image_heading_is_the_direction_of_its_top():
         assert image_heading(image_rotation_ned(yaw)) == pytest.approx(yaw)
     tilted = quat_to_matrix(quat_from_euler(0.05, -0.03, 0.0)) @ image_rotation_ned(1.0)
     assert image_heading(tilted) == pytest.approx(1.0, abs=0.01)
+
+
+def test_a_level_image_teaches_the_down_camera_its_mount_tilt():
+    """The down camera is really turned 1.5° and −1° about its x and y axes: seen from 2 m that
+    puts the image ~6 cm off. The pipeline learns the tilt from the image's pose (it lies level)
+    and, once learned, places the image within 1.5 cm; its σ then carries the learned tilt's."""
+    from autopilot.estimation.level_mount import LevelMountSettings, frame_tilt_rad
+
+    cfg = load_config()
+    assert cfg.estimation.image.learn_mount
+    assert cfg.estimation.camera_mount_std_deg > 0
+    pipeline = ImagePipeline(cfg, image_spec(cfg, size_m=SIZE_M))
+    nominal = front_camera(pitch_down_deg=90.0)
+    tilt = np.radians([1.5, -1.0, 0.0])
+    true_camera = dataclasses.replace(
+        nominal, rotation_body_cam=nominal.rotation_body_cam @ cv2.Rodrigues(tilt)[0])
+    centre = np.array([3.0, 1.0, 0.0])
+    rng = np.random.default_rng(3)
+    frames = LevelMountSettings().min_frames + 10
+    errors = []
+    for i in range(frames):
+        t = 0.05 * i
+        roll, pitch = np.radians(rng.normal(0.0, 2.0, 2))  # the vehicle rocks as it holds
+        state = vehicle_state(t, pos=(2.9, 1.1, -2.0), yaw=0.4)
+        state = dataclasses.replace(state, attitude_q=quat_from_euler(roll, pitch, 0.4))
+        pipeline.add_state(state)
+        image = _view(true_camera, state, centre, 0.3)
+        found = pipeline.detect(image, nominal, t, None)
+        assert found is not None
+        pipeline.estimate(t, nominal, found)
+        # the measurement of this frame, as placed with the camera the pipeline believes in
+        errors.append(np.linalg.norm(pipeline.filter._kf.x[:2] - centre[:2]))
+        if i == 0:  # one frame's tilt, from the exact geometry
+            r_world_body = quat_to_matrix(state.attitude_q)
+            one = frame_tilt_rad(r_world_body @ nominal.rotation_body_cam,
+                                 found.rotation_cam_image)
+            assert np.degrees(np.abs(one[:2] - tilt[:2])).max() < 1.0
+    learned = pipeline.mount.estimate()
+    assert learned is not None
+    assert learned.frames == frames
+    assert np.allclose(learned.tilt_deg, np.degrees(tilt[:2]), atol=0.3)
+    assert errors[5] > 0.04  # before: the mount's tilt, seen from 2 m
+    meas = pipeline.estimate(frames * 0.05, nominal, found)["measured_position_ned_m"]
+    assert np.linalg.norm(np.asarray(meas)[:2] - centre[:2]) < 0.015
+    assert pipeline.navigation.attitude_std_rad < math.radians(0.5)
+
+
+def test_no_mount_is_learned_where_it_is_believed_perfect():
+    cfg = load_config(overrides=["estimation.camera_mount_std_deg=0"])
+    assert ImagePipeline(cfg, image_spec(cfg, size_m=SIZE_M)).mount is None
