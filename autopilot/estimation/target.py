@@ -109,6 +109,14 @@ class TargetFilter:
         self._kf = None
         self._updates = 0
 
+    def shift(self, delta_ned_m: np.ndarray) -> None:
+        """The frame the measurements are placed in moved by ``delta_ned_m`` (a camera's
+        mount learned anew): the estimate moves with it, instead of rejecting the measurements
+        that now sit elsewhere until the track restarts."""
+        if self._kf is not None:
+            self._kf.x[:3] += np.asarray(delta_ned_m, dtype=float)
+            self._rejected.clear()
+
     def update(self, meas: PositionMeasurement) -> UpdateResult:
         if self.is_stale(meas.time_s):
             self._initialise(meas)

@@ -101,6 +101,7 @@ class ImagePipeline:
         self.mount = LevelMountEstimator(LevelMountSettings(
             e.mount_min_frames, residual_std_deg=e.mount_residual_std_deg)) \
             if e.learn_mount and cfg.estimation.camera_mount_std_deg > 0.0 else None
+        self._mount_camera: CameraInfo | None = None  # as corrected on the last frame
 
     def add_state(self, state: VehicleState) -> None:
         self.history.add(state)
@@ -118,11 +119,21 @@ class ImagePipeline:
         if pose is None:
             return None
         nominal = camera
+        width_px = camera.intrinsics.fx * self.size_m / max(detection.range_m, 1e-6)
+
+        def measured(cam: CameraInfo):
+            return camera_measurement(detection.position_cam_m, detection.range_m,
+                                      width_px / 2.0, cam, pose, self.filter_settings, time_s)
+
+        meas = measured(nominal)
         if self.mount is not None:
             camera = self.mount.corrected(nominal)
-        width_px = camera.intrinsics.fx * self.size_m / max(detection.range_m, 1e-6)
-        meas = camera_measurement(detection.position_cam_m, detection.range_m, width_px / 2.0,
-                                  camera, pose, self.filter_settings, time_s)
+            meas = measured(camera)
+            # the estimate moves as the correction does (all at once when first learned)
+            previous = measured(self._mount_camera) if self._mount_camera is not None \
+                else measured(nominal)
+            self.filter.shift(meas.position_ned_m - previous.position_ned_m)
+            self._mount_camera = camera
         result = self.filter.update(meas)
         if result.accepted:
             r_world_body = quat_to_matrix(pose.attitude_q)

@@ -101,7 +101,10 @@ def test_a_level_image_teaches_the_down_camera_its_mount_tilt():
         image = _view(true_camera, state, centre, 0.3)
         found = pipeline.detect(image, nominal, t, None)
         assert found is not None
-        pipeline.estimate(t, nominal, found)
+        record = pipeline.estimate(t, nominal, found)
+        # the estimate moves with the correction when it is learned: nothing is rejected
+        assert record["accepted"]
+        assert not record["reinitialised"] or i == 0
         # the measurement of this frame, as placed with the camera the pipeline believes in
         errors.append(np.linalg.norm(pipeline.filter._kf.x[:2] - centre[:2]))
         if i == 0:  # one frame's tilt, from the exact geometry
