@@ -99,11 +99,6 @@ LANDING_PHASES = frozenset({"landing", "descending", "committed", "touching down
 #: a landing a failsafe asked for and the vehicle refused (or did not answer within 2 s) is
 #: asked for again this long after (s)
 LAND_RETRY_S = 1.0
-#: how long a processed frame waits for telemetry to reach its capture time: on a starved CPU
-#: telemetry falls behind the video, and a frame newer than every pose cannot be placed (its
-#: measurement was lost: the target "lost" while in view)
-POSE_WAIT_S = 0.5
-POSE_EXTRAPOLATION_S = 0.05  # (the pose histories extrapolate up to 0.1 s)
 
 
 class Service(Protocol):
@@ -172,8 +167,6 @@ class RunStats:
     loop_lag_p99_ms: float | None = None
     loop_lag_max_ms: float | None = None
     loop_stalls: int = 0  # the loop silent for runtime.loop_stall_s or longer
-    frames_waited_for_pose: int = 0  # processed frames newer than telemetry (a starved CPU)
-    frames_without_pose: int = 0  # ... still without a pose after POSE_WAIT_S
 
 
 def detection_charge(config: AppConfig, kinds: Sequence[str]
@@ -233,7 +226,6 @@ class Runtime:
         self.errors: list[BaseException] = []
         self._progress = progress
         self._state: VehicleState | None = None
-        self._telemetry_signal = asyncio.Event()  # set on every state
         self._estimated: LatestSlot[float] = LatestSlot()  # capture time of the frame used
         self._intent: Intent | None = None
         self._last_send_s = -math.inf
@@ -1139,33 +1131,9 @@ class Runtime:
                                   detected_s=detected)
                     self.log.write(ch.detection_topic(pipeline.name), frame.time_s, record)
 
-    async def _telemetry_reaches(self, time_s: float) -> None:
-        """Wait, at most :data:`POSE_WAIT_S`, until the vehicle's telemetry is close enough to
-        ``time_s`` for a pose there (within the pose histories' extrapolation; at once when it
-        is, as it normally is: frames come later than poses)."""
-        def behind() -> bool:
-            return self._state is None or self._state.time_s < time_s - POSE_EXTRAPOLATION_S
-
-        if not behind():
-            return
-        self.stats.frames_waited_for_pose += 1
-        deadline = self.clock.now() + POSE_WAIT_S
-        while behind():
-            remaining = deadline - self.clock.now()
-            if remaining <= 0.0:
-                self.stats.frames_without_pose += 1
-                return
-            self._telemetry_signal.clear()
-            try:
-                await self.clock.wait_for(self._telemetry_signal.wait(), remaining)
-            except TimeoutError:
-                continue
-
     async def _estimation(self, lane: Lane) -> None:
         while True:
             item = await lane.frames.get()
-            if any(det is not None for det in item.detections):
-                await self._telemetry_reaches(item.time_s)
             for key, det in zip(lane.keys, item.detections, strict=True):
                 track = self.tracks[key]
                 track.detection = det
@@ -1212,7 +1180,6 @@ class Runtime:
                 record = ch.vehicle_state_record(state)
                 record["received_s"] = self.clock.now()
                 self.log.write(ch.VEHICLE_STATE, state.time_s, record)
-                self._telemetry_signal.set()
 
     def _sensor_tasks(self, tasks: asyncio.TaskGroup) -> list[asyncio.Task]:
         """The vehicle's extra sensor streams (UWB, the rover's reports) while any pipeline
