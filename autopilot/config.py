@@ -61,6 +61,9 @@ class RuntimeConfig(_Model):
     #: the event loop not answering for this long (wall clock) is a stall: reported, and in
     #: real time, once setpoints have lapsed, the mission's fallback takes over
     loop_stall_s: Annotated[float, Field(gt=0, le=30)] = 0.5
+    #: background threads (decoding, detection, encoding) this much lower in priority than the
+    #: event loop's (telemetry, control): :mod:`drivers.threads`
+    background_nice: Annotated[int, Field(ge=0, le=19)] = 10
 
     @model_validator(mode="after")
     def _stall_outlasts_setpoints(self) -> RuntimeConfig:

@@ -20,6 +20,7 @@ import numpy as np
 
 from autopilot.flightlog.log import FlightLog
 from drivers.base import Frame, Vehicle
+from drivers.threads import lower_this_thread
 
 FRAME_LOG_BUFFER = 32  # frames waiting for JPEG encoding; more are dropped (and counted)
 FRAME_LOG_PIPELINE = 3  # frames being encoded at once (each within this many frame periods)
@@ -82,7 +83,8 @@ class FrameLogger:
         then calls :meth:`close`)."""
         if not self.samplers:
             return []
-        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="frame-log")
+        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="frame-log",
+                                        initializer=lower_this_thread)
         return [group.create_task(self._encode(), name="frame-log"),
                 *(group.create_task(self._camera(name), name=f"frame-log-{name}")
                   for name in self.samplers)]

@@ -34,6 +34,7 @@ from autopilot.photos import CameraExif, CameraPose, write_geotagged_jpeg
 from autopilot.planning.footprint import ground_footprint
 from drivers.base import Frame, Vehicle, VehicleState
 from drivers.geometry import euler_from_quat
+from drivers.threads import lower_this_thread
 
 log = logging.getLogger(__name__)
 
@@ -206,7 +207,8 @@ class PhotoLane:
         attitude = CameraPose(yaw_deg, cam_pitch + math.degrees(pitch), math.degrees(roll),
                               height)
         if self._writer is None:
-            self._writer = ThreadPoolExecutor(max_workers=1, thread_name_prefix="photos")
+            self._writer = ThreadPoolExecutor(max_workers=1, thread_name_prefix="photos",
+                                              initializer=lower_this_thread)
             self.folder.mkdir(parents=True, exist_ok=True)
         self._writes.append(self._writer.submit(
             write_geotagged_jpeg, self.folder / name, frame.image, lat_deg=lat, lon_deg=lon,

@@ -28,6 +28,7 @@ from autopilot.process import StealMeter, release_freed_memory
 from autopilot.runtime import Runtime
 from autopilot.steps.metrics import mission_metrics
 from drivers.base import CameraUnavailable, Vehicle
+from drivers.threads import set_background_nice
 
 
 def default_out_dir(plan: MissionPlan, root: Path = Path("runs")) -> Path:
@@ -184,6 +185,7 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
         if progress is not None:
             progress(f"warning: {text}")
 
+    set_background_nice(plan.config.runtime.background_nice)
     vehicle, seed = make_vehicle(plan, realtime=realtime, connect=connect, video=video,
                                  calibration=calibration, signing_key=signing_key, warn=warn)
     log_cameras = None

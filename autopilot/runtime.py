@@ -90,6 +90,7 @@ from drivers.base import (
     VehicleState,
 )
 from drivers.slots import LatestSlot
+from drivers.threads import lower_this_thread
 
 log = logging.getLogger(__name__)
 
@@ -249,7 +250,8 @@ class Runtime:
         self._active: tuple[str, ...] = ()  # the running step's pipelines (keys)
         self._lanes: dict[str, Lane] = {}
         self._group: asyncio.TaskGroup | None = None
-        self._detect_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="detect")
+        self._detect_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="detect",
+                                               initializer=lower_this_thread)
         self._step_photo_camera = [step_kind(step.name).photo_camera(step.params, cfg)
                                    for step in plan.steps]
         #: the mission's steps, then the goals run so far (a goal's index is its place here)

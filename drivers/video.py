@@ -58,6 +58,7 @@ import numpy as np
 
 from drivers.base import CameraInfo, Frame
 from drivers.slots import Broadcast
+from drivers.threads import lower_this_thread
 
 log = logging.getLogger(__name__)
 
@@ -868,6 +869,7 @@ class VideoSource:
         self._stop_flag.set()
 
     def _decode(self, stop: threading.Event) -> None:
+        lower_this_thread()  # decoding sheds frames when the CPU is short; telemetry must not
         while not stop.is_set():
             if not self._decoding.acquire(timeout=0.2):
                 continue  # the previous thread has not let go of the sockets yet

@@ -50,6 +50,7 @@ from autopilot.behaviors.manual import ACTIONS, AXES
 from autopilot.flightlog import records as ch
 from autopilot.framelog import FrameSampler
 from drivers.slots import Broadcast
+from drivers.threads import lower_this_thread
 
 if TYPE_CHECKING:
     from autopilot.runtime import Runtime
@@ -218,7 +219,8 @@ class Console:
     def __init__(self, runtime: Runtime) -> None:
         self.runtime = runtime
         self.settings = runtime.config.console
-        self._pool = ThreadPoolExecutor(1, thread_name_prefix="console-video")
+        self._pool = ThreadPoolExecutor(1, thread_name_prefix="console-video",
+                                        initializer=lower_this_thread)
         self._feeds: dict[tuple[str, bool], CameraFeed] = {}
 
     def feed(self, camera: str, overlay: bool = True) -> CameraFeed:
