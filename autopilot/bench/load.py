@@ -560,7 +560,8 @@ def run_bench(hogs: Sequence[int], follow_s: float = DEFAULT_FOLLOW_S, driver: s
         if out is None:
             shutil.rmtree(folder, ignore_errors=True)
     rate = plan.config.runtime.control_rate_hz
-    return {"mission": "follow_ball", "follow_s": follow_s, "driver": driver,
+    return {"bench": "load", "mission": "follow_ball", "hogs": list(hogs),
+            "follow_s": follow_s, "driver": driver, "overrides": list(overrides),
             "vehicle_core": cores[0], "autopilot_core": cores[1], "viewer_fps": fps,
             "control_rate_hz": rate, "rows": rows, **conclusions(rows, rate),
             "out": str(out) if out is not None else None}

@@ -19,7 +19,7 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
-from autopilot.bench import down, follow, landing, offboard
+from autopilot.bench import down, follow, landing, load, offboard
 
 
 def _preformatted(bench: str, format_table: Callable[[dict], str],
@@ -50,6 +50,12 @@ FORMATTERS: dict[str, Callable[[dict], list[str]]] = {
         "Landing on the moving rover: ours against seed 004's fused filter and gain-scheduled "
         "PID, and ours without the tag, in the same trials; a trial that did not land on the "
         "deck counts in the success rate and as infinite in the error percentiles"),
+    "load": _preformatted(
+        "load", load.format_table,
+        "Real-time follow_ball on a busy CPU: `autopilot sim` on a core of its own, the "
+        "autopilot over MAVSDK (H.264 video in, a console viewer) sharing the other with N busy "
+        "processes, each in a session of its own (Linux's autogroups give each the "
+        "autopilot's share)"),
 }
 
 
@@ -59,6 +65,9 @@ def command_of(result: dict) -> str:
     if result["bench"] == "landing":
         parts += [f"--trials {result['trials']}", f"--rover-speed {result['rover_speed_m_s']:g}"]
         parts += [f"--strategy {n}" for n in landing.STRATEGIES if n in result]
+    elif result["bench"] == "load":
+        parts += ["--hogs " + ",".join(str(n) for n in result["hogs"]),
+                  f"--follow-s {result['follow_s']:g}", f"--driver {result['driver']}"]
     elif result.get("quick"):
         parts.append("--quick")
     else:

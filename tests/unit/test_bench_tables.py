@@ -217,3 +217,26 @@ def test_offboard_compares_trackers_against_the_navigation_when_it_has_it():
     for row in table.values():
         del row["rms_cross_track_nav_m_mean"]
     assert seed004_over_ours(table) == pytest.approx(0.33 / 0.32)
+
+
+def test_the_load_curve_is_a_table_of_its_own_with_its_command():
+    from autopilot.bench import load
+
+    def row(hogs, completed, p99, shed):
+        return {"hogs": hogs, "completed": completed, "why": None if completed else "lost",
+                "tick_ms_p50": 33.0, "tick_ms_p99": p99, "ticks": 500,
+                "latency_ms_p50": 50.0, "latency_ms_p95": 60.0, "perception_shed": 0,
+                "perception_frames": 600, "perception_shed_share": shed,
+                "console_shed": 0, "console_frames_due": 300, "console_shed_share": 0.0,
+                "viewer_error": None, "rms_range_error_m": 0.06, "detection_rate": 0.99,
+                "vehicle_real_time_factor": 1.0, "loop_lag_p99_ms": 5.0}
+
+    rows = [row(0, True, 44.0, 0.0), row(2, True, 61.0, 0.0), row(4, False, 130.0, 0.2)]
+    result = {"bench": "load", "mission": "follow_ball", "hogs": [0, 2, 4], "follow_s": 20.0,
+              "driver": "mavsdk", "overrides": [], "vehicle_core": 0, "autopilot_core": 1,
+              "viewer_fps": 15.0, "control_rate_hz": 20.0, "rows": rows,
+              **load.conclusions(rows, 20.0), "out": None}
+    page = tables.render([result])
+    assert "### `load`" in page
+    assert load.format_table(result) in page
+    assert "`autopilot bench load --hogs 0,2,4 --follow-s 20 --driver mavsdk --json`" in page
