@@ -159,13 +159,11 @@ class BallDetector:
                 outline = original[on_hull]
                 contour, area = hull, hull_area
         pts = contour.reshape(-1, 2)
-        on_border = ((pts[:, 0] <= 0) | (pts[:, 1] <= 0) | (pts[:, 0] >= width - 1)
-                     | (pts[:, 1] >= height - 1))
+        on_border = _on_border(pts, width, height)
         cut = bool(on_border.any())
         if outline is not None:  # the bitten blob's outline, where it is the ball's
             pts = outline
-            on_border = ((pts[:, 0] <= 0) | (pts[:, 1] <= 0) | (pts[:, 0] >= width - 1)
-                         | (pts[:, 1] >= height - 1))
+            on_border = _on_border(pts, width, height)
         if cut:
             inner = pts[~on_border]
             if len(inner) < 0.4 * len(pts) or len(inner) < 8:
@@ -320,6 +318,12 @@ class BallDetector:
             radius = min(ax1, ax2) / 2.0 + 0.5
         x, y = (cu - intr.cx) / intr.fx, (cv_ - intr.cy) / intr.fy
         return sphere_position(x, y, radius, math.sqrt(intr.fx * intr.fy), diameter)
+
+
+def _on_border(pts: np.ndarray, width: int, height: int) -> np.ndarray:
+    """Which outline points lie on the image's border (the blob is cut there)."""
+    return (pts[:, 0] <= 0) | (pts[:, 1] <= 0) | (pts[:, 0] >= width - 1) | \
+        (pts[:, 1] >= height - 1)
 
 
 def _circular_gaps(flags: np.ndarray) -> int:

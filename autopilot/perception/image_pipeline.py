@@ -125,13 +125,14 @@ class ImagePipeline:
             return camera_measurement(detection.position_cam_m, detection.range_m,
                                       width_px / 2.0, cam, pose, self.filter_settings, time_s)
 
-        meas = measured(nominal)
-        if self.mount is not None:
+        if self.mount is None:
+            meas = measured(nominal)
+        else:
             camera = self.mount.corrected(nominal)
             meas = measured(camera)
             # the estimate moves as the correction does (all at once when first learned)
-            previous = measured(self._mount_camera) if self._mount_camera is not None \
-                else measured(nominal)
+            before = self._mount_camera or nominal
+            previous = meas if before is camera else measured(before)
             self.filter.shift(meas.position_ned_m - previous.position_ned_m)
             self._mount_camera = camera
         result = self.filter.update(meas)
