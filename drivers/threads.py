@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import sys
 import threading
 
 #: how much lower than the event loop's thread background threads run (0: as high);
@@ -28,9 +29,9 @@ def set_background_nice(nice: int) -> None:
 def lower_this_thread() -> None:
     """Lower the calling thread's priority by the background nice (once per thread; a
     ThreadPoolExecutor's ``initializer``)."""
-    if not _background_nice or not hasattr(os, "setpriority"):
-        return
-    with contextlib.suppress(OSError):  # not permitted, or no such thread: run as is
+    if not _background_nice or not sys.platform.startswith("linux"):
+        return  # elsewhere a thread id is no process id: the call would renice the process
+    with contextlib.suppress(OSError, OverflowError, ValueError):  # not permitted: run as is
         tid = threading.get_native_id()
         now = os.getpriority(os.PRIO_PROCESS, tid)
         os.setpriority(os.PRIO_PROCESS, tid, min(19, now + _background_nice))

@@ -19,9 +19,8 @@ measurements → this filter → :class:`TargetEstimate` for behaviours.
 
 from __future__ import annotations
 
-import dataclasses
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from filterpy.kalman import KalmanFilter
@@ -112,10 +111,14 @@ class TargetFilter:
     def shift(self, delta_ned_m: np.ndarray) -> None:
         """The frame the measurements are placed in moved by ``delta_ned_m`` (a camera's
         mount learned anew): the estimate moves with it, instead of rejecting the measurements
-        that now sit elsewhere until the track restarts."""
-        if self._kf is not None:
-            self._kf.x[:3] += np.asarray(delta_ned_m, dtype=float)
-            self._rejected.clear()
+        that now sit elsewhere until the track restarts; measurements already rejected move too,
+        so a restart from consistent rejections still fires."""
+        delta = np.asarray(delta_ned_m, dtype=float)
+        if self._kf is None or not np.any(delta):
+            return
+        self._kf.x[:3] += delta
+        self._rejected = [replace(m, position_ned_m=m.position_ned_m + delta)
+                          for m in self._rejected]
 
     def update(self, meas: PositionMeasurement) -> UpdateResult:
         if self.is_stale(meas.time_s):
@@ -302,4 +305,4 @@ def with_navigation(estimate: TargetEstimate, vehicle_position_ned_m: np.ndarray
     cov = estimate.covariance.copy()
     cov[:3, :3] += navigation_covariance(
         estimate.position_ned_m - np.asarray(vehicle_position_ned_m, dtype=float), nav)
-    return dataclasses.replace(estimate, covariance=cov)
+    return replace(estimate, covariance=cov)

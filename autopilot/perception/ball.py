@@ -150,14 +150,13 @@ class BallDetector:
         if s.min_solidity < 1.0:
             hull = cv2.convexHull(contour)
             hull_area = cv2.contourArea(hull)
-            if area < hull_area and area >= s.min_solidity * hull_area:
-                # judged as its hull, fitted to the outline where it is the hull's (the
-                # bite's edge is not the ball's)
-                original = contour.reshape(-1, 2)
-                on_hull = np.array([abs(cv2.pointPolygonTest(hull, (float(x), float(y)), True))
-                                    <= 1.0 for x, y in original])
-                outline = original[on_hull]
-                contour, area = hull, hull_area
+            if area >= s.min_solidity * hull_area:
+                on_hull = _off_bites(contour)
+                if on_hull is not None:
+                    # bitten: judged as its hull, fitted to the outline where it is the
+                    # hull's (the bite's edge is not the ball's)
+                    outline = contour.reshape(-1, 2)[on_hull]
+                    contour, area = hull, hull_area
         pts = contour.reshape(-1, 2)
         on_border = _on_border(pts, width, height)
         cut = bool(on_border.any())
@@ -324,6 +323,40 @@ def _on_border(pts: np.ndarray, width: int, height: int) -> np.ndarray:
     """Which outline points lie on the image's border (the blob is cut there)."""
     return (pts[:, 0] <= 0) | (pts[:, 1] <= 0) | (pts[:, 0] >= width - 1) | \
         (pts[:, 1] >= height - 1)
+
+
+#: a dent in an outline deeper than this is a bite, not the pixel staircase of a round edge
+#: (a digitised disc's staircase dents by at most 0.6–0.9 px, growing with its radius)
+BITE_DEPTH_PX = 1.0
+
+
+def _off_bites(contour: np.ndarray) -> np.ndarray | None:
+    """Which of the outline's points lie on its convex hull (within 1 px of the chord across
+    each dent deeper than :data:`BITE_DEPTH_PX`); None if it has no such dent."""
+    try:
+        defects = cv2.convexityDefects(contour, cv2.convexHull(contour, returnPoints=False))
+    except cv2.error:  # a self-intersecting outline: no hull to judge it by
+        return None
+    if defects is None:
+        return None
+    defects = defects.reshape(-1, 4)  # (start, end, farthest, depth × 256) per dent
+    deep = defects[defects[:, 3] > BITE_DEPTH_PX * 256.0]
+    if len(deep) == 0:
+        return None
+    pts = contour.reshape(-1, 2).astype(np.float64)
+    n = len(pts)
+    keep = np.ones(n, bool)
+    for start, end, _, _ in deep:
+        idx = np.arange(start, end + (n if end < start else 0) + 1) % n
+        a, b = pts[start], pts[end]
+        chord = b - a
+        length = float(np.hypot(*chord))
+        if length < 1e-9:
+            continue
+        rel = pts[idx] - a
+        dist = np.abs(chord[0] * rel[:, 1] - chord[1] * rel[:, 0]) / length
+        keep[idx[dist > 1.0]] = False
+    return keep
 
 
 def _circular_gaps(flags: np.ndarray) -> int:

@@ -99,7 +99,8 @@ class ImagePipeline:
         e = cfg.estimation.image
         #: the down camera's mount tilt learned from the image, which lies level
         self.mount = LevelMountEstimator(LevelMountSettings(
-            e.mount_min_frames, residual_std_deg=e.mount_residual_std_deg)) \
+            e.mount_min_frames, max_tilt_deg=e.mount_max_tilt_deg,
+            residual_std_deg=e.mount_residual_std_deg)) \
             if e.learn_mount and cfg.estimation.camera_mount_std_deg > 0.0 else None
         self._mount_camera: CameraInfo | None = None  # as corrected on the last frame
 
@@ -132,8 +133,8 @@ class ImagePipeline:
             meas = measured(camera)
             # the estimate moves as the correction does (all at once when first learned)
             before = self._mount_camera or nominal
-            previous = meas if before is camera else measured(before)
-            self.filter.shift(meas.position_ned_m - previous.position_ned_m)
+            if before is not camera:
+                self.filter.shift(meas.position_ned_m - measured(before).position_ned_m)
             self._mount_camera = camera
         result = self.filter.update(meas)
         if result.accepted:

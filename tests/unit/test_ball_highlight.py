@@ -45,3 +45,23 @@ def test_a_ball_bitten_by_its_highlight_is_found_and_fitted_to_its_outline():
     assert abs(ball.v_px - whole[0].v_px) < 1.0
     assert abs(ball.radius_px - whole[0].radius_px) < 0.3
     assert abs(whole[0].radius_px - RADIUS) < 0.5
+
+
+def test_a_round_edge_s_pixel_staircase_is_not_a_bite_but_a_highlight_s_dent_is():
+    from autopilot.perception.ball import _off_bites
+
+    rng = np.random.default_rng(0)
+    for radius in (4, 8, 17, 40, 150):
+        k = 8
+        big = np.zeros((400 * k, 400 * k), np.uint8)
+        centre = (int((200 + rng.uniform(-0.5, 0.5)) * k), int((200 + rng.uniform(-0.5, 0.5)) * k))
+        cv2.circle(big, centre, radius * k, 255, -1)
+        disc = (cv2.resize(big, (400, 400), interpolation=cv2.INTER_AREA) > 127).astype(np.uint8)
+        contours, _ = cv2.findContours(disc, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+        assert _off_bites(contours[0]) is None, radius
+    detector = BallDetector(BallDetectorSettings(hsv_ranges=ORANGE_HSV, diameter_m=0.2))
+    contours, _ = cv2.findContours(detector.mask(_frame(bite=True)), cv2.RETR_EXTERNAL,
+                                   cv2.CHAIN_APPROX_NONE)
+    on_hull = _off_bites(max(contours, key=cv2.contourArea))
+    assert on_hull is not None
+    assert 0.5 < on_hull.mean() < 0.95

@@ -80,6 +80,26 @@ def test_consistent_rejections_restart_the_track():
     assert np.linalg.norm(est.velocity_ned_m_s - [1.2, 0.9, 0.0]) < 0.5
 
 
+def test_a_shift_moves_the_estimate_and_the_rejections_so_a_restart_still_fires():
+    f, rng = TargetFilter(SETTINGS), np.random.default_rng(3)
+    _feed(f, rng, np.arange(0.0, 2.0, 1 / 30))
+    delta = np.array([0.3, -0.2, 0.1])
+    before = f.estimate(2.0).position_ned_m
+    f.shift(delta)
+    assert np.allclose(f.estimate(2.0).position_ned_m, before + delta)
+    jumped = lambda t: _target(t) + delta + np.array([4.0, -2.0, 0.0])  # noqa: E731
+    times = np.arange(2.0, 2.0 + 5 / 30, 1 / 30)
+    results = [f.update(PositionMeasurement(times[0], jumped(times[0]), COV))]
+    f.shift(np.array([0.01, 0.0, 0.0]))  # a moved frame moves the rejections along
+    jumped_after = lambda t: jumped(t) + np.array([0.01, 0.0, 0.0])  # noqa: E731
+    for t in times[1:]:
+        f.shift(np.zeros(3))  # the frame unchanged, every frame: the rejections are kept
+        results.append(f.update(PositionMeasurement(t, jumped_after(t), COV)))
+    assert not results[0].accepted
+    assert any(r.reinitialised for r in results)
+    assert np.linalg.norm(f.estimate(times[-1]).position_ned_m - jumped_after(times[-1])) < 0.1
+
+
 def test_stale_track_restarts_on_the_next_measurement():
     f, rng = TargetFilter(SETTINGS), np.random.default_rng(4)
     _feed(f, rng, np.arange(0.0, 1.0, 1 / 30))
