@@ -186,7 +186,7 @@ class ImageEstimationConfig(_Model):
     #: (:mod:`autopilot.estimation.level_mount`), after this many frames, to this σ at best
     learn_mount: bool = True
     mount_min_frames: Annotated[int, Field(ge=5, le=10_000)] = 30
-    mount_residual_std_deg: NonNegative = 0.3
+    mount_residual_std_deg: NonNegative = 0.1
     #: a frame implying more tilt than this is a bad pose, not the mount (the mount's own
     #: error is a degree or two; raise it for a camera bolted on by eye)
     mount_max_tilt_deg: Annotated[float, Field(gt=0.0, le=30.0)] = 5.0

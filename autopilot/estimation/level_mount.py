@@ -13,7 +13,9 @@ too while it lasts.
 Each frame's tilt is noisy (PnP's rotation of a small planar target: ~1° here), so nothing is
 corrected before ``min_frames``; a frame implying more than ``max_tilt_deg`` (a flipped planar
 pose) is not used. The correction's own uncertainty is the mean's standard error with a floor
-(``residual_std_deg``) for the pose's bias (calibration residuals, the navigation's tilt).
+(``residual_std_deg``) for the pose's bias (calibration residuals). The navigation's tilt
+is not in it: it is the attitude term the estimate's σ carries anyway (the part learned
+with the mount drifts away again over the attitude error's minute), so it is counted once.
 """
 
 from __future__ import annotations
@@ -34,7 +36,7 @@ _DOWN = np.array([0.0, 0.0, 1.0])
 class LevelMountSettings:
     min_frames: int = 30  # frames before the learned tilt is applied
     max_tilt_deg: float = 5.0  # a frame implying more is a bad pose, not the mount
-    residual_std_deg: float = 0.3  # floor of the learned tilt's σ (pose bias, navigation tilt)
+    residual_std_deg: float = 0.1  # floor of the learned tilt's σ (the pose's bias)
 
 
 @dataclass(frozen=True, slots=True, eq=False)
