@@ -13,7 +13,8 @@ def _summary(status="completed", error=0.02, on_pad=True, lost=0.1):
                "time_to_land_s": 12.0, "touchdown_speed_m_s": 0.4}
     return {"status": status, "metrics": {
         "landing": landing,
-        "estimation": {"rms_position_error_m": 0.03, "lost_share": lost}}}
+        "estimation": {"rms_position_error_m": 0.3, "rms_relative_position_error_m": 0.03,
+                       "lost_share": lost}}}
 
 
 def test_a_run_without_its_figure_or_off_the_pad_is_a_failure():
@@ -88,7 +89,10 @@ def test_tables_are_generated_from_the_json(tmp_path):
     assert "| ours | 1/1 | 0.015 (0.015) |" in page
     assert "2.0×" in page  # 0.030 ÷ 0.015
     assert "∞" in page
-    assert "0.030 m (10%)" in page  # the estimate's RMS with its lost share
+    # the estimate's RMS relative to the vehicle (not the absolute 0.3 m, the navigation's
+    # error in it), median (worst), with its lost share
+    assert "0.030 (0.030) m (10%)" in page
+    assert "0.300" not in page
     assert "Failed runs: seed 001's detector and landing logic, seed 1" in page
     assert "Command: `autopilot bench land_pad --seeds 1 --scenario default --json`" in page
     with pytest.raises(ValueError, match="no table"):
@@ -240,3 +244,11 @@ def test_the_load_curve_is_a_table_of_its_own_with_its_command():
     assert "### `load`" in page
     assert load.format_table(result) in page
     assert "`autopilot bench load --hogs 0,2,4 --follow-s 20 --driver mavsdk --json`" in page
+
+
+def test_an_older_result_without_the_relative_estimate_shows_its_absolute_mean_marked():
+    s = {"runs": 2, "estimate_rms_m_mean": 0.25, "estimate_rms_m_n": 2}
+    assert down._estimate_cell(s) == "0.250 m abs"
+    s.update(estimate_relative_rms_m_median=0.02, estimate_relative_rms_m_worst=0.05,
+             estimate_relative_rms_m_n=1)
+    assert down._estimate_cell(s) == "0.020 (0.050) m [1]"
