@@ -304,13 +304,21 @@ def tick_intervals_ms(records: Iterable[Mapping], step: str = "follow_ball") -> 
     return [1e3 * (b - a) for a, b in itertools.pairwise(times)]
 
 
-def perception_shed(records: Iterable[Mapping]) -> tuple[int, int]:
-    """(frames shed, frames delivered) over the span of the processed frames' sequence numbers:
-    the camera numbers every frame it delivers, so a gap is a frame detection never saw."""
-    seqs = sorted({int(r["seq"]) for r in records if r.get("seq") is not None})
+def perception_shed(records: Iterable[Mapping], camera_rate_hz: float | None = None
+                    ) -> tuple[int, int]:
+    """(frames shed, frames delivered) over the processed frames' span. The decoder numbers
+    the frames it decodes, so a gap in the sequence is a decoded frame detection never saw;
+    frames the decoder itself never got to (a starved decoder's socket overflows) leave no
+    gap, so with ``camera_rate_hz`` the camera's own count over the span of capture times is
+    the floor of what was delivered."""
+    rows = [r for r in records if r.get("seq") is not None]
+    seqs = sorted({int(r["seq"]) for r in rows})
     if not seqs:
         return 0, 0
     delivered = seqs[-1] - seqs[0] + 1
+    times = [float(r["time_s"]) for r in rows if r.get("time_s") is not None]
+    if camera_rate_hz and len(times) > 1:
+        delivered = max(delivered, round((max(times) - min(times)) * camera_rate_hz) + 1)
     return delivered - len(seqs), delivered
 
 
@@ -350,7 +358,8 @@ def _share(pair: tuple[int, int] | None) -> float | None:
 
 def row_from(hogs: int, summary: Mapping | None, records: Mapping | None,
              viewer: Mapping | None, sim_lines: Sequence[str], fps: float,
-             failure: str | None = None, truth_real_time_factor: float | None = None) -> dict:
+             failure: str | None = None, truth_real_time_factor: float | None = None,
+             camera_rate_hz: float | None = None) -> dict:
     """One load's figures from its run's summary and log records, the viewer's result and the
     simulator's output; ``failure`` says why the run gave no summary (if it did not).
     ``truth_real_time_factor`` stands in for the vehicle's when its lines do not give it (a
@@ -359,7 +368,7 @@ def row_from(hogs: int, summary: Mapping | None, records: Mapping | None,
 
     records = records or {}
     ticks = tick_intervals_ms(records.get(ch.CONTROL_TARGET, []))
-    shed = perception_shed(records.get(ch.detection_topic("ball"), []))
+    shed = perception_shed(records.get(ch.detection_topic("ball"), []), camera_rate_hz)
     console = console_shed(viewer, fps) if viewer else None
     metrics = (summary or {}).get("metrics", {})
     latency = metrics.get("latency_ms", {})
@@ -428,6 +437,16 @@ def short_mission(follow_s: float) -> str:
         raise LoadBenchError("the shipped follow_ball mission no longer has "
                              f"'{original}': update autopilot/bench/load.py")
     return text.replace(original, f"follow_ball: {{duration_s: {follow_s:g}}}")
+
+
+def camera_rate_hz(mission: Path, overrides: Sequence[str]) -> float | None:
+    """The front camera's frame rate as the flown mission configures it."""
+    from autopilot.mission import load_mission
+
+    with contextlib.suppress(Exception):  # (no figure rather than no row)
+        return float(load_mission(mission, list(overrides)).config.vehicle.cameras["front"]
+                     .rate_hz)
+    return None
 
 
 def _wait_for_line(path: Path, text: str, proc: subprocess.Popen, timeout_s: float) -> bool:
@@ -524,7 +543,8 @@ def fly_one(hogs: int, folder: Path, mission: Path, driver: str, overrides: Sequ
     with contextlib.suppress(OSError, ValueError):
         viewer = json.loads(viewer_out.read_text())
     sim_lines = sim_out.read_text(errors="replace").splitlines() if sim_out.is_file() else []
-    row = row_from(hogs, summary, records, viewer, sim_lines, fps, failure, truth_rtf)
+    row = row_from(hogs, summary, records, viewer, sim_lines, fps, failure, truth_rtf,
+                   camera_rate_hz(mission, overrides))
     log(f"{hogs} busy: {'completed' if row['completed'] else 'NOT completed: ' + row['why']}")
     return row
 

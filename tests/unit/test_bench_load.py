@@ -42,6 +42,17 @@ SIM_LINES = ["PX4-compatible simulated vehicle (system 8) ...",
              "[   38.00 s | 13:22:59.000] auto-disarmed after landing"]
 
 
+def test_frames_the_decoder_never_got_to_count_as_shed():
+    # 30 fps for 10 s (301 frames captured), but the starved decoder decoded only every
+    # third: its own numbering has no gap, the capture times do
+    rows = [{"time_s": 0.1 * k, "seq": k} for k in range(101)]
+    assert load.perception_shed(rows) == (0, 101)
+    assert load.perception_shed(rows, 30.0) == (200, 301)
+    # decoded but not seen: the sequence's gaps, whatever the rate says
+    rows = [{"time_s": k / 30.0, "seq": k} for k in range(0, 300, 2)]
+    assert load.perception_shed(rows, 30.0) == (149, 299)
+
+
 def test_figures_of_one_load():
     ticks = [0.0, 0.03, 0.06, 0.09, 0.19]  # a 100 ms gap at the end
     seqs = [s for s in range(100, 200) if s % 10 != 5]  # 10 of the 100 delivered never seen
