@@ -11,10 +11,11 @@ links with clear errors. Around the plugins:
 
 * setpoints: MAVSDK's ``offboard`` plugin re-sends the last setpoint at 20 Hz on its own
   thread for as long as the process lives, which would keep a stalled controller's stale
-  intent alive. Here each :meth:`send_setpoint` is one SET_POSITION_TARGET_LOCAL_NED (through
-  ``mavlink_direct``, on one thread of its own so that setpoints keep their order; one whose
-  caller was cancelled before it went out is not sent), and OFFBOARD is entered with
-  DO_SET_MODE: if the caller stops, PX4's offboard-loss failsafe acts.
+  intent alive. Here each :meth:`send_setpoint` is one SET_POSITION_TARGET_LOCAL_NED, encoded
+  and sent on the event loop through the shared link (signed there when signing is on), and
+  OFFBOARD is entered with DO_SET_MODE: if the caller stops, PX4's offboard-loss failsafe
+  acts. Other messages MAVSDK has no call for (LANDING_TARGET) go through ``mavlink_direct``,
+  on one thread of its own so that they keep their order.
 * time: position and attitude are read from the link as they arrive, each stamped with its own
   ``time_boot_ms`` mapped onto our clock by TIMESYNC round trips of our own (answers to MAVSDK's
   or anyone else's requests are not taken for ours).
@@ -195,12 +196,16 @@ class MavsdkDriver(MavlinkVehicle):
         self._check_alive()
         system, component = self._target
         frame, mask, pos, vel, yaw, rate, acc = px4.setpoint_to_mavlink(setpoint)
-        fields = {"time_boot_ms": int(self._clock.now() * 1000) & 0xFFFFFFFF,
-                  "target_system": system, "target_component": component,
-                  "coordinate_frame": frame, "type_mask": mask, "x": pos[0], "y": pos[1],
-                  "z": pos[2], "vx": vel[0], "vy": vel[1], "vz": vel[2], "afx": acc[0],
-                  "afy": acc[1], "afz": acc[2], "yaw": yaw, "yaw_rate": rate}
-        await self._send_message("SET_POSITION_TARGET_LOCAL_NED", fields)
+        link = self._link
+        if link is None:
+            raise ConnectionLost("the link to the vehicle is closed")
+        # encoded and sent here, on the link MAVSDK also talks through (as our TIMESYNC is):
+        # through mavlink_direct each setpoint went to a sender thread, through MAVSDK's
+        # JSON encoder and back to this loop as raw bytes — two thread hand-overs per
+        # setpoint, which on a busy CPU made control ticks late
+        link.send(link.mav.set_position_target_local_ned_encode(
+            int(self._clock.now() * 1000) & 0xFFFFFFFF, system, component, frame, mask,
+            *pos, *vel, *acc, yaw, rate))
 
     async def _send_message(self, name: str, fields: dict) -> None:
         """One message through MAVSDK's mavlink_direct, in order on the sender thread."""
