@@ -120,8 +120,11 @@ def render(results: list[dict], note: str = "") -> str:
         bench = result.get("bench")
         if bench not in FORMATTERS:
             raise ValueError(f"no table for bench {bench!r} (known: {', '.join(FORMATTERS)})")
+        # pooled: the same bench, overrides and seeds (scenarios flown in separate processes);
+        # a run over other seeds has a table of its own (pooling it would count a seed twice)
         key = (bench, tuple(result.get("overrides") or ()),
-               None if bench in MERGERS else len(by_bench))  # (each its own table)
+               (result.get("seeds"), result.get("seed_start", 1)) if bench in MERGERS
+               else len(by_bench))  # (each its own table)
         by_bench.setdefault(key, []).append(result)
     for (bench, _, _), group in by_bench.items():
         result = MERGERS[bench](group) if len(group) > 1 else group[0]
