@@ -186,6 +186,14 @@ def test_follow_seeds_flown_apart_are_pooled_and_profiles_kept_apart():
     assert "### `follow_ball` — ideal world" in page
     assert "--seeds 2" in page
     assert "--set sim.profile=ideal" in page
+    # a run over seeds already in the table (more seeds, other code) is a table of its own
+    again = _follow_result("default", seed_rms=0.4, seed=1)
+    page = tables.render([a, b, again])
+    assert page.count("### `follow_ball`") == 2
+    assert "--row estimator --row seed001 --json" in page  # (seed003 not flown)
+    ours_only = _follow_result("default", seed=3)
+    ours_only["controllers"] = {"estimator": "ours"}
+    assert "--row estimator --set" in tables.command_of(ours_only)
 
 
 def test_offboard_and_landing_tables_are_their_own_text_tables():
