@@ -316,6 +316,7 @@ class FollowControlConfig(_Model):
     intercept_horizon_s: Annotated[float, Field(ge=0, le=10)]
     lost_after_s: Positive
     lost_hold_s: NonNegative
+    lost_coast_s: Annotated[float, Field(ge=0, le=10)] = 2.0
     search_yaw_rate_deg_s: Positive
     lost_timeout_s: Positive
 

@@ -1,12 +1,14 @@
 """Following a tracked target with a camera, for any kind of target (ball, marker, …).
 
 :class:`FollowTarget` flies :class:`~autopilot.control.follow.FollowController` on the step's
-target estimate (``inputs.target``). When the track is lost it stops (holds position) for
-``lost_hold_s``, then searches — turning towards where the target was last seen or is predicted
-to be, then sweeping on in that direction — and fails after ``lost_timeout_s`` so that the
-mission's fallback takes over. A step kind may instead fly a *rule* (a seed report's
-controller, kept as a baseline for the benchmarks): an object whose ``command(inputs)`` returns
-the setpoint, acting on raw detections as the original did.
+target estimate (``inputs.target``). When the track is lost it first coasts for
+``lost_coast_s`` — follows where the target was going, its last estimate moved on at its
+velocity, so that a target hidden for a moment (something passing in front of it) stays in
+view — then stops (holds position) for ``lost_hold_s``, then searches — turning towards where
+the target was last seen or is predicted to be, then sweeping on in that direction — and fails
+after ``lost_timeout_s`` so that the mission's fallback takes over. A step kind may instead
+fly a *rule* (a seed report's controller, kept as a baseline for the benchmarks): an object
+whose ``command(inputs)`` returns the setpoint, acting on raw detections as the original did.
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
@@ -31,6 +33,9 @@ from autopilot.control.follow import FollowController, FollowSettings
 from drivers.base import CameraInfo, Setpoint
 from drivers.geometry import wrap_pi
 
+if TYPE_CHECKING:
+    from autopilot.estimation.target import TargetEstimate
+
 
 @dataclass(frozen=True, slots=True)
 class LostTargetSettings:
@@ -38,6 +43,9 @@ class LostTargetSettings:
     hold_s: float  # then hold this long
     search_yaw_rate_rad_s: float  # then search, turning at this rate
     timeout_s: float  # lost this long in all: the step fails
+    #: first, follow where the target was going (its last estimate, at its velocity) this
+    #: long: a target hidden for a moment (something passing in front of it) stays in view
+    coast_s: float = 0.0
 
 
 class Rule(Protocol):
@@ -64,6 +72,8 @@ class FollowTarget(Behavior):
         self._hold_yaw = 0.0
         self._search_dir = 1.0
         self._search_aimed = False
+        self._last_good: TargetEstimate | None = None  # the last estimate flown on
+        self._held = False  # holding (or searching) since the loss's coast ended
 
     def activate(self, inputs: BehaviorInputs) -> BehaviorOutput:
         self._start = inputs.now_s
@@ -102,6 +112,8 @@ class FollowTarget(Behavior):
                 self.controller.reset(inputs.state)
                 self._tracking = True
             self._lost_since = None
+            self._held = False
+            self._last_good = target
             setpoint = self.controller.update(inputs.now_s, inputs.state, target)
             rel = target.position_ned_m - np.asarray(inputs.state.position_ned_m)
             values.publish("follow.lost_s", 0.0, "s")
@@ -117,15 +129,27 @@ class FollowTarget(Behavior):
         now = inputs.now_s
         if self._lost_since is None:
             self._lost_since = now
+        lost_for = now - self._lost_since
+        values.publish("follow.lost_s", round(lost_for, 2), "s")
+        last = self._last_good
+        if last is not None and lost_for < self.lost.coast_s and not self._held and \
+                lost_for < self.lost.timeout_s:
+            # coast: follow where it was going (as extrapolated from its last estimate)
+            dt = now - last.time_s
+            predicted = dataclasses.replace(
+                last, time_s=now, position_ned_m=last.position_ned_m + last.velocity_ned_m_s * dt,
+                age_s=last.age_s + dt)
+            return BehaviorOutput(Status.RUNNING, phase="coasting",
+                                  setpoint=self.controller.update(now, inputs.state, predicted))
+        if not self._held:
+            self._held = True
             self._tracking = False
             self._search_aimed = False
             self._hold_here(inputs)
-        lost_for = now - self._lost_since
-        values.publish("follow.lost_s", round(lost_for, 2), "s")
         if lost_for > self.lost.timeout_s:
             return BehaviorOutput(Status.FAILED, setpoint=self._hold_setpoint(now),
                                   phase="searching", reason=f"target lost for {lost_for:.1f} s")
-        if lost_for < self.lost.hold_s:
+        if lost_for < self.lost.hold_s + (self.lost.coast_s if last is not None else 0.0):
             return BehaviorOutput(Status.RUNNING, setpoint=self._hold_setpoint(now),
                                   phase="holding")
         # search: first face where the target should be, then keep turning that way

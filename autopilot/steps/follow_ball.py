@@ -41,7 +41,8 @@ def follow_settings(config: AppConfig, mode: str | None, standoff_m: float | Non
 def lost_settings(config: AppConfig) -> LostTargetSettings:
     f = config.control.follow
     return LostTargetSettings(f.lost_after_s, f.lost_hold_s,
-                              math.radians(f.search_yaw_rate_deg_s), f.lost_timeout_s)
+                              math.radians(f.search_yaw_rate_deg_s), f.lost_timeout_s,
+                              f.lost_coast_s)
 
 
 def camera_of(ctx: StepContext, name: str, key: str):

@@ -1,6 +1,7 @@
 """The follow controller (yaw, lateral and face modes, limits) and the follow behaviour's
 handling of a lost target (hold, search, fail), with synthetic states and estimates."""
 
+import dataclasses
 import math
 
 import numpy as np
@@ -212,6 +213,33 @@ def test_lost_target_holds_then_searches_then_fails():
     out = b.update(BehaviorInputs(10.8, facing, target=None))
     assert out.status is Status.FAILED
     assert "lost" in out.reason
+
+
+def test_a_target_hidden_for_a_moment_is_followed_where_it_was_going_then_held():
+    lost = LostTargetSettings(lost_after_s=0.5, hold_s=1.0, coast_s=2.0,
+                              search_yaw_rate_rad_s=math.radians(90), timeout_s=10.0)
+    b = FollowBall(FollowBallParams(duration_s=60.0), _settings(), lost, CAMERA, 0.2)
+    b.activate(BehaviorInputs(0.0, _state()))
+    seen = _target(1.0, (3.0, 0.0, -1.8), vel=(0.0, 1.0, 0.0))  # crossing eastwards at 1 m/s
+    out = b.update(BehaviorInputs(1.0, _state(1.0), target=seen))
+    assert out.phase == "tracking"
+    # hidden: no usable estimate for 0.6 s, then none at all
+    gone = dataclasses.replace(seen, time_s=1.6, age_s=0.6)
+    out = b.update(BehaviorInputs(1.6, _state(1.6), target=gone))
+    assert out.phase == "coasting"
+    out = b.update(BehaviorInputs(3.0, _state(3.0), target=None))
+    assert out.phase == "coasting"
+    # flown as if the target were 2 m further east, where it was going
+    ctl = FollowController(_settings(), CAMERA)
+    ctl.reset(_state(3.0))
+    expected = ctl.update(3.0, _state(3.0), dataclasses.replace(
+        seen, time_s=3.0, age_s=2.0, position_ned_m=np.array([3.0, 2.0, -1.8])))
+    assert out.setpoint.yaw_rad == pytest.approx(expected.yaw_rad, abs=0.05)
+    assert out.setpoint.yaw_rad > 0.3  # turned east after it
+    out = b.update(BehaviorInputs(3.7, _state(3.7), target=None))
+    assert out.phase == "holding"  # coasted 2 s: hold, then search, as before
+    out = b.update(BehaviorInputs(4.8, _state(4.8), target=None))
+    assert out.phase == "searching"
 
 
 def test_target_reacquired_while_searching():
