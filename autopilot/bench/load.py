@@ -53,8 +53,10 @@ from autopilot.config import InputError
 DEFAULT_HOGS = (0, 2, 4, 6)
 DEFAULT_FOLLOW_S = 20.0
 VIEWER_FPS = 15.0
-#: shed above this share of frames counts as shedding (a frame now and then is noise)
-SHED_SHARE = 0.01
+#: shed above this share of frames counts as shedding (a frame now and then is noise, and the
+#: camera itself drops ~1 % on the realistic profile: counted too, since the capture times'
+#: span cannot tell them apart)
+SHED_SHARE = 0.03
 #: the control loop keeps its rate while its tick interval's p99 stays within this many periods
 TICK_P99_PERIODS = 1.5
 #: the vehicle keeps real time above this factor
