@@ -442,12 +442,13 @@ def short_mission(follow_s: float) -> str:
 
 
 def camera_rate_hz(mission: Path, overrides: Sequence[str]) -> float | None:
-    """The front camera's frame rate as the flown mission configures it."""
+    """The frame rate of the camera the ball is followed with, as the flown mission
+    configures it."""
     from autopilot.mission import load_mission
 
     with contextlib.suppress(Exception):  # (no figure rather than no row)
-        return float(load_mission(mission, list(overrides)).config.vehicle.cameras["front"]
-                     .rate_hz)
+        cfg = load_mission(mission, list(overrides)).config
+        return float(cfg.vehicle.cameras[cfg.perception.ball.camera].rate_hz)
     return None
 
 

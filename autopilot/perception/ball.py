@@ -148,10 +148,11 @@ class BallDetector:
         s = self.settings
         outline = None  # the outline's points the fit may use (all of them unless bitten)
         if s.min_solidity < 1.0:
-            hull = cv2.convexHull(contour)
+            hull_idx = cv2.convexHull(contour, returnPoints=False)
+            hull = contour[hull_idx.ravel()]
             hull_area = cv2.contourArea(hull)
             if area >= s.min_solidity * hull_area:
-                on_hull = _off_bites(contour)
+                on_hull = _off_bites(contour, hull_idx)
                 if on_hull is not None:
                     # bitten: judged as its hull, fitted to the outline where it is the
                     # hull's (the bite's edge is not the ball's)
@@ -330,11 +331,14 @@ def _on_border(pts: np.ndarray, width: int, height: int) -> np.ndarray:
 BITE_DEPTH_PX = 1.0
 
 
-def _off_bites(contour: np.ndarray) -> np.ndarray | None:
-    """Which of the outline's points lie on its convex hull (within 1 px of the chord across
-    each dent deeper than :data:`BITE_DEPTH_PX`); None if it has no such dent."""
+def _off_bites(contour: np.ndarray, hull_idx: np.ndarray | None = None) -> np.ndarray | None:
+    """Which of the outline's points lie on its convex hull (``hull_idx``: its indices into
+    the outline, if already found) — within 1 px of the chord across each dent deeper than
+    :data:`BITE_DEPTH_PX`; None if it has no such dent."""
+    if hull_idx is None:
+        hull_idx = cv2.convexHull(contour, returnPoints=False)
     try:
-        defects = cv2.convexityDefects(contour, cv2.convexHull(contour, returnPoints=False))
+        defects = cv2.convexityDefects(contour, hull_idx)
     except cv2.error:  # a self-intersecting outline: no hull to judge it by
         return None
     if defects is None:
