@@ -214,6 +214,10 @@ class NavigationUncertaintyConfig(_Model):
     height_std_m: NonNegative  # wandering over height_time_constant_s
     height_time_constant_s: Positive
     position_noise_m: NonNegative  # white, each sample
+    #: the EKF output's lag on the wandering errors (they move smoothly, not as a random walk)
+    position_smoothing_s: NonNegative = 0.0
+    #: the target filters' memory: their random walk for the wander is its change over this
+    drift_window_s: Positive = 1.0
     attitude_std_deg: NonNegative  # roll and pitch
     yaw_std_deg: NonNegative
 

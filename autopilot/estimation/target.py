@@ -267,6 +267,30 @@ def camera_measurement(position_cam_m: np.ndarray, range_m: float, radius_px: fl
     return PositionMeasurement(time_s, position, cov)
 
 
+def navigation_drift_rate(std_m: float, time_constant_s: float, smoothing_s: float,
+                          window_s: float) -> float:
+    """The random-walk rate (m²/s) that stands, in a target filter, for the navigation error's
+    wander: the mean squared change of that error over ``window_s`` (the filter's memory),
+    per second of it.
+
+    The error is a Gauss–Markov process (σ ``std_m``, correlation ``time_constant_s``) seen
+    through the EKF output's first-order lag (``smoothing_s``, 0: none) with its σ kept, as
+    the simulator models PX4's. Unsmoothed, its change over W is 2σ²(1 − e^(−W/τ)) ≈ 2σ²W/τ, a
+    random walk of 2σ²/τ; smoothed, it moves like a slow velocity (≈ σ/√(τT)) and changes over
+    one second several times less than that random walk says (σ 0.5 m, τ 100 s, T 3 s: 6.7×).
+    """
+    if std_m <= 0.0:
+        return 0.0
+    tau, lag, w = time_constant_s, smoothing_s, window_s
+    if lag <= 0.0:
+        correlation = math.exp(-w / tau)
+    elif abs(tau - lag) < 1e-9 * tau:
+        correlation = (1.0 + w / tau) * math.exp(-w / tau)
+    else:
+        correlation = (tau * math.exp(-w / tau) - lag * math.exp(-w / lag)) / (tau - lag)
+    return 2.0 * std_m * std_m * (1.0 - correlation) / w
+
+
 @dataclass(frozen=True, slots=True)
 class NavigationUncertainty:
     """The vehicle's own pose errors (1σ): they drift slowly, so averaging many frames of a

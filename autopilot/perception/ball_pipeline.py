@@ -17,6 +17,7 @@ from autopilot.estimation.target import (
     TargetFilter,
     TargetFilterSettings,
     camera_measurement,
+    navigation_drift_rate,
     with_navigation,
 )
 from autopilot.flightlog import records as ch
@@ -58,8 +59,11 @@ def filter_settings(cfg: AppConfig) -> TargetFilterSettings:
         max_extrapolation_s=t.max_extrapolation_s, pixel_noise_px=t.pixel_noise_px,
         radius_noise_px=t.radius_noise_px, restart_after=t.restart_after,
         confirm_after=t.confirm_after, navigation_noise_m=n.position_noise_m,
-        navigation_drift_m2_s=(2.0 * n.position_std_m ** 2 / n.position_time_constant_s,) * 2
-        + (2.0 * n.height_std_m ** 2 / n.height_time_constant_s,))
+        navigation_drift_m2_s=(navigation_drift_rate(
+            n.position_std_m, n.position_time_constant_s, n.position_smoothing_s,
+            n.drift_window_s),) * 2 + (navigation_drift_rate(
+                n.height_std_m, n.height_time_constant_s, n.position_smoothing_s,
+                n.drift_window_s),))
 
 
 def navigation_settings(cfg: AppConfig) -> NavigationUncertainty:

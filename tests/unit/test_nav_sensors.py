@@ -204,3 +204,35 @@ def test_a_target_filter_that_knows_the_navigation_keeps_a_still_pad_through_its
         rates[name] = accepted / n
     assert rates["told"] > 0.97
     assert rates["blind"] < 0.8
+
+
+def test_target_filters_drift_rate_matches_the_simulated_wander():
+    """The autopilot's random walk for its navigation's wander (``navigation_drift_rate`` from
+    config.yaml's ``estimation.navigation``) is what the simulator's GNSS grade does over the
+    filters' memory: the smoothed error's mean squared change over 1 s — several times less
+    than the unsmoothed 2σ²/τ once charged (which left every estimate's σ too wide)."""
+    from autopilot.estimation.target import navigation_drift_rate
+    from autopilot.perception.ball_pipeline import filter_settings
+
+    settings = filter_settings(load_config(overrides=["sim.profile=realistic"]))
+    nav = load_config(overrides=["sim.profile=realistic"]).estimation.navigation
+    grade = _sim().estimator.grades["gnss"]
+    assert (nav.position_std_m, nav.position_time_constant_s, nav.position_smoothing_s) == \
+        (grade.horizontal_error_m, grade.horizontal_time_constant_s,
+         grade.position_smoothing_s)
+    dt, window = 0.05, 1.0
+    lag = round(window / dt)
+    changes = []
+    for seed in range(6):
+        pos, _, _ = _errors(_estimator("gnss", seed, position_noise_m=0.0), 600.0, dt)
+        changes.append(pos[lag:] - pos[:-lag])
+    changes = np.concatenate(changes)
+    measured = (changes ** 2).mean(axis=0) / window
+    horizontal, height = settings.navigation_drift_m2_s[0], settings.navigation_drift_m2_s[2]
+    assert measured[:2].mean() == pytest.approx(horizontal, rel=0.2)
+    assert measured[2] == pytest.approx(height, rel=0.25)
+    assert 2 * nav.position_std_m ** 2 / nav.position_time_constant_s > 4 * measured[:2].mean()
+    # without the lag the old random walk is the limit
+    assert navigation_drift_rate(0.5, 100.0, 0.0, 1e-3) == pytest.approx(2 * 0.25 / 100, rel=1e-3)
+    assert navigation_drift_rate(0.5, 3.0, 3.0, 1.0) == pytest.approx(
+        navigation_drift_rate(0.5, 3.0, 3.0 + 1e-6, 1.0), rel=1e-4)
