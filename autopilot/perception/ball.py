@@ -51,6 +51,11 @@ class BallDetectorSettings:
     min_polygon_vertices: int = 8  # of the outline simplified to 2 % of its length
     min_edge_arc: float = 0.75  # merged blobs: fraction of the circle the outline follows ...
     max_edge_gaps: int = 2  # ... broken in at most this many places
+    #: where the tracker expects the ball (its place and size), a merged blob's circle counts
+    #: with this much of its outline: a ball passing in front of something of its colour
+    #: shows little more than half its edge (the rest lies against the other's face)
+    min_tracked_edge_arc: float = 0.5
+    tracked_radius_tolerance: float = 0.25  # … if its radius is the expected one within this
 
 
 @dataclass(frozen=True, slots=True)
@@ -111,11 +116,14 @@ class BallDetector:
         return cv2.morphologyEx(mask, cv2.MORPH_CLOSE, self._close)
 
     def candidates(self, image_bgr: np.ndarray,
-                   window: tuple[int, int, int, int] | None = None) -> list[BallCandidate]:
+                   window: tuple[int, int, int, int] | None = None,
+                   min_edge_arc: float | None = None) -> list[BallCandidate]:
         """Every blob that looks like a ball, best first (image coordinates).
 
         With a ``window`` (x0, y0, x1, y1) only that part of the image is searched, and only
-        balls lying wholly inside it count (one cut by the window's edge would be mis-fitted)."""
+        balls lying wholly inside it count (one cut by the window's edge would be mis-fitted).
+        ``min_edge_arc``: how much of a merged blob's circle its outline must follow (default:
+        the settings')."""
         s = self.settings
         height, width = image_bgr.shape[:2]
         x0, y0 = 0, 0
@@ -136,7 +144,9 @@ class BallDetector:
             if candidate is not None:
                 found.append(candidate)
             elif area > 4.0 * min_area:
-                found.extend(self._merged_balls(contour, width, height))
+                found.extend(self._merged_balls(contour, width, height,
+                                                s.min_edge_arc if min_edge_arc is None
+                                                else min_edge_arc))
         if window is not None:
             found = [c for c in found if _inside(c, window, width, height)]
         found.sort(key=lambda c: c.score, reverse=True)
@@ -200,8 +210,8 @@ class BallDetector:
             return None
         return BallCandidate(cu, cv_, minor, circularity, fill, cut, outline=fit_pts)
 
-    def _merged_balls(self, contour: np.ndarray, width: int,
-                      height: int) -> list[BallCandidate]:
+    def _merged_balls(self, contour: np.ndarray, width: int, height: int,
+                      min_edge_arc: float) -> list[BallCandidate]:
         """Balls inside a blob that is not one (a ball with something of its colour touching
         it). Try the blob's largest inscribed circles in turn: refit a circle to the outline
         points near each, and keep it if those points go most of the way round."""
@@ -221,7 +231,7 @@ class BallDetector:
             if circle is None:
                 continue
             cu, cv_, radius, arc, gaps, outline = circle
-            if arc < s.min_edge_arc or gaps > s.max_edge_gaps or radius > s.max_radius_px:
+            if arc < min_edge_arc or gaps > s.max_edge_gaps or radius > s.max_radius_px:
                 continue
             cut = cu - radius < 0 or cv_ - radius < 0 or cu + radius > width - 1 or \
                 cv_ + radius > height - 1
@@ -272,11 +282,14 @@ class BallDetector:
         is searched first and the whole image only if that finds nothing conclusive; the
         candidate nearest the prediction wins. Without one, the most ball-like candidate."""
         found: list[BallCandidate] = []
+        window = None
         if predicted_uv is not None:
-            found = self.candidates(image_bgr, self._window(image_bgr, predicted_uv,
-                                                            predicted_radius_px))
+            window = self._window(image_bgr, predicted_uv, predicted_radius_px)
+            found = self.candidates(image_bgr, window)
         if not found:
             found = self.candidates(image_bgr)
+        if not found and window is not None and predicted_radius_px:
+            found = self._tracked(image_bgr, window, predicted_uv, predicted_radius_px)
         if not found:
             return None
         if predicted_uv is not None:
@@ -299,6 +312,19 @@ class BallDetector:
             others=tuple(c for c in found if c is not best),
         )
 
+
+    def _tracked(self, image_bgr: np.ndarray, window: tuple[int, int, int, int],
+                 predicted_uv: Sequence[float], predicted_radius_px: float
+                 ) -> list[BallCandidate]:
+        """The ball where the tracker expects it, merged with something of its colour and
+        showing less of its edge than an unexpected ball must: a circle of the expected size
+        near the expected place (within its radius)."""
+        s = self.settings
+        pu, pv = predicted_uv
+        return [c for c in self.candidates(image_bgr, window, s.min_tracked_edge_arc)
+                if c.merged and abs(c.radius_px - predicted_radius_px)
+                <= s.tracked_radius_tolerance * predicted_radius_px
+                and math.hypot(c.u_px - pu, c.v_px - pv) <= predicted_radius_px]
 
     def _position(self, camera: CameraInfo, c: BallCandidate) -> np.ndarray:
         """The ball's centre in the optical frame. Through a distorting lens the outline is

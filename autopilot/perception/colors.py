@@ -11,7 +11,7 @@ HsvRange = tuple[tuple[int, int, int], tuple[int, int, int]]
 
 #: name → (RGBA used to render it, HSV ranges that detect it)
 COLORS: dict[str, tuple[tuple[float, float, float, float], tuple[HsvRange, ...]]] = {
-    "orange": ((1.0, 0.42, 0.0, 1.0), (((9, 150, 50), (18, 255, 255)),)),
+    "orange": ((1.0, 0.42, 0.0, 1.0), (((9, 150, 50), (20, 255, 255)),)),
     "red": ((0.9, 0.05, 0.05, 1.0), (((0, 150, 50), (5, 255, 255)),
                                       ((172, 150, 50), (180, 255, 255)))),
     "yellow": ((0.95, 0.85, 0.05, 1.0), (((24, 150, 60), (34, 255, 255)),)),
