@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
@@ -67,6 +67,9 @@ class BallCandidate:
     fill_ratio: float
     cut_by_border: bool
     merged: bool = False  # recovered from a blob merged with something else
+    #: how far the ball's edge (where its saturation is halfway to the ground's) lies outside
+    #: the mask's outline, already added to ``radius_px`` (see :func:`_edge_offset`)
+    edge_offset_px: float = 0.0
     #: the outline points the fit used (image pixels), to refit in the undistorted image
     outline: np.ndarray | None = field(default=None, compare=False, repr=False)
 
@@ -149,6 +152,7 @@ class BallDetector:
                                                 else min_edge_arc))
         if window is not None:
             found = [c for c in found if _inside(c, window, width, height)]
+        found = [_at_edge(image_bgr, c) for c in found]
         found.sort(key=lambda c: c.score, reverse=True)
         return found
 
@@ -342,6 +346,7 @@ class BallDetector:
         else:
             (cu, cv_), (ax1, ax2), _ = cv2.fitEllipse(ideal.astype(np.float32))
             radius = min(ax1, ax2) / 2.0 + 0.5
+        radius += c.edge_offset_px  # (the lens scales it by < 1 % over a ball's size)
         x, y = (cu - intr.cx) / intr.fx, (cv_ - intr.cy) / intr.fy
         return sphere_position(x, y, radius, math.sqrt(intr.fx * intr.fy), diameter)
 
@@ -392,6 +397,75 @@ def _off_bites(contour: np.ndarray, hull_idx: np.ndarray | None = None) -> np.nd
 def _circular_gaps(flags: np.ndarray) -> int:
     """How many runs of False a circular sequence of flags has."""
     return int(np.count_nonzero(~flags & np.roll(flags, 1))) if flags.any() else 1
+
+
+#: the edge is looked for this far (px) either side of the mask's outline
+EDGE_SEARCH_PX = 3.0
+#: … where the colour changes by at least this much (BGR distance) from inside to outside (a
+#: clear edge against the background, not against something of the ball's colour)
+EDGE_MIN_CONTRAST = 60.0
+#: smaller balls are left as their mask gives them: the search would reach across the ball,
+#: whose shaded limb then reads as background
+EDGE_MIN_RADIUS_PX = 6.0
+
+
+def _edge_offset(image_bgr: np.ndarray, c: BallCandidate) -> float | None:
+    """How far (px, outwards positive) the ball's edge lies from its mask's outline.
+
+    The mask keeps every pixel still saturated enough, so a blended edge pixel that is only a
+    third ball is in it: on an antialiased disc of radius 16 px the outline lies 0.2 px outside
+    the edge, 0.5 px with a pixel of blur, and the range comes out 1–3 % short. Along the
+    outward normal at up to 48 outline points, each pixel's colour is placed between the
+    ball's just inside and the background's just outside (a blend is linear in colour, so
+    halfway is where the edge cuts the pixel); the median of where that crosses one half is
+    the offset. None without enough clear edge (a ball against something of its colour)."""
+    if c.outline is None or len(c.outline) < 8 or c.radius_px < EDGE_MIN_RADIUS_PX:
+        return None
+    pts = np.asarray(c.outline, np.float64)
+    pts = pts[:: max(1, len(pts) // 48)]
+    normal = pts - (c.u_px, c.v_px)
+    length = np.hypot(normal[:, 0], normal[:, 1])
+    keep = length > 1.0
+    pts, normal = pts[keep], normal[keep] / length[keep, None]
+    if len(pts) < 8:
+        return None
+    height, width = image_bgr.shape[:2]
+    r = c.radius_px + EDGE_SEARCH_PX + 2.0
+    x0, y0 = max(0, int(c.u_px - r)), max(0, int(c.v_px - r))
+    x1, y1 = min(width, int(c.u_px + r) + 2), min(height, int(c.v_px + r) + 2)
+    crop = image_bgr[y0:y1, x0:x1].astype(np.float32)
+    # outline points are pixel centres half a pixel inside the mask's edge
+    steps = np.arange(-EDGE_SEARCH_PX, EDGE_SEARCH_PX + 1e-9, 0.25) + 0.5
+    at = pts[:, None, :] + normal[:, None, :] * steps[None, :, None] - (x0, y0)
+    profile = cv2.remap(crop, at[..., 0].astype(np.float32), at[..., 1].astype(np.float32),
+                        cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)  # (points, steps, 3)
+    inner, outer = profile[:, :4].mean(axis=1), profile[:, -4:].mean(axis=1)
+    span = inner - outer
+    contrast = np.sqrt((span * span).sum(axis=1))
+    clear = contrast >= EDGE_MIN_CONTRAST
+    if clear.sum() < 8:
+        return None
+    # how much ball each sample is: 1 inside, 0 outside
+    share = ((profile[clear] - outer[clear, None, :]) * span[clear, None, :]).sum(axis=2) \
+        / (contrast[clear, None] ** 2)
+    below = share < 0.5
+    first = np.argmax(below, axis=1)  # the first sample past the edge
+    ok = below.any(axis=1) & (first > 0)
+    if ok.sum() < 8:
+        return None
+    rows = np.nonzero(ok)[0]
+    a, b = share[rows, first[rows] - 1], share[rows, first[rows]]
+    frac = (a - 0.5) / np.maximum(a - b, 1e-6)
+    crossing = steps[first[rows] - 1] + 0.25 * frac - 0.5
+    return float(np.clip(np.median(crossing), -1.5, 1.5))
+
+
+def _at_edge(image_bgr: np.ndarray, c: BallCandidate) -> BallCandidate:
+    """The candidate with its radius moved to the ball's edge (:func:`_edge_offset`)."""
+    offset = _edge_offset(image_bgr, c)
+    if offset is None:
+        return c
+    return replace(c, radius_px=c.radius_px + offset, edge_offset_px=offset)
 
 
 def _inside(c: BallCandidate, window: tuple[int, int, int, int], width: int,
