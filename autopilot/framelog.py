@@ -101,7 +101,7 @@ class FrameLogger:
         for frame in waiting:
             with contextlib.suppress(Exception):  # the run's outcome matters more than a frame
                 self.log.write_image(frame.camera.name, frame.time_s,
-                                     encode_jpeg(frame.image, self.quality))
+                                     frame.jpeg or encode_jpeg(frame.image, self.quality))
 
     async def _camera(self, name: str) -> None:
         sampler = self.samplers[name]
@@ -124,9 +124,14 @@ class FrameLogger:
         try:
             while True:
                 frame = await self._to_log.get()
-                pending.append((frame, asyncio.ensure_future(self.clock.run_blocking(
-                    encode_jpeg, frame.image, self.quality, executor=self._pool,
-                    budget_s=FRAME_LOG_PIPELINE / frame.camera.rate_hz))))
+                if frame.jpeg is not None:  # the codec's own bytes, as the detectors saw them
+                    job: asyncio.Future[bytes] = asyncio.get_running_loop().create_future()
+                    job.set_result(frame.jpeg)
+                else:
+                    job = asyncio.ensure_future(self.clock.run_blocking(
+                        encode_jpeg, frame.image, self.quality, executor=self._pool,
+                        budget_s=FRAME_LOG_PIPELINE / frame.camera.rate_hz))
+                pending.append((frame, job))
                 while pending and (pending[0][1].done() or len(pending) >= FRAME_LOG_PIPELINE):
                     done, job = pending[0]
                     jpeg = await job

@@ -280,6 +280,9 @@ class Frame:
     time_s: float
     seq: int
     image: np.ndarray
+    #: the JPEG the image was decoded from, when it came out of a JPEG codec as it is (a
+    #: frame log keeps these bytes, so a replay sees exactly what the detectors saw)
+    jpeg: bytes | None = None
 
 
 # --------------------------------------------------------------------------------------------

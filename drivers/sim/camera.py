@@ -407,9 +407,9 @@ class CameraRig:
     def finish(self, pending: PendingFrame) -> Frame:
         """The captured frame (waits for the render if it is not done; once per frame)."""
         if pending.frame is None:
-            image = pending.image.result()
+            image, jpeg = pending.image.result()
             pending.frame = Frame(camera=pending.camera.reported, time_s=pending.time_s,
-                                  seq=pending.seq, image=image)
+                                  seq=pending.seq, image=image, jpeg=jpeg)
             target = self._targets[pending.camera.cam_id]
             if target.pending is pending:
                 target.pending = None
@@ -417,9 +417,10 @@ class CameraRig:
 
     def _render(self, target: _CameraTarget, render_from_s: float | None = None,
                 motion: VehicleMotion | None = None, seq: int = 0,
-                gain: float = 1.0) -> np.ndarray:
+                gain: float = 1.0) -> tuple[np.ndarray, bytes | None]:
         """On the render thread: draw the snapshot, read it back top-down BGR (and make it look
-        like a real camera's, for a realistic camera)."""
+        like a real camera's, for a realistic camera); with the JPEG it was decoded from, if
+        its codec's round trip was the last thing done to it."""
         if render_from_s is not None and self.render_gate is not None:
             self.render_gate(render_from_s)
         if self._gl is None:
@@ -459,16 +460,18 @@ class CameraRig:
                 bgr = cv2.cvtColor(target.bgra, cv2.COLOR_BGRA2BGR)
                 cv2.copyTo(target.sky, background, bgr)
         effects = target.cam.effects
+        jpeg = None
         if effects is None:
             image = cv2.flip(bgr, 0)  # OpenGL rows run bottom-up
         else:
-            image = self._realistic(target, effects, bgr, motion, seq, gain)
+            image, jpeg = self._realistic(target, effects, bgr, motion, seq, gain)
         image.flags.writeable = False
-        return image
+        return image, jpeg
 
     @staticmethod
     def _realistic(target: _CameraTarget, effects: CameraEffects, bottom_up: np.ndarray,
-                   motion: VehicleMotion | None, seq: int, gain: float = 1.0) -> np.ndarray:
+                   motion: VehicleMotion | None, seq: int, gain: float = 1.0
+                   ) -> tuple[np.ndarray, bytes | None]:
         """Distortion (and rolling shutter), motion blur, exposure, read noise and the codec;
         see the module notes."""
         info = target.cam.info
@@ -512,17 +515,19 @@ class CameraRig:
             up, down = (part[offset:offset + n].reshape(image.shape) for part in target.noise)
             image = cv2.add(image, up)
             cv2.subtract(image, down, dst=image)
+        jpeg = None
         if effects.jpeg_quality:
             _, data = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY,
                                                    effects.jpeg_quality])
             image = cv2.imdecode(data, cv2.IMREAD_COLOR)
+            jpeg = data.tobytes()
         if effects.h264_bitrate_bps:
             if target.h264 is None:
                 intr = info.intrinsics
                 target.h264 = H264RoundTrip(intr.width_px, intr.height_px, effects.rate_hz,
                                             effects.h264_bitrate_bps)
-            image = target.h264(image)
-        return image
+            image, jpeg = target.h264(image), None
+        return image, jpeg
 
     def _release(self) -> None:
         for target in self._targets.values():
