@@ -11,7 +11,10 @@ fails the shape checks may be the ball merged with something of the same colour 
 beside it: circles refitted around its largest inscribed circles are accepted where the blob's
 outline follows them unbroken most of the way round (true of a ball with a box touching it,
 which hides one stretch of its outline; not of a box alone, whose inscribed circle meets the
-outline in several short stretches).
+outline in several short stretches); where the tracker expects a ball of that size, half its
+outline is enough (a ball in front of a box of its colour). Each candidate's radius is then
+moved from the mask's outline to the ball's edge (the colour halfway between the ball's and
+the background's): the mask keeps blended pixels down to about a third ball.
 
 Data flow: a camera :class:`~drivers.base.Frame` goes in; a :class:`BallDetection` (or None)
 comes out, in the camera's optical frame. Synchronous and stateless apart from its settings;
@@ -67,8 +70,9 @@ class BallCandidate:
     fill_ratio: float
     cut_by_border: bool
     merged: bool = False  # recovered from a blob merged with something else
-    #: how far the ball's edge (where its saturation is halfway to the ground's) lies outside
-    #: the mask's outline, already added to ``radius_px`` (see :func:`_edge_offset`)
+    #: how far the ball's edge (where a pixel's colour is halfway between the ball's and the
+    #: ground's) lies from the mask's outline, already added to ``radius_px``
+    #: (see :func:`_edge_offset`)
     edge_offset_px: float = 0.0
     #: the outline points the fit used (image pixels), to refit in the undistorted image
     outline: np.ndarray | None = field(default=None, compare=False, repr=False)
