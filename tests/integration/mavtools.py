@@ -8,9 +8,7 @@ import contextlib
 from drivers.mavlink.face import MavlinkFace
 from drivers.sim.driver import SimDriver
 
-from ..workers import PORT_OFFSET
-
-INSTANCE = 7 + PORT_OFFSET  # ports 14587 / 18577 and client port 14547: clear of a running SITL
+INSTANCE = 7  # ports 14587 / 18577 and client port 14547: clear of a running SITL
 CLIENT_URL = f"udpin://127.0.0.1:{14540 + INSTANCE}"
 
 #: the simulator's link_loss fault for an external client's test (from the arming on): 10 % of

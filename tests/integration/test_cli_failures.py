@@ -10,9 +10,7 @@ import sys
 
 import pytest
 
-from ..workers import PORT_OFFSET
-
-PORT = 14549 + PORT_OFFSET  # clear of a running SITL and of the other tests' instances
+PORT = 14549  # clear of a running SITL and of the other tests' instances
 
 
 def _autopilot(*args: str, env: dict | None = None, timeout_s: float = 120.0):
@@ -81,7 +79,7 @@ def test_port_already_in_use(tmp_path):
 
 def test_network_link_needs_a_key_or_insecure(tmp_path, capsys):
     result = _in_process(capsys, "run", "--mission", "follow_ball", "--driver", "pymavlink",
-                         "--connect", f"udpin://0.0.0.0:{PORT}", "--out", str(tmp_path))
+                         "--connect", "udpin://0.0.0.0:14549", "--out", str(tmp_path))
     assert result.returncode == 2
     assert "--signing-key" in _one_error_line(result) or "--signing-key" in result.stderr
     result = _in_process(capsys, "sim", "--bind", "0.0.0.0")
@@ -134,13 +132,11 @@ def test_a_camera_that_never_delivers_a_frame(no_camera_config, tmp_path):
         from tests.integration.mavtools import CLIENT_URL
 
         result = _autopilot("run", "--mission", "follow_ball", "--driver", "pymavlink",
-                            "--connect", CLIENT_URL,
-                            "--video", f"udp://127.0.0.1:{5609 + PORT_OFFSET}",
+                            "--connect", CLIENT_URL, "--video", "udp://127.0.0.1:5609",
                             "--out", str(tmp_path), "--set", "link.connect_timeout_s=3")
     finally:
         stop.set()
         thread.join(10.0)
     assert result.returncode == 5
     line = _one_error_line(result)
-    video = f"udp://127.0.0.1:{5609 + PORT_OFFSET}"
-    assert f"no video from the front camera on {video} within 3 s" in line
+    assert "no video from the front camera on udp://127.0.0.1:5609 within 3 s" in line

@@ -20,7 +20,6 @@ from websockets.sync.client import connect
 
 from autopilot.mission import load_mission
 
-from ..workers import PORT_OFFSET
 from .test_goal_api import Client, _fly_with_client
 
 
@@ -289,8 +288,7 @@ def test_simulator_console_watches_the_vehicle():
     async def main():
         stop = asyncio.Event()
         sim = asyncio.ensure_future(serve(
-            load_config(), None, instance=9 + PORT_OFFSET, videos=None, log=lambda line: None,
-            stop=stop,
+            load_config(), None, instance=9, videos=None, log=lambda line: None, stop=stop,
             console="127.0.0.1:0", on_console=servers.append, title="test world"))
         try:
             while not servers:

@@ -19,11 +19,10 @@ from drivers.base import Setpoint
 from drivers.mavlink.mavsdk_driver import MavsdkDriver
 from drivers.mavlink.pymavlink_driver import PymavlinkDriver
 
-from ..workers import PORT_OFFSET
 from .mavtools import served
 
 DRIVERS = [PymavlinkDriver, MavsdkDriver]
-TCP_PORT = 15760 + PORT_OFFSET
+TCP_PORT = 15760
 
 
 class _UdpSide(asyncio.DatagramProtocol):

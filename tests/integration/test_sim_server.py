@@ -7,9 +7,7 @@ import asyncio
 from autopilot.config import load_config
 from autopilot.sim_server import READY, serve
 
-from ..workers import PORT_OFFSET
-
-INSTANCE = 11 + PORT_OFFSET  # ports clear of the other tests' simulators
+INSTANCE = 11  # ports clear of the other tests' simulators
 
 
 def test_it_says_ready_for_takeoff_once_the_vehicle_is_armable():

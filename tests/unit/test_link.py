@@ -14,8 +14,6 @@ from pymavlink.dialects.v20 import common as mavlink
 from drivers.mavlink.link import MAX_PENDING_B, Endpoint, MavlinkLink, UrlError
 from drivers.mavlink.signing import Signing, refresh, signing_timestamp
 
-from ..workers import PORT_OFFSET
-
 KEY = Signing(bytes(range(32)))
 
 
@@ -98,10 +96,9 @@ def test_udpout_to_a_host_name_locks_onto_its_address():
 
 def test_tcpin_takes_the_vehicles_next_connection_after_a_reset():
     async def main():
-        link = await MavlinkLink.open(f"tcpin://127.0.0.1:{15761 + PORT_OFFSET}",
-                                      lambda msg, addr: None)
+        link = await MavlinkLink.open("tcpin://127.0.0.1:15761", lambda msg, addr: None)
         try:
-            first = socket.create_connection(("127.0.0.1", 15761 + PORT_OFFSET))
+            first = socket.create_connection(("127.0.0.1", 15761))
             await asyncio.sleep(0.1)
             assert link._transport is not None
             first.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, b"\x01\x00\x00\x00\x00\x00"
@@ -109,7 +106,7 @@ def test_tcpin_takes_the_vehicles_next_connection_after_a_reset():
             first.close()
             await asyncio.sleep(0.2)
             assert link._transport is None
-            second = socket.create_connection(("127.0.0.1", 15761 + PORT_OFFSET))
+            second = socket.create_connection(("127.0.0.1", 15761))
             await asyncio.sleep(0.1)
             assert link._transport is not None  # taken, not refused as "a second connection"
             second.close()
