@@ -10,7 +10,7 @@ from collections.abc import Sequence
 
 from autopilot import __version__
 from autopilot.config import ConfigError, InputError, load_config
-from autopilot.process import configure_for_flight, yield_cpu_to_other_processes
+from autopilot.process import configure_for_flight
 
 EXIT_OK = 0
 EXIT_FAILED = 1  # the mission failed (the summary says why)
@@ -857,7 +857,6 @@ def _sim(args: argparse.Namespace) -> int:
     from autopilot.logs import route_library_logs
 
     route_library_logs()
-    yield_cpu_to_other_processes()  # the vehicle's own hardware would not share our CPU
     from autopilot.cameras import parse_camera_options
     from autopilot.sim_server import FROM_CONFIG
 

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
-import os
 import sys
 
 # glibc mallopt() parameters (malloc.h)
@@ -92,13 +91,3 @@ def _cpu_ticks() -> tuple[int, int] | None:
     # user nice system idle iowait irq softirq steal [guest guest_nice: already in user/nice]
     ticks = [int(v) for v in fields[1:9]]
     return sum(ticks), ticks[7]
-
-
-def yield_cpu_to_other_processes(niceness: int = 10) -> None:
-    """Run this whole process (and every thread it starts from now on) at a lower CPU priority.
-
-    ``autopilot sim`` does this: the simulated vehicle and camera stand in for hardware that on
-    a real drone does not share the companion computer's CPU, so when both run on one machine
-    the autopilot under test should not wait for the simulator's rendering or encoding."""
-    with contextlib.suppress(AttributeError, OSError):  # not POSIX, or not permitted
-        os.nice(niceness)

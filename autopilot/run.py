@@ -233,7 +233,14 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
         if handle_signals:
             for sig in signals:
                 loop.add_signal_handler(sig, on_signal, sig.name)
-        status = await runtime.run()
+        mapping = asyncio.create_task(_log_time_mapping(vehicle, log), name="time-mapping") \
+            if hasattr(vehicle, "vehicle_to_local_s") else None
+        try:
+            status = await runtime.run()
+        finally:
+            if mapping is not None:
+                mapping.cancel()
+                await asyncio.gather(mapping, return_exceptions=True)
         reason = runtime.reason
     except asyncio.CancelledError:
         status, reason = "aborted", f"{' then '.join(received) or 'cancelled'}: forced exit"
@@ -244,9 +251,7 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
             for sig in signals:
                 loop.remove_signal_handler(sig)
         if hasattr(vehicle, "vehicle_to_local_s"):  # MAVLink: for scoring against the sim
-            log.write(ch.TIME_SYNC, vehicle.clock.now(), {
-                "time_s": vehicle.clock.now(), "vehicle_to_local_s": vehicle.vehicle_to_local_s,
-                "round_trip_s": vehicle.time_sync_round_trip_s})
+            _write_time_mapping(vehicle, log)
         sim_time = getattr(vehicle, "sim_time_s", None)
         wall_time = time.perf_counter() - wall_start
         await vehicle.close()
@@ -318,3 +323,22 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
     summary = json.loads(text)
     release_freed_memory()  # what the flight freed goes back to the system, not to the next
     return summary
+
+
+#: how often a MAVLink run logs its mapping of the vehicle's clock (for scoring against a
+#: simulator's truth, which a vehicle whose clock drifts or lags needs more than once)
+TIME_MAPPING_EVERY_S = 1.0
+
+
+def _write_time_mapping(vehicle, log) -> None:
+    now = vehicle.clock.now()
+    log.write(ch.TIME_SYNC, now, {"time_s": now, "vehicle_to_local_s": vehicle.vehicle_to_local_s,
+                                  "round_trip_s": vehicle.time_sync_round_trip_s})
+
+
+async def _log_time_mapping(vehicle, log) -> None:
+    """The vehicle's clock mapping, every :data:`TIME_MAPPING_EVERY_S` while the run lasts."""
+    while True:
+        await asyncio.sleep(TIME_MAPPING_EVERY_S)
+        if math.isfinite(vehicle.vehicle_to_local_s):
+            _write_time_mapping(vehicle, log)

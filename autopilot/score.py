@@ -3,10 +3,11 @@ against the ground truth that ``autopilot sim --out DIR`` recorded.
 
 The autopilot never sees ground truth; the simulator never sees detections. This joins the
 two logs after the fact: the run's log holds its detections and setpoints on its own clock,
-and the time mapping its driver measured (TIMESYNC: local − vehicle boot time); the
-simulator's log holds ground truth on the vehicle's boot clock. Truth is shifted onto the
-run's clock and the run's metrics (each step's, as the registry picks them) are computed as
-for an in-process run.
+and the time mapping its driver measured (TIMESYNC: local − vehicle boot time, logged every
+second); the simulator's log holds ground truth on the vehicle's boot clock. Truth is shifted
+onto the run's clock by the mapping of its time (interpolated: a lagging clock moves it), and
+the run's metrics (each step's, as the registry picks them) are computed as for an in-process
+run.
 """
 
 from __future__ import annotations
@@ -14,6 +15,8 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
+
+import numpy as np
 
 from autopilot.config import InputError
 from autopilot.flightlog import records as ch
@@ -39,11 +42,18 @@ def score(run_dir: Path, truth_path: Path) -> dict:
     if not syncs:
         raise ScoreError(f"{log_path}: no time mapping to the vehicle's clock (channel "
                          f"{ch.TIME_SYNC}); was it flown through a MAVLink driver?")
-    offset = syncs[-1]["vehicle_to_local_s"]
     truth = read_log(truth_path).get(ch.GROUND_TRUTH, [])
     if not truth:
         raise ScoreError(f"{truth_path}: no ground truth (channel {ch.GROUND_TRUTH})")
-    records[ch.GROUND_TRUTH] = [{**r, "time_s": r["time_s"] + offset} for r in truth]
+    # the mapping as it was when each truth sample was taken (it moves when the vehicle's
+    # clock drifts, or lags as a starved simulator's does); held beyond the first and last
+    syncs.sort(key=lambda r: r["time_s"])
+    offsets = np.array([r["vehicle_to_local_s"] for r in syncs])
+    vehicle_s = np.array([r["time_s"] for r in syncs]) - offsets
+    order = np.argsort(vehicle_s, kind="stable")
+    shifted = np.interp([r["time_s"] for r in truth], vehicle_s[order], offsets[order])
+    records[ch.GROUND_TRUTH] = [{**r, "time_s": r["time_s"] + float(off)}
+                                for r, off in zip(truth, shifted, strict=True)]
     metrics = ch.clean(mission_metrics(records))
     summary_path = run_dir / "summary.json"
     if summary_path.is_file():

@@ -5,8 +5,10 @@ given, behind :class:`~drivers.mavlink.face.MavlinkFace`. It runs until Ctrl-C /
 a client is still flying it, the vehicle is landed first (as stopping PX4 SITL would not do,
 but as a safe state demands).
 
-When the machine cannot run it in real time, the physics and telemetry come first: rendering is
-shed (frames skipped) while it is behind, and a warning says so every
+It runs at normal CPU priority (in process the simulator yields the CPU to the autopilot, and
+its world slows as a whole; here its clock runs against other processes'). When the machine
+cannot run it in real time, the physics and telemetry come first: rendering is shed (frames
+skipped, and never waited for) while it is behind, and a warning says so every
 :data:`SLOW_WARNING_EVERY_S` (its boot clock then lags the wall clock, as no real flight
 controller's does). It prints :data:`READY` when the vehicle becomes armable, as PX4 SITL's
 commander does, so that scripts can wait for that line.
@@ -84,7 +86,8 @@ async def serve(config: AppConfig, scenario: Scenario | None, *, instance: int =
     sim_config, objects = build_world(scenario, with_instance_id(config.sim, instance),
                                       config.rover)
     vehicle = SimDriver(sim_config, scenario=objects, lockstep=False,
-                        warn_every_s=SLOW_WARNING_EVERY_S, shed_rendering=True)
+                        warn_every_s=SLOW_WARNING_EVERY_S, shed_rendering=True,
+                        background=False)
     await vehicle.connect()
     face = MavlinkFace(vehicle, instance=instance, events=vehicle.events(), host=host,
                        signing=signing)

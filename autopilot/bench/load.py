@@ -492,9 +492,8 @@ def fly_one(hogs: int, folder: Path, mission: Path, driver: str, overrides: Sequ
     with Processes() as procs:
         procs.start_hogs(hogs, autopilot_core)
         instance, video = free_instance(rng), free_video_port(rng)
-        # The vehicle has a core of its own, so the lower priority autopilot sim takes (nice 10:
-        # for when it shares the autopilot's core) only exposes it to whatever else runs on the
-        # machine; it is undone where this user may (raising priority needs the privilege).
+        # The vehicle has a core of its own, and a higher priority where this user may, so
+        # that whatever else runs on the machine does not slow it.
         sim = procs.start("sim", [sys.executable, "-m", "autopilot", "sim", "--mission",
                                   str(mission), "--instance", str(instance), "--video",
                                   f"front=udp://127.0.0.1:{video}", "--out", str(sim_dir),

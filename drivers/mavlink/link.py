@@ -444,6 +444,10 @@ def _baud_constant(baud: int) -> int | None:
     return getattr(termios, f"B{baud}", None)
 
 
+#: how long after a proven-wrong mapping :attr:`BootTimeMapper.settling` stays true
+SETTLING_S = 5.0
+
+
 class BootTimeMapper:
     """Maps the vehicle's boot-time stamps (``time_boot_ms``) onto the local clock.
 
@@ -453,7 +457,10 @@ class BootTimeMapper:
     stamps give an upper bound (:meth:`observe`: the smallest local − vehicle seen, which still
     contains the vehicle's own telemetry latency). Either estimate may creep by
     ``drift_per_s`` per second to follow clock drift, and is reset when the vehicle's time
-    jumps back (a reboot).
+    jumps back (a reboot). A mapping that a newer exchange proves wrong (the vehicle's answer
+    falls outside the interval it was sent and received in, as when a simulated vehicle's
+    clock lags a starved CPU, or a telemetry sample arrives before its mapped capture) is
+    replaced at once, however short its round trip was.
     """
 
     def __init__(self, drift_per_s: float = 1e-4) -> None:
@@ -464,6 +471,8 @@ class BootTimeMapper:
         self._synced = False
         self._rtt = math.inf
         self._sync_at = 0.0
+        self._corrected_at = -math.inf
+        self._last_sync = -math.inf
 
     @property
     def ready(self) -> bool:
@@ -473,8 +482,11 @@ class BootTimeMapper:
         """A telemetry sample stamped ``vehicle_s`` arrived at ``local_s``."""
         if vehicle_s < self._last_vehicle - 1.0:  # the vehicle rebooted
             self._offset, self._synced, self._rtt = math.nan, False, math.inf
-        if not self._synced:
-            sample = local_s - vehicle_s
+        sample = local_s - vehicle_s
+        if self._synced:
+            # a sample cannot arrive before it was taken: the offset is at most this
+            self._offset = min(self._offset, sample)
+        else:
             if not self.ready:
                 self._offset = sample
             else:
@@ -490,9 +502,22 @@ class BootTimeMapper:
             return
         # older round trips count for less as time passes (drift): inflate them slowly
         aged = self._rtt + 2.0 * self._drift * max(0.0, received_local_s - self._sync_at)
-        if not self._synced or rtt <= aged:
+        # the answer bounds the offset to [sent, received] − vehicle time: outside it, the
+        # mapping is wrong, whatever round trip it came from
+        inconsistent = not (sent_local_s - vehicle_s <= self._offset
+                            <= received_local_s - vehicle_s)
+        if self._synced and inconsistent:
+            self._corrected_at = received_local_s
+        self._last_sync = received_local_s
+        if not self._synced or rtt <= aged or inconsistent:
             self._offset = (sent_local_s + received_local_s) / 2.0 - vehicle_s
             self._rtt, self._sync_at, self._synced = rtt, received_local_s, True
+
+    @property
+    def settling(self) -> bool:
+        """True for a few seconds after an exchange proved the mapping wrong: the vehicle's
+        clock is moving against ours, and more frequent exchanges follow it closer."""
+        return self._last_sync - self._corrected_at < SETTLING_S
 
     @property
     def round_trip_s(self) -> float:

@@ -375,7 +375,7 @@ class MavsdkDriver(MavlinkVehicle):
                 ts1 = int(now * 1e9)
                 self._timesync_sent.sent(ts1, now)
                 link.send(link.mav.timesync_encode(0, ts1))
-            await asyncio.sleep(px4.timesync_period_s(count))
+            await asyncio.sleep(px4.timesync_period_s(count, self._boot.settling))
 
     async def _watchdog(self) -> None:
         while True:

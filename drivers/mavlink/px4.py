@@ -34,10 +34,11 @@ def mav_result_name(result: int) -> str:
     return MAV_RESULT_NAMES.get(result, f"result {result}")
 
 
-def timesync_period_s(requests_sent: int) -> float:
+def timesync_period_s(requests_sent: int, settling: bool = False) -> float:
     """When a driver sends its next TIMESYNC request: ten a second for the first two
-    seconds (to find a short round trip quickly), then one a second."""
-    return 0.1 if requests_sent < 20 else 1.0
+    seconds (to find a short round trip quickly) and while the vehicle's clock is seen moving
+    against ours (``settling``), then one a second."""
+    return 0.1 if requests_sent < 20 or settling else 1.0
 
 
 MAV_FRAME_LOCAL_NED = 1

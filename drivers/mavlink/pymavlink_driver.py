@@ -317,7 +317,7 @@ class PymavlinkDriver(MavlinkVehicle):
                 self._timesync_sent.sent(ts1, now)
                 self._send(self._link.mav.timesync_encode(0, ts1))
             count += 1
-            await asyncio.sleep(px4.timesync_period_s(count))
+            await asyncio.sleep(px4.timesync_period_s(count, self._boot.settling))
 
     async def _watchdog(self) -> None:
         """The link is lost when nothing from the vehicle (heartbeats, telemetry) arrives

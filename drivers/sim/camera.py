@@ -384,6 +384,12 @@ class CameraRig:
         target.pending = pending
         return pending
 
+    def rendering(self, cam: SimCamera) -> bool:
+        """Is ``cam``'s last frame still being drawn? (Capturing the next would wait for it.)"""
+        target = self._targets.get(cam.cam_id)
+        return target is not None and target.pending is not None \
+            and not target.pending.image.done()
+
     def _snapshot(self, data: mujoco.MjData, cam: SimCamera) -> _CameraTarget:
         """Update ``cam``'s scene from ``data`` (after collecting a frame still rendering it)."""
         target = self._targets.get(cam.cam_id)

@@ -12,8 +12,10 @@ never hopping the loop per physics step.
   deterministic for a given seed.
 * Real time: a :class:`~drivers.clock.PacedClock`; the simulator lives on one dedicated
   thread, the physics runs at most ``realtime_batch_s`` ahead of the wall clock, and outputs are
-  published when they are due. That thread runs at a lower CPU priority, standing in for the
-  vehicle's own hardware: when the machine is busy the autopilot's work comes first. The clock
+  published when they are due. In process that thread (and the rendering) runs at a lower CPU
+  priority, standing in for the vehicle's own hardware: when the machine is busy the
+  autopilot's work comes first. A stand-alone vehicle (``background=False``: ``autopilot sim``)
+  runs at normal priority, its clock running against other processes' wall clocks. The clock
   (a :class:`~drivers.clock.PacedClock`) does not run past the end of the batch being
   computed, and time lost handing a batch over is taken back: on a CPU too slow or too busy for real
   time the simulated world slows down as a whole (its clock, telemetry and frames together),
@@ -91,7 +93,8 @@ class SimDriver(Vehicle):
 
     def __init__(self, config: SimConfig, *, scenario: Sequence[ScenarioObject] = (),
                  seed: int | None = None, lockstep: bool = True,
-                 warn_every_s: float | None = None, shed_rendering: bool = False) -> None:
+                 warn_every_s: float | None = None, shed_rendering: bool = False,
+                 background: bool = True) -> None:
         self.config = config
         self._scenario = list(scenario)
         self._seed = config.seed if seed is None else seed
@@ -102,6 +105,12 @@ class SimDriver(Vehicle):
         self.warn_every_s = warn_every_s
         #: real time: skip rendering frames while the simulator cannot keep up
         self.shed_rendering = shed_rendering
+        #: real time: the simulator's threads (physics, telemetry, rendering) at a lower CPU
+        #: priority, standing in for hardware of their own: in process, where the world
+        #: slows as a whole when the autopilot needs the CPU. A stand-alone vehicle
+        #: (``autopilot sim``) runs at normal priority: its clock runs against its clients'
+        #: (lowered, two busy processes on its core starved it to 0.04× real time)
+        self.background = background
         #: real time: the newest real-time factor (simulated / wall seconds over
         #: PACE_WINDOW_S), and the lowest seen
         self.pace_factor = math.nan
@@ -157,9 +166,9 @@ class SimDriver(Vehicle):
             if self.lockstep:
                 self._sim = self._build()
             else:
-                self._executor = ThreadPoolExecutor(max_workers=1,
-                                                    thread_name_prefix="simulator",
-                                                    initializer=lower_thread_priority)
+                self._executor = ThreadPoolExecutor(
+                    max_workers=1, thread_name_prefix="simulator",
+                    initializer=lower_thread_priority if self.background else None)
                 self._sim = await loop.run_in_executor(self._executor, self._build)
                 self._clock.restart(self._sim.time_s)
         except RenderingUnavailable as exc:
@@ -411,7 +420,7 @@ class SimDriver(Vehicle):
         sim = Simulator(self.config, self._scenario, self._seed)
         try:
             if not self.lockstep:
-                sim.set_realtime_rendering(self._wait_for_clock)
+                sim.set_realtime_rendering(self._wait_for_clock, background=self.background)
             sim.prepare_cameras()
         except BaseException:
             sim.close()

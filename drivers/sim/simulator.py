@@ -186,8 +186,10 @@ class Simulator:
         self._capture_models = {name: CaptureModel(name, config.cameras[name], self.seed)
                                 for name in self.cameras}
         self._rig = CameraRig(self.model, self.seed)
-        #: real time, behind the wall clock: every other frame due is skipped, not rendered
-        #: (the physics and telemetry come first; set by the driver)
+        #: real time, behind the wall clock: every other frame due is skipped, not rendered,
+        #: as is any while its camera still draws the last, and a frame not drawn when due is
+        #: delivered when it is (the physics and telemetry come first, never waiting for the
+        #: rendering; set by the driver)
         self.shed_rendering = False
         self._moving = [obj for obj in self.scenario if obj.moves]
         #: the rover (a scenario with one), its UWB anchors and its own telemetry
@@ -282,10 +284,13 @@ class Simulator:
     def pop_due(self) -> list[SimOutput]:
         """Outputs whose delivery time has come (frames are read back from the GPU now)."""
         now = self.time_s + _EPS
-        out = []
+        out, rendering = [], []
         while self._outbox and self._outbox[0][0] <= now:
             item = heapq.heappop(self._outbox)[2]
             if item.kind == "frame":
+                if self.shed_rendering and not item.payload.image.done():
+                    rendering.append(item.payload)  # delivered when drawn, later than due
+                    continue
                 frame = self._rig.finish(item.payload)
                 if self.faults:
                     frame = self._faulted_frame(frame)
@@ -295,6 +300,8 @@ class Simulator:
                 item = SimOutput(item.delivery_s, "photo", dataclasses.replace(
                     meta, frame=self._rig.finish(pending)))
             out.append(item)
+        for pending in rendering:
+            self._queue(self.time_s + self.dt, "frame", pending)
         return out
 
     def next_event_s(self, include_truth: bool = False) -> float:
@@ -364,8 +371,11 @@ class Simulator:
         for name, cam in self.cameras.items():
             sched = self._cam_schedules[name]
             if k >= sched.next_step:
-                if cam.active and self.shed_rendering and cam.may_shed:
-                    cam.shed += 1  # every other frame: the video goes on at half its rate
+                if cam.active and self.shed_rendering and (cam.may_shed
+                                                           or self._rig.rendering(cam)):
+                    # every other frame (the video goes on at half its rate), and any frame
+                    # whose camera is still rendering the last one: physics does not wait
+                    cam.shed += 1
                     cam.may_shed = False
                 elif cam.active and not (self.faults and self.faults.camera(
                         "camera_dropout", name, self._fault_time(t))):
@@ -697,12 +707,13 @@ class Simulator:
         return self._rig.finish(self._rig.submit(self.data, cam, self.time_s,
                                                  motion=self._vehicle_motion()))
 
-    def set_realtime_rendering(self, gate: Callable[[float], None] | None) -> None:
-        """Render as the real-time driver needs (see camera.py): at a lower CPU priority, and
-        each scheduled frame held until ``gate(t)`` returns, where ``t`` is
-        ``realtime_render_lead_s`` before the frame is due. Call before the first render."""
+    def set_realtime_rendering(self, gate: Callable[[float], None] | None,
+                               background: bool = True) -> None:
+        """Render as the real-time driver needs (see camera.py): at a lower CPU priority
+        (``background``), and each scheduled frame held until ``gate(t)`` returns, where ``t``
+        is ``realtime_render_lead_s`` before the frame is due. Call before the first render."""
         self._rig.render_gate = gate
-        self._rig.background = True
+        self._rig.background = background
 
     def prepare_cameras(self) -> None:
         """Make every camera's render context now (see :meth:`CameraRig.prepare`)."""

@@ -4,6 +4,9 @@ This checks wiring, not speed: bounds are loose so that a busy machine does not 
 
 import contextlib
 import itertools
+import sys
+
+import pytest
 
 from .simtools import run, simulator
 
@@ -114,3 +117,63 @@ def test_a_stand_alone_vehicle_sheds_rendering_when_behind(sim_config, monkeypat
     assert len(slow) >= 2
     assert "lags the wall clock" in slow[0]
     assert "frames not rendered" in slow[0]
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="per-thread nice is Linux's")
+@pytest.mark.parametrize("stand_alone", [False, True])
+def test_the_simulator_yields_the_cpu_only_in_process(sim_config, stand_alone):
+    """In process the simulator's threads (physics, telemetry, rendering) yield the CPU to the
+    autopilot beside them, and the world slows as a whole; ``autopilot sim``'s vehicle runs at
+    normal priority (lowered, it ran at 0.04× real time beside two busy processes, its clock
+    lagging its client's, and a MAVSDK flight found no video)."""
+    import os
+
+    def niceness() -> int:
+        return os.getpriority(os.PRIO_PROCESS, 0)  # Linux: the calling thread's
+
+    async def main():
+        async with simulator(sim_config, lockstep=False, background=not stand_alone) as drv:
+            async with contextlib.aclosing(drv.frames("front")) as frames:
+                await anext(frames)  # the render thread has drawn (and lowered itself)
+            physics = drv._executor.submit(niceness).result()
+            render = drv.simulator._rig._executor().submit(niceness).result()
+            return physics, render
+
+    ours = niceness()
+    physics, render = run(main())
+    lowered = min(19, ours + 10)
+    if stand_alone:
+        assert (physics, render) == (ours, ours)
+    else:
+        assert physics == lowered
+        assert render >= lowered
+
+
+def test_shedding_physics_never_waits_for_a_frame_still_drawing(sim_config):
+    """Behind real time, a frame not yet drawn when due is sent when it is drawn, and no frame
+    is captured while its camera still draws the last: the physics steps on either way."""
+    import threading
+
+    from drivers.sim.simulator import Simulator
+
+    sim = Simulator(sim_config)
+    try:
+        sim.set_camera_active("front", True)
+        sim.shed_rendering = True
+        cam = sim.cameras["front"]
+        release = threading.Event()
+        # the render thread is busy (for 30 s at most: physics that waited would fail, not hang)
+        sim._rig._executor().submit(release.wait, 30.0)
+        outputs = sim.advance_to(0.5)  # 15 frames due: the first waits behind the busy thread
+        assert sim.time_s >= 0.5
+        assert not [o for o in outputs if o.kind == "frame"]
+        assert any(o.kind == "telemetry" for o in outputs)
+        assert cam.rendered == 1
+        assert cam.shed >= 10
+        release.set()
+        sim._rig._executor().submit(lambda: None).result()  # (one thread: the frame is drawn)
+        later = [o.payload for o in sim.advance_to(sim.time_s + 0.01) if o.kind == "frame"]
+        (frame,) = later
+        assert frame.time_s < 0.05  # captured when it was, delivered when drawn
+    finally:
+        sim.close()

@@ -45,6 +45,24 @@ def test_truth_is_shifted_onto_the_run_clock_by_the_measured_offset(tmp_path, mo
     assert summary["scored_against"].endswith("truth.mcap")
 
 
+def test_a_lagging_vehicle_clock_is_followed_through_the_run(tmp_path, monkeypatch):
+    # a starved simulator: its clock ran at half speed, so the mapping (local − vehicle) grew
+    # from 100 s to 105 s over the ten seconds it was logged; truth lands where it happened
+    run = tmp_path / "run"
+    run.mkdir()
+    _write(run / "flight.mcap", [
+        (ch.TIME_SYNC, t, {"time_s": t, "vehicle_to_local_s": 100.0 + 0.5 * (t - 110.0),
+                           "round_trip_s": 0.001}) for t in (110.0, 115.0, 120.0)])
+    _write(tmp_path / "truth.mcap", [(ch.GROUND_TRUTH, t, _truth(t))
+                                     for t in (5.0, 10.0, 12.5, 15.0, 20.0)])
+    seen = {}
+    monkeypatch.setattr(scoring, "mission_metrics", lambda records: seen.update(records) or {})
+    scoring.score(run, tmp_path / "truth.mcap")
+    # vehicle 10 s ↔ local 110 s, 12.5 ↔ 115, 15 ↔ 120; held beyond the ends
+    assert [r["time_s"] for r in seen[ch.GROUND_TRUTH]] == pytest.approx(
+        [105.0, 110.0, 115.0, 120.0, 125.0])
+
+
 def test_a_run_without_a_time_mapping_cannot_be_scored(tmp_path):
     run = tmp_path / "run"
     run.mkdir()

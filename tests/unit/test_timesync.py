@@ -34,3 +34,38 @@ def test_a_rebooted_vehicle_resets_the_mapping():
     m.observe(40.5, 50.51)
     m.observe(0.5, 60.52)  # boot time jumped back: rebooted
     assert m.to_local(0.5) == pytest.approx(60.52)
+
+
+def test_a_lagging_vehicle_clock_is_followed_not_held_to_its_best_round_trip():
+    # a simulated vehicle on a starved CPU: its clock runs at half the local rate. The first
+    # exchange has the shortest round trip ever seen; later ones prove its offset wrong.
+    m = BootTimeMapper()
+    m.observe_sync(10.0, 0.0005, 10.001)
+    assert not m.settling
+    for i in range(1, 30):
+        sent = 10.0 + 0.1 * i
+        vehicle_answer = 0.5 * (sent + 0.001 - 10.0)  # answered on the way back
+        m.observe_sync(sent, vehicle_answer, sent + 0.002)
+        local_now = sent + 0.002
+        # the vehicle time just answered maps within one round trip of when it was answered
+        assert abs(m.to_local(vehicle_answer) - (sent + 0.001)) <= 0.002
+    assert m.settling  # so the drivers ask ten times a second
+    assert local_now > 12.0
+
+
+def test_telemetry_that_would_arrive_before_its_capture_lowers_a_synced_offset():
+    m = BootTimeMapper(drift_per_s=0.0)
+    m.observe_sync(50.0, 50.0 - OFFSET + 0.001, 50.010)  # way back slow: offset 4 ms high
+    assert m.to_local(60.0 - OFFSET) == pytest.approx(60.004)
+    m.observe(60.0 - OFFSET, 60.001)  # arrived 1 ms after capture by the truth
+    assert m.to_local(60.0 - OFFSET) == pytest.approx(60.001)
+    m.observe(61.0 - OFFSET, 61.003)  # a later, slower sample does not raise it
+    assert m.to_local(61.0 - OFFSET) == pytest.approx(61.001)
+
+
+def test_the_drivers_ask_often_while_the_vehicle_clock_moves():
+    from drivers.mavlink import px4
+
+    assert px4.timesync_period_s(100) == 1.0
+    assert px4.timesync_period_s(100, settling=True) == 0.1
+    assert px4.timesync_period_s(3) == 0.1
