@@ -459,8 +459,8 @@ class BootTimeMapper:
     ``drift_per_s`` per second to follow clock drift, and is reset when the vehicle's time
     jumps back (a reboot). A mapping that a newer exchange proves wrong (the vehicle's answer
     falls outside the interval it was sent and received in, as when a simulated vehicle's
-    clock lags a starved CPU, or a telemetry sample arrives before its mapped capture) is
-    replaced at once, however short its round trip was.
+    clock lags a starved CPU, or a telemetry sample arrives before its mapped capture) moves
+    at once to the nearest offset the newer evidence allows, however short its round trip was.
     """
 
     def __init__(self, drift_per_s: float = 1e-4) -> None:
@@ -502,16 +502,18 @@ class BootTimeMapper:
             return
         # older round trips count for less as time passes (drift): inflate them slowly
         aged = self._rtt + 2.0 * self._drift * max(0.0, received_local_s - self._sync_at)
-        # the answer bounds the offset to [sent, received] − vehicle time: outside it, the
-        # mapping is wrong, whatever round trip it came from
-        inconsistent = not (sent_local_s - vehicle_s <= self._offset
-                            <= received_local_s - vehicle_s)
-        if self._synced and inconsistent:
-            self._corrected_at = received_local_s
         self._last_sync = received_local_s
-        if not self._synced or rtt <= aged or inconsistent:
+        if not self._synced or rtt <= aged:
             self._offset = (sent_local_s + received_local_s) / 2.0 - vehicle_s
             self._rtt, self._sync_at, self._synced = rtt, received_local_s, True
+            return
+        # the answer bounds the offset to [sent, received] − vehicle time: outside it, the
+        # mapping is wrong, whatever round trip it came from; it moves to the nearest offset
+        # the answer allows (not to this longer round trip's midpoint)
+        low, high = sent_local_s - vehicle_s, received_local_s - vehicle_s
+        if not low <= self._offset <= high:
+            self._offset = min(max(self._offset, low), high)
+            self._corrected_at = received_local_s
 
     @property
     def settling(self) -> bool:

@@ -48,7 +48,7 @@ def test_a_lagging_vehicle_clock_is_followed_not_held_to_its_best_round_trip():
         m.observe_sync(sent, vehicle_answer, sent + 0.002)
         local_now = sent + 0.002
         # the vehicle time just answered maps within one round trip of when it was answered
-        assert abs(m.to_local(vehicle_answer) - (sent + 0.001)) <= 0.002
+        assert abs(m.to_local(vehicle_answer) - (sent + 0.001)) <= 0.002 + 1e-9
     assert m.settling  # so the drivers ask ten times a second
     assert local_now > 12.0
 
@@ -69,3 +69,11 @@ def test_the_drivers_ask_often_while_the_vehicle_clock_moves():
     assert px4.timesync_period_s(100) == 1.0
     assert px4.timesync_period_s(100, settling=True) == 0.1
     assert px4.timesync_period_s(3) == 0.1
+
+
+def test_an_asymmetric_exchange_moves_a_good_mapping_only_as_far_as_it_proves():
+    m = BootTimeMapper(drift_per_s=0.0)
+    m.observe_sync(50.0, 50.0 - OFFSET + 0.0015, 50.002)  # 1.5 ms there, 0.5 back: 0.5 ms low
+    # way there 0.1 ms, back 30 ms: the offset must be at least OFFSET − 0.1 ms
+    m.observe_sync(60.0, 60.0 - OFFSET + 0.0001, 60.0301)
+    assert m.to_local(0.0) == pytest.approx(OFFSET - 0.0001, abs=1e-9)  # not its 15 ms midpoint
