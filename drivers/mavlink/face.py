@@ -46,7 +46,7 @@ from drivers.mavlink.face_mission import MissionServer
 from drivers.mavlink.face_params import ParamServer
 from drivers.mavlink.face_telemetry import DEFAULT_RATES_HZ, TelemetryEncoder, base_mode
 from drivers.mavlink.link import pack
-from drivers.mavlink.signing import Signing, refresh
+from drivers.mavlink.signing import Signing, authenticated, refresh
 
 log = logging.getLogger(__name__)
 
@@ -95,7 +95,7 @@ class _Link(asyncio.DatagramProtocol):
         self.rover_mav = mavlink.MAVLink(None, srcSystem=face.rover_system_id,
                                          srcComponent=COMPONENT_ID)
         if face.signing is not None:
-            face.signing.apply(self.mav, self._rx)
+            face.signing.apply(self.mav, self._rx, face.signed_streams)
             face.signing.apply(self.rover_mav, mavlink.MAVLink(None))
 
     def connection_made(self, transport) -> None:
@@ -118,7 +118,8 @@ class _Link(asyncio.DatagramProtocol):
                 self.face.stats.bad_data += 1
             log.debug("%s: unparsable datagram from %s: %s", self.name, addr, exc)
             return
-        good = [m for m in messages if m.get_type() != "BAD_DATA"]
+        good = [m for m in messages
+                if m.get_type() != "BAD_DATA" and authenticated(m, self.face.signing)]
         if good:  # only a sender that spoke valid (and, with signing, signed) MAVLink is answered
             self.peer = self.heard_from = addr
         for msg in messages:
@@ -202,6 +203,9 @@ class MavlinkFace:
                                    or self.system_id + 1)
         self.host = host
         self.signing = signing
+        #: signing's replay state, one for every port (a frame replayed to another port is
+        #: still a replay)
+        self.signed_streams: dict = {}
         self.stats = FaceStats()
         peer = peer_host or ("127.0.0.1" if host in ("0.0.0.0", "") else host)
         self.ports = {"offboard": (14580 + instance, (peer, 14540 + instance)),

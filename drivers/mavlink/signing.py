@@ -4,7 +4,10 @@ A link with a key signs everything it sends (SHA-256 over key, frame and a 48-bi
 in 10 µs since 2015-01-01, link id) and drops what arrives unsigned or badly signed, apart from
 the few messages that radios inject on their own (RADIO_STATUS, as ArduPilot and PX4 allow).
 Replayed messages (a timestamp not newer than the last one of that sender's stream) and
-messages more than a minute older than the link's clock are dropped too.
+messages more than a minute older than the link's clock are dropped too. A stream is a
+(link id, system, component) triple, and its last timestamp is kept once per key, not per port:
+a frame captured on one port and replayed to another is still a replay (the signing
+specification's one timestamp per stream, wherever the frame arrives).
 
 Key files (``--signing-key FILE``) hold the 32-byte secret key as 64 hexadecimal digits, as
 32 raw bytes, or as a passphrase whose SHA-256 is the key (what MAVProxy's ``signing setup
@@ -59,9 +62,11 @@ class Signing:
                                   f"{exc.strerror or exc}") from None
         return cls(key_from_bytes(raw, str(path)), link_id)
 
-    def apply(self, tx, rx) -> None:
+    def apply(self, tx, rx, streams: dict | None = None) -> None:
         """Sign what ``tx`` (a pymavlink MAVLink) sends; accept only signed messages on ``rx``
-        (which may be the same object). Call :func:`refresh` on ``tx`` before each send."""
+        (which may be the same object). Call :func:`refresh` on ``tx`` before each send.
+        ``streams``: the replay state (last timestamp per stream) ``rx`` shares with the other
+        ports that take this key (None: its own)."""
         now = signing_timestamp()
         tx.signing.secret_key = self.key
         tx.signing.sign_outgoing = True
@@ -70,6 +75,8 @@ class Signing:
         rx.signing.secret_key = self.key
         rx.signing.timestamp = max(rx.signing.timestamp, now)
         rx.signing.allow_unsigned_callback = _allow_unsigned
+        if streams is not None:
+            rx.signing.stream_timestamps = streams
         # verify before believing a frame's timestamp (see _check_signature)
         rx.check_signature = types.MethodType(_check_signature, rx)
 
@@ -84,6 +91,13 @@ def refresh(mav) -> None:
 
 def _allow_unsigned(mav, msg_id: int) -> bool:
     return msg_id in UNSIGNED_ALLOWED
+
+
+def authenticated(msg, signing: Signing | None) -> bool:
+    """Whether ``msg`` proves who sent it: any message on a link without a key; on a signed
+    link only a signed one (RADIO_STATUS is taken unsigned for what it says, never as proof
+    of its sender, so it may not move a link's peer)."""
+    return signing is None or bool(msg.get_signed())
 
 
 def _check_signature(mav, msgbuf, src_system: int, src_component: int) -> bool:
