@@ -170,6 +170,18 @@ class RunStats:
     loop_stalls: int = 0  # the loop silent for runtime.loop_stall_s or longer
 
 
+def next_tick_due(due_s: float, now_s: float, period_s: float, *, estimate: bool,
+                  lockstep: bool) -> float:
+    """When the control tick after the one at ``now_s`` is due (at the latest; an estimate
+    brings it forward). ``due_s``: when this one was due; ``estimate``: this tick came with
+    an estimate. In real time a tick that came late when due does not delay the next one
+    (the schedule is kept, as PX4's work queues keep theirs), but no two come closer than
+    half a period; after an estimate, or in lockstep, the period counts from now."""
+    if estimate or lockstep or now_s < due_s:
+        return now_s + period_s
+    return max(due_s + period_s, now_s + 0.5 * period_s)
+
+
 def detection_charge(config: AppConfig, kinds: Sequence[str]
                      ) -> float | Callable[[list[tuple[object | None, float, str | None]]], float]:
     """What the lockstep clock charges for detecting ``kinds`` in one frame (``sim.compute_*``):
@@ -408,9 +420,18 @@ class Runtime:
         await self._apply(out)
         period = 1.0 / self.config.runtime.control_rate_hz
         deadline: float | None = None
+        # Control runs on every estimate and at least every period. In real time the period
+        # counts from when the last tick was due, not from when its work ended: a tick made
+        # late by a busy CPU (the loop's thread waiting for a core) or by its own work does
+        # not delay the next one (next_tick_due). Lockstep keeps its schedule as it was: a
+        # period from the end of each tick.
+        next_tick_s = self.clock.now() + period
         while not out.finished:
-            source = await self._next_tick(period)
-            self._tick_clock_s = self.clock.now()
+            wait_s = period if self.clock.lockstep else max(0.0, next_tick_s - self.clock.now())
+            source = await self._next_tick(wait_s)
+            self._tick_clock_s = now = self.clock.now()
+            next_tick_s = next_tick_due(next_tick_s, now, period, estimate=source is not None,
+                                        lockstep=self.clock.lockstep)
             inputs = self._inputs(self._state)
             self._log_control_target(inputs)
             if self._stale:

@@ -211,3 +211,28 @@ def test_a_paced_clock_held_back_stands_still_and_never_goes_back():
         assert clock.now() == pytest.approx(cap, abs=0.01)
 
     asyncio.run(main())
+
+
+def test_a_late_control_tick_does_not_delay_the_next_in_real_time():
+    from autopilot.runtime import next_tick_due
+
+    period = 0.05
+    # on time: the next a period later
+    assert next_tick_due(1.0, 1.0, period, estimate=False, lockstep=False) == 1.05
+    # 20 ms late: the next still when the schedule says (30 ms from now) ...
+    assert abs(next_tick_due(1.0, 1.02, period, estimate=False, lockstep=False) - 1.05) < 1e-12
+    # ... but never closer than half a period
+    assert abs(next_tick_due(1.0, 1.2, period, estimate=False, lockstep=False) - 1.225) < 1e-12
+    # an estimate's tick: a period from now, in real time and lockstep alike
+    assert next_tick_due(1.05, 1.02, period, estimate=True, lockstep=False) == 1.07
+    # lockstep: from now whatever happened
+    assert next_tick_due(1.0, 1.03, period, estimate=False, lockstep=True) == 1.08
+    # over many ticks each 20 ms late at random, the rate holds at 20 Hz
+    import random
+
+    rng, due, ticks = random.Random(1), 0.0, []
+    for _ in range(1000):
+        now = due + rng.uniform(0.0, 0.02)
+        ticks.append(now)
+        due = next_tick_due(due, now, period, estimate=False, lockstep=False)
+    assert abs((ticks[-1] - ticks[0]) / 999 - period) < 1e-3
