@@ -105,13 +105,33 @@ def check_listen(host: str, port: int) -> None:
 def goal_schema() -> dict:
     """JSON Schema of a goal: one of the step kinds, each ``{KIND: {its parameters}}``."""
     members = [create_model(f"{name.title().replace('_', '')}Goal",
-                            __config__=ConfigDict(extra="forbid"),
+                            __config__=ConfigDict(extra="forbid", allow_inf_nan=False),
                             **{name: (STEP_KINDS[name].params, ...)})
                for name in goal_kinds()]
     from typing import Union
 
     return TypeAdapter(Union[tuple(members)]).json_schema(  # noqa: UP007
         ref_template="#/components/schemas/{model}")
+
+
+#: the largest goal body taken (the largest survey polygon a goal may carry fits many times)
+MAX_GOAL_BODY_B = 64 * 1024
+#: how deeply a goal's JSON may nest (a goal needs four levels: polygon holes)
+MAX_GOAL_DEPTH = 16
+
+
+def _depth(value: Any, limit: int = MAX_GOAL_DEPTH + 1) -> int:
+    """How deeply ``value`` nests (lists and objects), counted no further than ``limit``."""
+    deepest, level, todo = 0, 0, [(value, 1)]
+    while todo:
+        item, level = todo.pop()
+        if isinstance(item, dict | list):
+            deepest = max(deepest, level)
+            if level >= limit:
+                return level
+            todo.extend((child, level + 1)
+                        for child in (item.values() if isinstance(item, dict) else item))
+    return deepest
 
 
 _LOOPBACK_NAMES = frozenset({"127.0.0.1", "localhost", "::1"})
@@ -238,10 +258,20 @@ def build_app(runtime: Runtime, token: str | None, stream_rate_hz: float = 5.0,
               responses={409: {"description": "another goal runs, or the mission is busy"},
                          422: {"description": "invalid goal: the bad key is named"}})
     async def submit(request: Request):
+        raw = bytearray()
+        async for chunk in request.stream():  # read no further than the limit
+            raw += chunk
+            if len(raw) > MAX_GOAL_BODY_B:
+                return JSONResponse({"error": f"a goal's body is at most {MAX_GOAL_BODY_B} "
+                                              "bytes"}, status_code=413)
         try:
-            body: Any = await request.json()
-        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-            return JSONResponse({"error": f"the body is not JSON: {exc}"}, status_code=422)
+            body: Any = json.loads(raw)
+        except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as exc:
+            why = "nested too deeply" if isinstance(exc, RecursionError) else str(exc)
+            return JSONResponse({"error": f"the body is not JSON: {why}"}, status_code=422)
+        if _depth(body) > MAX_GOAL_DEPTH:
+            return JSONResponse({"error": f"a goal nests at most {MAX_GOAL_DEPTH} levels"},
+                                status_code=422)
         try:
             # (validation may read files, e.g. a hover_image goal's image: off the loop)
             step = await asyncio.to_thread(validate_goal, body, runtime.config)

@@ -40,7 +40,7 @@ HsvTriple = tuple[Annotated[int, Field(ge=0, le=180)], Annotated[int, Field(ge=0
 
 
 class _Model(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
 
 class RuntimeConfig(_Model):
@@ -635,10 +635,16 @@ def load_yaml(path: str | Path) -> Located:
     path = Path(path)
     source = path.name
     try:
-        text = path.read_text(encoding="utf-8")
+        raw = path.read_bytes()
     except OSError as exc:
         raise ConfigError([Problem(str(path), None, "", f"cannot read file: {exc.strerror}")])\
             from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = raw.count(b"\n", 0, exc.start) + 1
+        raise ConfigError([Problem(source, line, "", f"not UTF-8 text: byte 0x{raw[exc.start]:02x} "
+                                   f"at offset {exc.start} (YAML files are UTF-8)")]) from None
     return parse_yaml(text, source)
 
 

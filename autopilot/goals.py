@@ -49,6 +49,11 @@ def goal_kinds() -> list[str]:
     return [name for name in STEP_KINDS if name not in NOT_GOALS]
 
 
+def _short(value: Any, limit: int = 60) -> str:
+    text = repr(value)
+    return text if len(text) <= limit else text[:limit - 1] + "…"
+
+
 def validate_goal(body: Any, config: AppConfig) -> Step:
     """A goal body as a validated step; :class:`GoalError` (422) naming the bad key."""
     if not isinstance(body, dict) or len(body) != 1 or not isinstance(next(iter(body)), str):
@@ -75,10 +80,11 @@ def validate_goal(body: Any, config: AppConfig) -> Step:
             key = ".".join(str(p) for p in (name, *err["loc"]))
             message = {"extra_forbidden": "unknown key",
                        "missing": "missing required key"}.get(
-                err["type"], f"{err['msg']} (got {err.get('input')!r})")
+                err["type"], f"{err['msg']} (got {_short(err.get('input'))})")
             problems.append({"key": key, "error": message})
-        raise GoalError(422, f"invalid {name} goal: " + "; ".join(
-            f"{p['key']}: {p['error']}" for p in problems), problems) from None
+        # the input is echoed once, shortened, in the problem that names its key
+        raise GoalError(422, f"invalid {name} goal: " + ", ".join(
+            p["key"] for p in problems), problems) from None
     try:
         kind.check(model, config)
         kind.pipelines(model, config)

@@ -24,7 +24,7 @@ Coefficient = Annotated[float, Field(ge=-2, le=2)]
 
 
 class _Model(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
 
 class CameraConfig(_Model):

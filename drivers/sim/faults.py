@@ -64,7 +64,7 @@ Fraction = Annotated[float, Field(ge=0, le=1)]
 
 
 class _Fault(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
     #: seconds after the vehicle first arms
     start_s: Annotated[float, Field(ge=0, le=86400)] = 0.0

@@ -102,6 +102,21 @@ def test_goal_api_flow(tmp_path):
         assert body["problems"][0]["key"].startswith("goto.position_m")
         code, _ = c.call("POST", "/api/goals", b"{not json")
         assert code == 422
+        # hostile shapes (issue 31): 422 or 413, never a 500, the loop not held up
+        code, body = c.call("POST", "/api/goals", b'{"hold": {"duration_s": Infinity}}')
+        assert code == 422, body
+        assert body["problems"][0]["key"] == "hold.duration_s"
+        assert body["error"].count("Infinity") == 0  # the input is echoed once, in its problem
+        code, body = c.call("POST", "/api/goals",
+                            b'{"hover_image": {"duration_s": 5, "offset_m": [NaN, 0]}}')
+        assert code == 422, body
+        assert body["problems"][0]["key"].startswith("hover_image.offset_m")
+        code, body = c.call("POST", "/api/goals", b"[" * 10_000 + b"]" * 10_000)
+        assert code == 422, body
+        assert "nest" in body["error"]
+        code, body = c.call("POST", "/api/goals", b'{"hold": {"duration_s": 1, "x": "' +
+                            b"a" * (100 << 10) + b'"}}')
+        assert code == 413, body
         code, _ = c.call("POST", "/api/goals", b"orbit", content_type="text/plain")
         assert code == 415
         code, _ = c.call("POST", "/api/goals", {"orbit": {"center_m": [6, 0]}},

@@ -60,10 +60,14 @@ def _written(text: str) -> Iterator[Path]:
 def _load_mission_text(text: str):
     """A plan, or the ConfigError that names the problem; anything else fails the test."""
     with _written(text) as path:
-        try:
-            return load_mission(str(path))
-        except ConfigError as exc:
-            error = exc
+        return _load_mission_text_at(path)
+
+
+def _load_mission_text_at(path: Path):
+    try:
+        return load_mission(str(path))
+    except ConfigError as exc:
+        error = exc
     assert error.problems, "a ConfigError must name at least one problem"
     for problem in error.problems:
         assert str(problem)  # printable, with its source
@@ -182,3 +186,24 @@ def test_degenerate_missions_are_refused_by_name(text):
     result = _load_mission_text(text)
     assert isinstance(result, ConfigError)
     assert not math.isnan(len(str(result)))
+
+
+@FUZZ
+@given(st.one_of(
+    st.binary(max_size=200),
+    st.builds(lambda name, junk, at: (_SHIPPED_BYTES[name][:at] + junk + _SHIPPED_BYTES[name][at:]),
+              st.sampled_from(SHIPPED), st.binary(min_size=1, max_size=8),
+              st.integers(min_value=0, max_value=400))))
+def test_bytes_that_are_not_text_as_a_mission_file_or_with_validate(raw):
+    """Any bytes at all (a shipped mission with binary spliced in, Latin-1, a UTF-16 BOM, …):
+    a plan or a ConfigError naming the file and line, from the loader and from ``validate``."""
+    with tempfile.TemporaryDirectory(prefix="fuzz-") as folder:
+        path = Path(folder) / "mission.yaml"
+        path.write_bytes(raw)
+        _load_mission_text_at(path)
+        from autopilot.cli import main
+
+        assert main(["validate", str(path)]) in (0, 2)
+
+
+_SHIPPED_BYTES = {name: find_mission(name).read_bytes() for name in SHIPPED}
