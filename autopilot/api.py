@@ -12,7 +12,8 @@ action servers), on FastAPI, served by uvicorn inside the autopilot's own event 
 ``GET /api/goals/{id}``                 its state, feedback (phase, progress, photos), result
 ``POST /api/goals/{id}/cancel``         → the vehicle hovers (status 3)
 ``POST /api/abort``                     → status 12 and the safe stop (hold, land, disarm)
-``GET /docs``                           the OpenAPI page: every goal kind and its parameters
+``GET /docs``                           the OpenAPI page (served from the package, no CDN):
+                                        every goal kind and its parameters
 ``GET /``, ``GET /video/{camera}.mjpg``  with ``--console``: the operator console's page, its
 ``WS /api/console``                     live video, and its socket (values, events, keys);
 ``GET /api/console/stats``              see :mod:`autopilot.console`
@@ -134,6 +135,17 @@ def _depth(value: Any, limit: int = MAX_GOAL_DEPTH + 1) -> int:
     return deepest
 
 
+#: the slowest live video a viewer may ask for (slower: a viewer that receives nothing while
+#: the encoder runs for it)
+MIN_VIDEO_FPS = 0.2
+
+def _hardened(response):
+    """Every answer: its type as declared (no sniffing), and no address leaked onwards."""
+    response.headers.setdefault("X-Content-Type-Options", "nosniff")
+    response.headers.setdefault("Referrer-Policy", "no-referrer")
+    return response
+
+
 _LOOPBACK_NAMES = frozenset({"127.0.0.1", "localhost", "::1"})
 
 
@@ -158,7 +170,7 @@ def cookie_name(headers) -> str:
 
 def build_app(runtime: Runtime, token: str | None, stream_rate_hz: float = 5.0,
               loopback_only: bool = True, console: Console | None = None) -> FastAPI:
-    app = FastAPI(title="autopilot goal API", version="1",
+    app = FastAPI(title="autopilot goal API", version="1", docs_url=None, redoc_url=None,
                   description="Goals (mission steps) at runtime, status, cancel and abort. "
                   "Local by default; any other address needs a bearer token."
                   + (" The operator console: the page at /, live video at "
@@ -166,7 +178,7 @@ def build_app(runtime: Runtime, token: str | None, stream_rate_hz: float = 5.0,
                      "/api/console (see autopilot.console)." if console is not None else ""))
 
     def refuse(status: int, error: str) -> JSONResponse:
-        return JSONResponse({"error": error}, status_code=status)
+        return _hardened(JSONResponse({"error": error}, status_code=status))
 
     def token_is(given: str | None) -> bool:
         return token is not None and given is not None and \
@@ -187,7 +199,9 @@ def build_app(runtime: Runtime, token: str | None, stream_rate_hz: float = 5.0,
         whose name resolves to 127.0.0.1 — DNS rebinding — carries its own name)."""
         if not loopback_only:
             return True
-        return _hostname(headers.get("host", "")) in _LOOPBACK_NAMES
+        name = _hostname(headers.get("host", ""))
+        # a loopback address written out (127.0.0.2, …) is no name a page could rebind
+        return name in _LOOPBACK_NAMES or (name != "localhost" and is_loopback(name))
 
     def origin_ok(headers) -> bool:
         """No foreign page: a browser's request carries its page's origin, which must be
@@ -222,7 +236,7 @@ def build_app(runtime: Runtime, token: str | None, stream_rate_hz: float = 5.0,
             if kind and kind != "application/json":  # (a form posted by a web page)
                 return refuse(415, f"{kind} is not taken here: send application/json or "
                               "no body")
-        return await call_next(request)
+        return _hardened(await call_next(request))
 
     @app.get("/api/status", summary="The mission status and the vehicle's state")
     async def status() -> dict:
@@ -320,7 +334,45 @@ def build_app(runtime: Runtime, token: str | None, stream_rate_hz: float = 5.0,
         return app.openapi_schema
 
     app.openapi = openapi
+    _docs_routes(app)
     return app
+
+
+# The OpenAPI page, served from the installed swagger-ui-bundle (FastAPI's default loads its
+# scripts from a CDN: unpinned code in the origin that can fly the vehicle, and no page at all
+# offline on a companion computer). Its own script starts it, so the policy allows no inline
+# script.
+_DOCS_PAGE = """<!doctype html>
+<html><head><meta charset="utf-8"><title>autopilot goal API</title>
+<link rel="stylesheet" href="/docs/static/swagger-ui.css"></head>
+<body><div id="swagger-ui"></div>
+<script src="/docs/static/swagger-ui-bundle.js"></script>
+<script src="/docs/start.js"></script></body></html>
+"""
+_DOCS_START = """SwaggerUIBundle({url: "/openapi.json", dom_id: "#swagger-ui",
+  deepLinking: true, presets: [SwaggerUIBundle.presets.apis]});
+"""
+DOCS_POLICY = ("default-src 'none'; script-src 'self'; style-src 'self' 'unsafe-inline'; "
+               "img-src 'self' data:; connect-src 'self'; frame-ancestors 'none'; "
+               "base-uri 'none'; form-action 'none'")
+
+
+def _docs_routes(app: FastAPI) -> None:
+    from fastapi.responses import HTMLResponse, Response
+    from fastapi.staticfiles import StaticFiles
+    from swagger_ui_bundle import swagger_ui_path
+
+    headers = {"Content-Security-Policy": DOCS_POLICY, "Cache-Control": "no-store"}
+
+    @app.get("/docs", include_in_schema=False)
+    async def docs_page() -> HTMLResponse:
+        return HTMLResponse(_DOCS_PAGE, headers=headers)
+
+    @app.get("/docs/start.js", include_in_schema=False)
+    async def docs_start() -> Response:
+        return Response(_DOCS_START, media_type="text/javascript", headers=headers)
+
+    app.mount("/docs/static", StaticFiles(directory=str(swagger_ui_path)), name="docs-static")
 
 
 def _console_routes(app: FastAPI, runtime: Runtime, console: Console, socket_allowed,
@@ -359,8 +411,9 @@ def _console_routes(app: FastAPI, runtime: Runtime, console: Console, socket_all
         if camera not in runtime.vehicle.cameras:
             return JSONResponse({"error": f"no camera {camera!r}; cameras: "
                                  f"{sorted(runtime.vehicle.cameras)}"}, status_code=404)
-        if fps is not None and not 0 < fps <= 60:
-            return JSONResponse({"error": "fps: expected 0 < fps <= 60"}, status_code=422)
+        if fps is not None and not MIN_VIDEO_FPS <= fps <= 60:  # (NaN fails this too)
+            return JSONResponse({"error": f"fps: expected {MIN_VIDEO_FPS:g} <= fps <= 60"},
+                                status_code=422)
         feed = console.feed(camera, overlay=bool(overlay))
         return StreamingResponse(feed.stream(fps),
                                  media_type=f"multipart/x-mixed-replace; boundary={BOUNDARY}",

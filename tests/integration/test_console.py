@@ -123,6 +123,9 @@ def test_console_video_socket_keys_and_hooks(tmp_path):
         code, body = c.call("GET", "/video/nope.mjpg")
         assert code == 404
         assert "front" in body["error"]
+        for fps in ("1e-300", "0.1", "nan", "61"):  # a viewer that would receive nothing
+            code, body = c.call("GET", f"/video/front.mjpg?fps={fps}")
+            assert code == 422, (fps, body)
         time.sleep(0.5)
         stats = c.call("GET", "/api/console/stats")[1]["video"]["front"]
         assert stats["viewers"] == 0
