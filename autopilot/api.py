@@ -40,6 +40,9 @@ import hmac
 import ipaddress
 import json
 import logging
+import math
+import time
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from fastapi import FastAPI, Request, WebSocket
@@ -429,6 +432,96 @@ def _console_routes(app: FastAPI, runtime: Runtime, console: Console, socket_all
             await console.serve_socket(ws)
 
 
+@dataclass(frozen=True, slots=True)
+class ConnectionLimits:
+    """What one API server takes: connections open at once (in total and from one address),
+    and how long a connection may take to send a request's headers (idle ones included;
+    between requests uvicorn's keep-alive of 5 s applies). Beyond them a connection is closed
+    at once: a client that opens thousands and never speaks costs the process a few file
+    descriptors, not all of them, and the flight goes on."""
+
+    max_connections: int = 256
+    max_per_client: int = 32
+    header_timeout_s: float = 10.0
+
+
+def _guarded_protocol(limits: ConnectionLimits):
+    """uvicorn's HTTP protocol with :class:`ConnectionLimits` (a class per server)."""
+    from uvicorn.protocols.http.h11_impl import H11Protocol
+
+    live: dict = {}  # transport -> client address (WebSocket upgrades keep their transport)
+    refused = {"count": 0, "logged_s": -math.inf}
+
+    class GuardedH11Protocol(H11Protocol):
+        _header_timer: asyncio.TimerHandle | None = None
+
+        def connection_made(self, transport) -> None:
+            for gone in [t for t in live if t.is_closing()]:
+                del live[gone]
+            super().connection_made(transport)
+            address = self.client[0] if self.client else "?"
+            if len(live) >= limits.max_connections or \
+                    sum(1 for a in live.values() if a == address) >= limits.max_per_client:
+                refused["count"] += 1
+                now = time.monotonic()
+                if now - refused["logged_s"] >= 10.0:  # one line per 10 s, never a flood
+                    refused["logged_s"] = now
+                    log.warning("goal API: connection from %s refused (%d open, at most %d, "
+                                "%d from one address); %d refused so far", address, len(live),
+                                limits.max_connections, limits.max_per_client,
+                                refused["count"])
+                transport.abort()
+                return
+            live[transport] = address
+            self._arm_header_timer()
+
+        def _arm_header_timer(self) -> None:
+            if self._header_timer is None:
+                self._header_timer = self.loop.call_later(limits.header_timeout_s,
+                                                          self._header_timeout)
+
+        def _between_requests(self) -> bool:
+            return self.cycle is None or self.cycle.response_complete
+
+        def _header_timeout(self) -> None:
+            self._header_timer = None
+            if self._between_requests() and not self.transport.is_closing():
+                self.transport.abort()  # no request's headers in time (or none at all)
+
+        def data_received(self, data: bytes) -> None:
+            if self._between_requests():  # the start of a request: its headers have a deadline
+                self._arm_header_timer()
+            super().data_received(data)
+            upgraded = self.transport.get_protocol() is not self  # now a WebSocket's
+            if (upgraded or not self._between_requests()) and self._header_timer is not None:
+                self._header_timer.cancel()  # the headers came
+                self._header_timer = None
+
+        def connection_lost(self, exc) -> None:
+            live.pop(self.transport, None)
+            if self._header_timer is not None:
+                self._header_timer.cancel()
+                self._header_timer = None
+            super().connection_lost(exc)
+
+    GuardedH11Protocol.live = live
+    return GuardedH11Protocol
+
+
+def _raise_open_files_limit(wanted: int = 65536) -> None:
+    """The soft limit on open files up to the hard one (Linux gives 1,024 soft by default):
+    the server's own caps stay far below it, whatever else the process opens."""
+    try:
+        import resource
+
+        soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+        target = wanted if hard == resource.RLIM_INFINITY else min(wanted, hard)
+        if soft != resource.RLIM_INFINITY and soft < target:
+            resource.setrlimit(resource.RLIMIT_NOFILE, (target, hard))
+    except (ImportError, ValueError, OSError):
+        pass
+
+
 def _quiet_server_class():
     import uvicorn
 
@@ -448,7 +541,8 @@ class ApiServer:
     name = "goal-api"
 
     def __init__(self, runtime: Runtime, host: str, port: int, token: str | None,
-                 stream_rate_hz: float = 5.0, console: bool = False) -> None:
+                 stream_rate_hz: float = 5.0, console: bool = False,
+                 limits: ConnectionLimits = ConnectionLimits()) -> None:
         import uvicorn
 
         if not is_loopback(host) and not token:
@@ -462,8 +556,11 @@ class ApiServer:
         self.console = Console(runtime) if console else None
         self.app = build_app(runtime, token if token else None, stream_rate_hz,
                              loopback_only=is_loopback(host), console=self.console)
+        _raise_open_files_limit()
+        self.protocol = _guarded_protocol(limits)
         config = uvicorn.Config(self.app, host=host, port=port, log_level="warning",
-                                lifespan="off", ws="websockets-sansio", access_log=False)
+                                lifespan="off", ws="websockets-sansio", access_log=False,
+                                http=self.protocol, h11_max_incomplete_event_size=16 * 1024)
         self._server = _quiet_server_class()(config)
         self.started = asyncio.Event()
         self._serve_task: asyncio.Future | None = None
