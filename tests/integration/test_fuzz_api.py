@@ -12,8 +12,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from websockets.sync.client import connect
 
+from autopilot.goals import goal_kinds
 from autopilot.mission import load_mission
 
+from ..unit.test_finite_numbers import EXAMPLES, _numeric_leaves, _replaced
 from .test_goal_api import Client, _fly_with_client
 
 json_values = st.recursive(
@@ -72,8 +74,38 @@ def test_fuzzed_requests_are_answered_4xx_and_the_flight_goes_on(tmp_path):
             codes.add(code)
             assert code < 500, (method, path, code)
 
+        @FUZZ
+        @given(st.data(), st.sampled_from(["NaN", "Infinity", "-Infinity"]))
+        def post_non_finite(data, bad):
+            """NaN or ±Infinity in any number of any goal kind: 422 naming its key."""
+            kind = data.draw(st.sampled_from(sorted(k for k in EXAMPLES if k in goal_kinds())))
+            paths = list(_numeric_leaves(EXAMPLES[kind]))
+            if not paths:
+                return
+            path = data.draw(st.sampled_from(paths))
+            marker = 1234567.125  # a number no example holds, swapped for the bare token
+            text = json.dumps({kind: _replaced(EXAMPLES[kind], path, marker)})
+            code, answer = _raw(c, "POST", "/api/goals", text.replace(str(marker), bad).encode(),
+                                "application/json")
+            codes.add(code)
+            assert code == 422, (kind, path, bad, code, answer)
+            keys = [p["key"] for p in json.loads(answer)["problems"]]
+            assert any(k.startswith(f"{kind}.{path[0]}") for k in keys), (path, keys)
+
+        @FUZZ
+        @given(st.integers(min_value=17, max_value=10_000), st.booleans())  # (under 64 kB)
+        def post_deep(depth, objects):
+            """JSON nested past the limit, or too deep to parse: 422, never a 500."""
+            body = ('{"a":' * depth + "1" + "}" * depth) if objects else \
+                ("[" * depth + "]" * depth)
+            code, _ = _raw(c, "POST", "/api/goals", body.encode(), "application/json")
+            codes.add(code)
+            assert code == 422, (depth, objects, code)
+
         post_goal()
         post_bytes()
+        post_non_finite()
+        post_deep()
         random_paths()
         with connect(f"ws://127.0.0.1:{port}/api/console", open_timeout=10) as ws:
             assert json.loads(ws.recv(timeout=10))["type"] == "hello"
