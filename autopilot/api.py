@@ -43,11 +43,12 @@ import logging
 import math
 import time
 from dataclasses import dataclass
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from fastapi import FastAPI, Request, WebSocket
 from fastapi.openapi.utils import get_openapi
-from fastapi.responses import JSONResponse
+from fastapi.responses import HTMLResponse, JSONResponse, Response
 from pydantic import ConfigDict, TypeAdapter, create_model
 
 from autopilot.goals import GoalError, goal_kinds, validate_goal
@@ -162,6 +163,30 @@ def _hostname(host_port: str) -> str:
 
 TOKEN_COOKIE = "autopilot_token"
 
+PAGE_SECURITY = {"Cache-Control": "no-store", "X-Frame-Options": "DENY",
+                 "Content-Security-Policy": "default-src 'self'; img-src 'self' blob: data:; "
+                 "style-src 'self' 'unsafe-inline'; script-src 'self' 'unsafe-inline'; "
+                 "connect-src 'self'; frame-ancestors 'none'",
+                 "Referrer-Policy": "no-referrer"}
+
+#: the console's sign-in page off loopback: the token typed in (it never sits in an address,
+#: the browser's history or a server's log), sent once to /api/login, kept as a cookie
+SIGN_IN_PAGE = """<!doctype html><html><head><meta charset="utf-8"><title>autopilot: sign in</title>
+<style>body{font-family:sans-serif;margin:4em auto;max-width:26em}input{width:100%;margin:.5em 0}
+</style></head><body><h1>autopilot console</h1>
+<form id="f"><label>API token <input id="t" type="password" autocomplete="current-password"
+autofocus required></label><button>Sign in</button></form><p id="e"></p>
+<script>
+document.getElementById("f").addEventListener("submit", async (ev) => {
+  ev.preventDefault();
+  const r = await fetch("/api/login", {method: "POST", credentials: "same-origin",
+    headers: {"Content-Type": "application/json"},
+    body: JSON.stringify({token: document.getElementById("t").value})});
+  if (r.ok) { location.replace("/"); }
+  else { document.getElementById("e").textContent = "wrong token"; }
+});
+</script></body></html>"""
+
 
 def cookie_name(headers) -> str:
     """The token's cookie, one per port: browsers share cookies across a host's ports, and
@@ -224,11 +249,18 @@ def build_app(runtime: Runtime, token: str | None, stream_rate_hz: float = 5.0,
         if request.headers.get("sec-fetch-site") in ("cross-site", "same-site"):
             # a browser fetching for a page of another origin (an <img> of the video, …)
             return refuse(403, "cross-origin request refused")
-        if not authorised(request.headers, request.cookies) and not (
-                console is not None and request.url.path == "/"
-                and token_is(request.query_params.get("token"))):
-            return refuse(401, "a bearer token is needed (Authorization: Bearer TOKEN; the "
-                          "console: open /?token=TOKEN once)")
+        if not authorised(request.headers, request.cookies):
+            path = request.url.path
+            if console is not None and path == "/" and request.method in ("GET", "HEAD") \
+                    and request.query_params.get("token") is None:
+                # the console's sign-in page: the token typed in, never in an address
+                return _hardened(HTMLResponse(SIGN_IN_PAGE, status_code=401,
+                                              headers=PAGE_SECURITY))
+            if not (console is not None and (
+                    (path == "/api/login" and request.method == "POST")
+                    or (path == "/" and token_is(request.query_params.get("token"))))):
+                return refuse(401, "a bearer token is needed (Authorization: Bearer TOKEN; "
+                              "the console: open / and sign in)")
         if request.method not in ("GET", "HEAD", "OPTIONS"):
             if not origin_ok(request.headers):
                 return refuse(403, f"cross-origin request from {request.headers['origin']} "
@@ -291,7 +323,8 @@ def build_app(runtime: Runtime, token: str | None, stream_rate_hz: float = 5.0,
                                 status_code=422)
         try:
             # (validation may read files, e.g. a hover_image goal's image: off the loop)
-            step = await asyncio.to_thread(validate_goal, body, runtime.config)
+            step = await asyncio.to_thread(validate_goal, body, runtime.config,
+                                           runtime.goal_site())
             goal = runtime.submit_goal(step)
         except GoalError as exc:
             return JSONResponse(exc.as_dict(), status_code=exc.status)
@@ -380,16 +413,31 @@ def _docs_routes(app: FastAPI) -> None:
 
 def _console_routes(app: FastAPI, runtime: Runtime, console: Console, socket_allowed,
                     token_is) -> None:
-    from fastapi.responses import HTMLResponse, RedirectResponse, StreamingResponse
+    from fastapi.responses import RedirectResponse, StreamingResponse
 
     from autopilot.console import BOUNDARY, page_html
 
     page = page_html()
-    security = {"Cache-Control": "no-store", "X-Frame-Options": "DENY",
-                "Content-Security-Policy": "default-src 'self'; img-src 'self' blob: data:; "
-                "style-src 'self' 'unsafe-inline'; script-src 'self' 'unsafe-inline'; "
-                "connect-src 'self'; frame-ancestors 'none'",
-                "Referrer-Policy": "no-referrer"}
+    security = PAGE_SECURITY
+
+    def token_cookie(answer, request: Request, given: str) -> None:
+        # one per port (a host's other ports are other servers), HttpOnly (no script reads
+        # it), SameSite=Strict (no other site's page sends it), Secure over HTTPS (--api-tls-*)
+        answer.set_cookie(cookie_name(request.headers), given, httponly=True,
+                          samesite="strict", secure=request.url.scheme == "https")
+
+    @app.post("/api/login", summary="The console's sign-in: the token as a cookie",
+              status_code=204, include_in_schema=False)
+    async def login(request: Request):
+        try:
+            given = (await request.json()).get("token")
+        except (ValueError, AttributeError):
+            given = None
+        if not isinstance(given, str) or not token_is(given):
+            return _hardened(JSONResponse({"error": "wrong token"}, status_code=401))
+        answer = Response(status_code=204)
+        token_cookie(answer, request, given)
+        return answer
 
     @app.get("/", summary="The operator console (a page: video, values, map, keys, goals)",
              response_class=HTMLResponse)
@@ -399,9 +447,7 @@ def _console_routes(app: FastAPI, runtime: Runtime, console: Console, socket_all
             # once: the token becomes a same-site cookie (the page, its video and its socket
             # then carry it), and leaves the address bar
             answer = RedirectResponse("/", status_code=303)
-            answer.set_cookie(cookie_name(request.headers), given, httponly=True,
-                              samesite="strict",
-                              secure=request.url.scheme == "https")
+            token_cookie(answer, request, given)
             return answer
         return HTMLResponse(page, headers=security)
 
@@ -443,6 +489,10 @@ class ConnectionLimits:
     max_connections: int = 256
     max_per_client: int = 32
     header_timeout_s: float = 10.0
+    #: connections waiting in the kernel to be accepted, and so accepted per turn of the
+    #: event loop (asyncio accepts up to the backlog at once): a burst of thousands is taken
+    #: in slices, the loop turning between them, not in one stall of a third of a second
+    backlog: int = 64
 
 
 def _guarded_protocol(limits: ConnectionLimits):
@@ -450,6 +500,7 @@ def _guarded_protocol(limits: ConnectionLimits):
     from uvicorn.protocols.http.h11_impl import H11Protocol
 
     live: dict = {}  # transport -> client address (WebSocket upgrades keep their transport)
+    silent: dict = {}  # transports whose request's headers have not all come, oldest first
     refused = {"count": 0, "logged_s": -math.inf}
 
     class GuardedH11Protocol(H11Protocol):
@@ -458,8 +509,19 @@ def _guarded_protocol(limits: ConnectionLimits):
         def connection_made(self, transport) -> None:
             for gone in [t for t in live if t.is_closing()]:
                 del live[gone]
+                silent.pop(gone, None)
             super().connection_made(transport)
             address = self.client[0] if self.client else "?"
+            if len(live) >= limits.max_connections and \
+                    sum(1 for a in live.values() if a == address) < limits.max_per_client:
+                # full: the connection waiting longest for its request's headers makes room
+                # (idle sockets or slow headers from many addresses cannot lock out a client
+                # that speaks)
+                oldest = next((t for t in silent if not t.is_closing()), None)
+                if oldest is not None:
+                    silent.pop(oldest, None)
+                    live.pop(oldest, None)
+                    oldest.abort()
             if len(live) >= limits.max_connections or \
                     sum(1 for a in live.values() if a == address) >= limits.max_per_client:
                 refused["count"] += 1
@@ -476,6 +538,7 @@ def _guarded_protocol(limits: ConnectionLimits):
             self._arm_header_timer()
 
         def _arm_header_timer(self) -> None:
+            silent[self.transport] = None
             if self._header_timer is None:
                 self._header_timer = self.loop.call_later(limits.header_timeout_s,
                                                           self._header_timeout)
@@ -494,11 +557,13 @@ def _guarded_protocol(limits: ConnectionLimits):
             super().data_received(data)
             upgraded = self.transport.get_protocol() is not self  # now a WebSocket's
             if (upgraded or not self._between_requests()) and self._header_timer is not None:
+                silent.pop(self.transport, None)
                 self._header_timer.cancel()  # the headers came
                 self._header_timer = None
 
         def connection_lost(self, exc) -> None:
             live.pop(self.transport, None)
+            silent.pop(self.transport, None)
             if self._header_timer is not None:
                 self._header_timer.cancel()
                 self._header_timer = None
@@ -506,6 +571,21 @@ def _guarded_protocol(limits: ConnectionLimits):
 
     GuardedH11Protocol.live = live
     return GuardedH11Protocol
+
+
+def check_tls(certfile: str, keyfile: str) -> None:
+    """:class:`ApiSetupError` unless ``certfile`` and ``keyfile`` are a certificate (chain)
+    and its private key in PEM (what uvicorn's ``--ssl-certfile``/``--ssl-keyfile`` take)."""
+    import ssl
+
+    for what, path in (("--api-tls-cert", certfile), ("--api-tls-key", keyfile)):
+        if not Path(path).is_file():
+            raise ApiSetupError(f"{what} {path}: no such file")
+    try:
+        ssl.create_default_context(ssl.Purpose.CLIENT_AUTH).load_cert_chain(certfile, keyfile)
+    except (ssl.SSLError, OSError, ValueError) as exc:
+        raise ApiSetupError(f"--api-tls-cert {certfile} / --api-tls-key {keyfile}: not a PEM "
+                            f"certificate and its private key ({exc})") from None
 
 
 def _raise_open_files_limit(wanted: int = 65536) -> None:
@@ -542,8 +622,12 @@ class ApiServer:
 
     def __init__(self, runtime: Runtime, host: str, port: int, token: str | None,
                  stream_rate_hz: float = 5.0, console: bool = False,
-                 limits: ConnectionLimits = ConnectionLimits()) -> None:
+                 limits: ConnectionLimits = ConnectionLimits(),
+                 tls: tuple[str, str] | None = None) -> None:
         import uvicorn
+
+        if tls is not None:
+            check_tls(*tls)
 
         if not is_loopback(host) and not token:
             raise ApiSetupError(
@@ -560,7 +644,11 @@ class ApiServer:
         self.protocol = _guarded_protocol(limits)
         config = uvicorn.Config(self.app, host=host, port=port, log_level="warning",
                                 lifespan="off", ws="websockets-sansio", access_log=False,
-                                http=self.protocol, h11_max_incomplete_event_size=16 * 1024)
+                                http=self.protocol, h11_max_incomplete_event_size=16 * 1024,
+                                backlog=limits.backlog,
+                                **({"ssl_certfile": tls[0], "ssl_keyfile": tls[1]}
+                                   if tls is not None else {}))
+        self.scheme = "https" if tls is not None else "http"
         self._server = _quiet_server_class()(config)
         self.started = asyncio.Event()
         self._serve_task: asyncio.Future | None = None

@@ -66,6 +66,11 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--api-token-file", metavar="FILE",
                      help="the goal API's bearer token (else the AUTOPILOT_API_TOKEN "
                      "environment variable); required off loopback")
+    run.add_argument("--api-tls-cert", metavar="FILE",
+                     help="serve the goal API and the console over HTTPS with this PEM "
+                     "certificate (chain); use it on any network others share: the token then "
+                     "never crosses it in clear text (with --api-tls-key)")
+    run.add_argument("--api-tls-key", metavar="FILE", help="the certificate's PEM private key")
     run.add_argument("--report", action="store_true",
                      help="write DIR/report.html (plots of the flight) at the end")
     run.add_argument("--record-video", nargs="?", const="", metavar="CAMERA",
@@ -417,6 +422,16 @@ def build_parser() -> argparse.ArgumentParser:
                            help="hover this long in each flight (default 20)")
     api_bench.add_argument("--poll-hz", type=float, default=10.0, metavar="HZ",
                            help="GET /api/status rate while busy (default 10)")
+    api_bench.add_argument("--abuse", action="store_true",
+                           help="instead: one real-time standby with the console and a token, "
+                           "attacked from another process (idle sockets, slow headers, 8 MB and "
+                           "deep bodies, no token), then the largest accepted orbit, survey and "
+                           "goto and a goal flood: the loop's lag per phase and whether the "
+                           "flight went on (about 3 min)")
+    api_bench.add_argument("--idle", type=int, default=2000, metavar="N",
+                           help="--abuse: idle sockets opened at once (default 2000)")
+    api_bench.add_argument("--flood", type=int, default=500, metavar="N",
+                           help="--abuse: goals posted back to back (default 500)")
 
     perception = benches.add_parser(
         "perception", help="each detector on frames rendered from known poses, against truth: "
@@ -710,7 +725,7 @@ def _run(args: argparse.Namespace) -> int:
                          "goal API: run with --api HOST:PORT (e.g. --api 127.0.0.1:8080), or "
                          "give the standby a timeout_s")
     if args.api:
-        from autopilot.api import check_listen, is_loopback
+        from autopilot.api import check_listen, check_tls, is_loopback
 
         try:
             host, port = parse_address(args.api)
@@ -719,8 +734,15 @@ def _run(args: argparse.Namespace) -> int:
                 raise ApiSetupError(f"--api {args.api} is reachable from other machines: give "
                                     "a token (--api-token-file FILE, or AUTOPILOT_API_TOKEN)")
             check_listen(host, port)
+            if bool(args.api_tls_cert) != bool(args.api_tls_key):
+                raise ApiSetupError("--api-tls-cert and --api-tls-key go together")
+            if args.api_tls_cert:
+                check_tls(args.api_tls_cert, args.api_tls_key)
         except ApiSetupError as exc:
             raise InputError(str(exc)) from None
+    elif args.api_tls_cert or args.api_tls_key:
+        raise InputError("--api-tls-cert/--api-tls-key serve the goal API or the console: "
+                         "give --api HOST:PORT or --console HOST:PORT")
     if args.faults and plan.config.driver != "sim":
         raise InputError(f"--fault acts on the simulated vehicle, not on a vehicle flown through "
                          f"--driver {plan.config.driver}: give it to 'autopilot sim --fault ...' "
@@ -743,7 +765,9 @@ def _run(args: argparse.Namespace) -> int:
                               calibration=args.calibration,
                               record_video=args.record_video,
                               signing_key=Path(args.signing_key) if args.signing_key else None,
-                              api=args.api, api_token=token, console=bool(args.console)))
+                              api=args.api, api_token=token, console=bool(args.console),
+                              api_tls=(args.api_tls_cert, args.api_tls_key)
+                              if args.api_tls_cert else None))
     if sys.stderr.isatty():
         sys.stderr.write("\n")
     follow = summary["metrics"].get("follow") or {}
@@ -1154,6 +1178,13 @@ def _bench(args: argparse.Namespace) -> int:
 
         if args.seconds <= 0 or args.poll_hz <= 0:
             raise InputError("--seconds and --poll-hz must be positive")
+        if args.abuse:
+            if not 0 < args.idle <= 20_000 or not 0 < args.flood <= 100_000:
+                raise InputError("--idle must be 1-20000 and --flood 1-100000")
+            result = api_bench.run_abuse(args.idle, max(args.seconds, 12.0), args.flood, log)
+            print(json.dumps(result) if args.json else api_bench.format_abuse(result))
+            return EXIT_OK if result["status"] == "completed" and not result["aborted"] \
+                else EXIT_FAILED
         result = api_bench.run_bench(args.seconds, args.poll_hz, log)
         print(json.dumps(result) if args.json else api_bench.format_table(result))
         return EXIT_OK

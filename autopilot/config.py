@@ -344,6 +344,10 @@ class TrajectoryControlConfig(_Model):
     #: ours, or seed004: seed 004's PID on the position error (a baseline for the benchmark)
     tracker: Literal["ours", "seed004"]
     seed004_pid: tuple[NonNegative, NonNegative, NonNegative]  # its Kp, Ki, Kd
+    #: one step's planned path at most this long (its way in, laps, lines and turns); a
+    #: longer one is refused before it is planned (planning costs ~0.1 s and ~6 MB per km)
+    max_path_m: Annotated[float, Field(gt=0, le=100_000)] = 10_000.0
+    max_photos: Annotated[int, Field(ge=0, le=100_000)] = 2000  # one orbit's or survey's
 
 
 class PhotoConfig(_Model):
@@ -494,10 +498,13 @@ class ConsoleKeysConfig(_Model):
 
 
 class GeofenceConfig(_Model):
-    """The autopilot's own fence, checked on every setpoint (0 / null: that limit is off)."""
+    """The autopilot's own fence, checked on every setpoint and on every goto, orbit and
+    survey before it flies (0 / null: that limit is off; on by default)."""
 
-    max_distance_m: Annotated[float, Field(ge=0)] = 0.0  # horizontal, from home
-    max_altitude_m: Annotated[float, Field(ge=0)] = 0.0  # above home
+    max_distance_m: Annotated[float, Field(ge=0)] = 500.0  # horizontal, from home
+    max_altitude_m: Annotated[float, Field(ge=0)] = 120.0  # above home
+    #: goto, orbit and survey never planned lower than this above home (null: off)
+    min_altitude_m: Annotated[float, Field(ge=-100, le=100)] | None = 1.0
     polygon_m: list[tuple[FiniteFloat, FiniteFloat]] | None = None  # north, east (local)
     lookahead_s: Annotated[float, Field(gt=0, le=10)] = 1.0  # velocity setpoints
 

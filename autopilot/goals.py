@@ -20,6 +20,8 @@ from typing import Any
 
 from pydantic import ValidationError
 
+from autopilot.behaviors.base import BehaviorInputs
+from autopilot.behaviors.trajectory import LimitError
 from autopilot.config import AppConfig
 from autopilot.mission import Step
 from autopilot.status import MissionStatus
@@ -54,8 +56,13 @@ def _short(value: Any, limit: int = 60) -> str:
     return text if len(text) <= limit else text[:limit - 1] + "…"
 
 
-def validate_goal(body: Any, config: AppConfig) -> Step:
-    """A goal body as a validated step; :class:`GoalError` (422) naming the bad key."""
+def validate_goal(body: Any, config: AppConfig, site: BehaviorInputs | None = None) -> Step:
+    """A goal body as a validated step; :class:`GoalError` (422) naming the bad key.
+
+    ``site``: where the vehicle is now (its position, home, global origin): a goal that plans a
+    path is then checked against the plan bounds and the geofence from there — too long, too
+    many photos, too far or high from home, or below ``failsafe.geofence.min_altitude_m`` — and
+    refused naming the key and the limit, before it starts."""
     if not isinstance(body, dict) or len(body) != 1 or not isinstance(next(iter(body)), str):
         raise GoalError(422, "a goal is one step: {\"KIND\": {parameters}}, e.g. "
                         "{\"goto\": {\"position_m\": [5, 0, 3]}}",
@@ -88,6 +95,11 @@ def validate_goal(body: Any, config: AppConfig) -> Step:
     try:
         kind.check(model, config)
         kind.pipelines(model, config)
+        if kind.reach is not None:
+            kind.reach(model, config, site)
+    except LimitError as exc:
+        key = f"{name}.{exc.key}"
+        raise GoalError(422, f"{name}: {exc}", [{"key": key, "error": str(exc)}]) from None
     except ValueError as exc:
         raise GoalError(422, f"{name}: {exc}", [{"key": name, "error": str(exc)}]) from None
     return Step(name, model)

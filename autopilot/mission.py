@@ -423,9 +423,11 @@ def _validate_steps(raw_steps: list[dict[str, Any]], located: Located) -> tuple[
 # ------------------------------------------------------------------------------------------
 
 
-def build_behavior(step: Step, config: AppConfig, cameras: Mapping[str, CameraInfo]) -> Behavior:
-    """The behaviour that flies a step, as its registered kind builds it."""
-    return step_kind(step.name).behavior(step.params, StepContext(config, cameras))
+def build_behavior(step: Step, config: AppConfig, cameras: Mapping[str, CameraInfo],
+                   offload=None) -> Behavior:
+    """The behaviour that flies a step, as its registered kind builds it (``offload``: where
+    heavy planning runs, see :class:`StepContext`)."""
+    return step_kind(step.name).behavior(step.params, StepContext(config, cameras, offload))
 
 
 # ------------------------------------------------------------------------------------------

@@ -170,13 +170,15 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
               calibration: str | Path | Sequence[str] | None = None,
               record_video: str | None = None, signing_key: Path | None = None,
               api: str | None = None, api_token: str | None = None,
-              on_api: Callable[[object], None] | None = None, console: bool = False) -> dict:
+              on_api: Callable[[object], None] | None = None, console: bool = False,
+              api_tls: tuple[str, str] | None = None) -> dict:
     """Fly ``plan`` and return its summary (also written to ``out_dir/summary.json``).
 
     ``record_video`` names a camera whose every frame is logged (for ``onboard.mp4``; "" is
     the followed camera). ``api`` (``HOST:PORT``) serves the goal API for the flight
     (:mod:`autopilot.api`; ``on_api`` is called with the server once it is created), with the
-    operator console (:mod:`autopilot.console`) when ``console``. Warnings
+    operator console (:mod:`autopilot.console`) when ``console``, over HTTPS with ``api_tls``
+    (certificate file, key file). Warnings
     (an uncalibrated camera) go to ``progress`` and into the summary."""
     warnings: list[str] = []
 
@@ -222,14 +224,15 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
                           goals=goals)
         if api is not None:
             host, port = parse_address(api)
-            server = ApiServer(runtime, host, port, api_token, console=console)
+            server = ApiServer(runtime, host, port, api_token, console=console, tls=api_tls)
             runtime.add_service(server)
             if on_api is not None:
                 on_api(server)
             if progress is not None:
-                progress(f"console on http://{host}:{port}/ (goal API at /api, documented at "
-                         "/docs)" if console else
-                         f"goal API on http://{host}:{port}/api (documented at /docs)")
+                scheme = server.scheme
+                progress(f"console on {scheme}://{host}:{port}/ (goal API at /api, documented "
+                         "at /docs)" if console else
+                         f"goal API on {scheme}://{host}:{port}/api (documented at /docs)")
         if handle_signals:
             for sig in signals:
                 loop.add_signal_handler(sig, on_signal, sig.name)

@@ -36,10 +36,11 @@ import contextlib
 import dataclasses
 import logging
 import math
+import multiprocessing
 import time
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ProcessPoolExecutor, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Protocol
@@ -170,6 +171,12 @@ class RunStats:
     loop_stalls: int = 0  # the loop silent for runtime.loop_stall_s or longer
 
 
+def _warm_planner() -> None:
+    """The planning worker's first job: the planners imported before the first plan."""
+    import autopilot.behaviors.trajectory
+    import autopilot.steps  # noqa: F401
+
+
 def next_tick_due(due_s: float, now_s: float, period_s: float, *, estimate: bool,
                   lockstep: bool) -> float:
     """When the control tick after the one at ``now_s`` is due (at the latest; an estimate
@@ -264,6 +271,10 @@ class Runtime:
         self._group: asyncio.TaskGroup | None = None
         self._detect_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="detect",
                                                initializer=lower_this_thread)
+        #: plans goto, orbit and survey paths in a worker process in real time (the vehicle
+        #: holds meanwhile; a process, so that no plan holds the event loop's interpreter);
+        #: in lockstep a step plans at once (the same plan at the same simulated moment)
+        self._planner: ProcessPoolExecutor | None = None
         self._step_photo_camera = [step_kind(step.name).photo_camera(step.params, cfg)
                                    for step in plan.steps]
         #: the mission's steps, then the goals run so far (a goal's index is its place here)
@@ -357,7 +368,9 @@ class Runtime:
         if callable(true_cameras):
             for camera in true_cameras().values():
                 self.log.write(ch.CAMERA_TRUTH, self.clock.now(), ch.camera_info_record(camera))
-        behaviors = [build_behavior(step, self.config, cameras) for step in self.plan.steps]
+        behaviors = [build_behavior(step, self.config, cameras, self._offload)
+                     for step in self.plan.steps]
+        self._start_planner()
         self._executor = MissionExecutor(behaviors)
         self.values.clear()
         try:
@@ -403,6 +416,8 @@ class Runtime:
             self.values.clear()  # the run's last values (status, battery, ...) end with it
             self.events.close()
             self._detect_pool.shutdown(wait=True, cancel_futures=True)
+            if self._planner is not None:  # (a plan still being made ends within a second)
+                self._planner.shutdown(wait=True, cancel_futures=True)
             self.photos.close()
             self.frame_logger.close()
             self.stats.frames_log_dropped = self.frame_logger.dropped
@@ -575,13 +590,13 @@ class Runtime:
         self._step, self._phase = out.step, out.phase
         self.step_progress = out.progress
         if out.plan is not None:
-            self.log.write(ch.PLANNED_PATH, now, ch.clean(dict(out.plan, time_s=now)))
+            self.log.write(ch.PLANNED_PATH, now, dict(out.plan, time_s=now))
             points = out.plan.get("points_ned_m")
-            points = [] if points is None else list(points)
+            points = np.zeros((0, 3)) if points is None else \
+                np.asarray(points, dtype=float).reshape(-1, 3)
             every = max(1, len(points) // 400)
             self.planned_path = (self.planned_path[0] + 1,
-                                 [[round(float(p[0]), 2), round(float(p[1]), 2)]
-                                  for p in points[::every]])
+                                 np.round(points[::every, :2], 2).tolist())
         self.photos.want(out.photo_soon)
         for index, photo in out.photos:
             self.photos.request(index, self._steps[index].name, photo)
@@ -649,7 +664,7 @@ class Runtime:
     def _start_goal(self, goal: Goal, inputs: BehaviorInputs) -> MissionOutput:
         now = self.clock.now()
         kind = step_kind(goal.step.name)
-        behavior = build_behavior(goal.step, self.config, self.vehicle.cameras)
+        behavior = build_behavior(goal.step, self.config, self.vehicle.cameras, self._offload)
         specs = kind.pipelines(goal.step.params, self.config)
         for spec in specs:
             if spec.key not in self.pipelines:
@@ -1354,6 +1369,37 @@ class Runtime:
         if self._silence_held:
             with contextlib.suppress(VehicleError, TimeoutError):
                 await self.clock.wait_for(self._perform(VehicleRequest(RequestKind.HOLD)), 2.0)
+
+    @property
+    def _offload(self):
+        if self.clock.lockstep:
+            return None
+        return self._plan_off_loop
+
+    def _plan_off_loop(self, job) -> Future:
+        if self._planner is None:  # (started with the first plan, or when the run starts)
+            self._planner = ProcessPoolExecutor(
+                max_workers=1, mp_context=multiprocessing.get_context("spawn"),
+                initializer=lower_this_thread)
+        return self._planner.submit(job)
+
+    def _start_planner(self) -> None:
+        """In real time, a mission that may plan paths (its steps, or goals) starts its
+        planning worker with the run (a process takes a second or two to start)."""
+        if self.clock.lockstep:
+            return
+        if self.goals is not None or any(step_kind(s.name).reach is not None
+                                          for s in self.plan.steps):
+            self._plan_off_loop(_warm_planner)
+
+    def goal_site(self) -> BehaviorInputs | None:
+        """Where the vehicle is now, for checking a goal's reach before it is accepted (None:
+        no telemetry yet)."""
+        if self._state is None:
+            return None
+        return BehaviorInputs(now_s=self.clock.now(), state=self._state,
+                              home_ned_m=self.vehicle.home_ned_m,
+                              global_origin=self.vehicle.global_origin)
 
     def _inputs(self, state: VehicleState) -> BehaviorInputs:
         """What the behaviours see now: the vehicle, and the running step's percepts (its

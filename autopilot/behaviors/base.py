@@ -108,7 +108,8 @@ class BehaviorOutput:
     photos: tuple[PhotoRequest, ...] = ()
     #: how far the step has got (0..1; NaN: it does not say), for status and goal feedback
     progress: float = float("nan")
-    #: the step's plan, once, when it has made one (logged on /planning/path)
+    #: the step's plan, once, when it has made one (logged on /planning/path as it is: numbers,
+    #: lists and numpy arrays, NaN logged as null)
     plan: dict | None = None
     #: a photo will be asked for within a moment (a camera that renders on demand — the
     #: simulator's — is kept running only then)

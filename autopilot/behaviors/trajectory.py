@@ -21,8 +21,12 @@ WGS-84 latitude and longitude, with the altitude above home.
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import math
-from dataclasses import dataclass
+from collections.abc import Callable
+from concurrent.futures import Future
+from dataclasses import dataclass, field
 from typing import Annotated, Literal
 
 import numpy as np
@@ -63,6 +67,22 @@ _ROVER_LATLON = "latitude/longitude are absolute: frame rover does not apply to 
 
 class PlanError(ValueError):
     """A step cannot be planned as asked (the frame unknown, the polygon empty, …)."""
+
+
+class LimitError(PlanError):
+    """A step beyond a limit (its path too long, too many photos, outside the geofence):
+    ``key`` names the parameter that puts it there."""
+
+    def __init__(self, key: str, message: str) -> None:
+        super().__init__(message)
+        self.key = key
+
+    def __reduce__(self):  # (raised in a planning worker process, re-raised here)
+        return type(self), (self.key, str(self))
+
+
+#: runs a planning job off the control loop (a worker process): the job → its future
+Offload = Callable[[Callable[[], object]], Future]
 
 
 def _finite(values, name: str):
@@ -163,6 +183,188 @@ class TrajectorySettings:
     #: commanding velocity, no feed-forward)
     tracker: str = "ours"
     pid: tuple[float, float, float] = (1.5, 0.0, 0.1)
+    bounds: PlanBounds = field(default_factory=lambda: PlanBounds())
+
+
+@dataclass(frozen=True, slots=True)
+class PlanBounds:
+    """What one step may plan: checked before it is planned (and a goal before it is
+    accepted). Heights and distances are from home; None: that bound is off."""
+
+    max_path_m: float = 10_000.0  # control.trajectory.max_path_m
+    max_photos: int = 2000  # control.trajectory.max_photos
+    max_distance_m: float | None = None  # failsafe.geofence.max_distance_m (horizontal)
+    max_altitude_m: float | None = None  # failsafe.geofence.max_altitude_m
+    min_altitude_m: float | None = None  # failsafe.geofence.min_altitude_m
+    polygon_ne_m: tuple[tuple[float, float], ...] | None = None  # failsafe.geofence.polygon_m
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Reach:
+    """Where a step would fly, worked out before planning it: the points that bound it (local
+    NED; None: its frame cannot be resolved yet), the keys that put them there, the length of
+    its path (the way in included when the start is known) and its photos."""
+
+    points_ned_m: np.ndarray | None
+    place_key: str  # e.g. "center_m" (what puts the points where they are)
+    altitude_key: str  # e.g. "altitude_m"
+    path_m: float
+    path_key: str  # e.g. "laps" (what makes the path long)
+    photos: int = 0
+    photos_key: str = "images"
+
+
+def check_reach(reach: Reach, bounds: PlanBounds, home_ned_m: np.ndarray | None) -> None:
+    """Raise :class:`LimitError` naming the key and the limit when ``reach`` is beyond
+    ``bounds`` (the geofence's limits are from ``home_ned_m``; unknown: the local origin)."""
+    _check_fence(reach, bounds, home_ned_m)
+    if reach.path_m > bounds.max_path_m:
+        raise LimitError(reach.path_key, f"the path would be {reach.path_m:,.0f} m long, more "
+                         f"than control.trajectory.max_path_m ({bounds.max_path_m:g})")
+    if reach.photos > bounds.max_photos:
+        raise LimitError(reach.photos_key, f"{reach.photos:,} photos planned, more than "
+                         f"control.trajectory.max_photos ({bounds.max_photos})")
+
+
+def _check_fence(reach: Reach, bounds: PlanBounds, home_ned_m: np.ndarray | None) -> None:
+    pts = reach.points_ned_m
+    if pts is None or not len(pts):
+        return
+    home = np.zeros(3) if home_ned_m is None else np.asarray(home_ned_m, dtype=float)
+    rel = np.asarray(pts, dtype=float).reshape(-1, 3) - home
+    far = float(np.max(np.hypot(rel[:, 0], rel[:, 1])))
+    if bounds.max_distance_m and far > bounds.max_distance_m * 1.0001:
+        raise LimitError(reach.place_key, f"it would fly {far:,.1f} m from home, beyond "
+                         f"failsafe.geofence.max_distance_m ({bounds.max_distance_m:g})")
+    high, low = float(np.max(-rel[:, 2])), float(np.min(-rel[:, 2]))
+    if bounds.max_altitude_m and high > bounds.max_altitude_m * 1.0001:
+        raise LimitError(reach.altitude_key, f"it would fly {high:.1f} m above home, above "
+                         f"failsafe.geofence.max_altitude_m ({bounds.max_altitude_m:g})")
+    if bounds.min_altitude_m is not None and low < bounds.min_altitude_m - 1e-6:
+        where = "below the ground" if low < 0 else "too near the ground"
+        raise LimitError(reach.altitude_key, f"it would fly {low:.1f} m above home, {where}: "
+                         f"failsafe.geofence.min_altitude_m is {bounds.min_altitude_m:g}")
+    if bounds.polygon_ne_m:
+        from shapely import contains_xy
+
+        fence = Polygon(bounds.polygon_ne_m)
+        inside = contains_xy(fence.buffer(1e-6), pts[:, 0], pts[:, 1])
+        if not np.all(inside):
+            n, e = pts[int(np.argmin(inside))][:2]
+            raise LimitError(reach.place_key, f"it would fly outside failsafe.geofence."
+                             f"polygon_m (at {n:.1f}, {e:.1f} m)")
+
+
+def _from_here(bounds: PlanBounds, start_ned: np.ndarray, home_ned_m: np.ndarray | None
+               ) -> PlanBounds:
+    """``bounds`` for a planned path that starts where the vehicle is: the way from there
+    may pass where the vehicle already is (lower than the floor, or further out), never
+    further beyond."""
+    home = np.zeros(3) if home_ned_m is None else np.asarray(home_ned_m, dtype=float)
+    rel = np.asarray(start_ned, dtype=float) - home
+    far, up = float(np.hypot(rel[0], rel[1])) + 0.01, float(-rel[2])
+    polygon = bounds.polygon_ne_m
+    if polygon:
+        from shapely.geometry import Point
+
+        if not Polygon(polygon).buffer(1e-6).covers(Point(float(start_ned[0]),
+                                                          float(start_ned[1]))):
+            polygon = None  # (outside it already: the way back in crosses it)
+    return dataclasses.replace(
+        bounds, polygon_ne_m=polygon,
+        max_distance_m=bounds.max_distance_m and max(bounds.max_distance_m, far),
+        max_altitude_m=bounds.max_altitude_m and max(bounds.max_altitude_m, up + 0.01),
+        min_altitude_m=None if bounds.min_altitude_m is None
+        else min(bounds.min_altitude_m, up - 0.01))
+
+
+def _transit_m(inputs: BehaviorInputs | None, points: np.ndarray | None) -> float:
+    """From where the vehicle is to the nearest of ``points`` (0: either unknown)."""
+    if inputs is None or points is None or not len(points):
+        return 0.0
+    here = np.asarray(inputs.state.position_ned_m, dtype=float)
+    if not np.all(np.isfinite(here)):
+        return 0.0
+    return float(np.min(np.linalg.norm(np.asarray(points) - here, axis=1)))
+
+
+def _resolvable(inputs: BehaviorInputs | None, frame: str, latlon: bool) -> bool:
+    """Whether the step's positions can be put in the local frame now."""
+    if inputs is None:
+        return False
+    try:
+        if latlon:
+            _latlon_ne(0.0, 0.0, inputs)
+        else:
+            _frame_offset(frame, inputs)
+    except PlanError:
+        return False
+    return True
+
+
+def goto_reach(params: GotoParams, inputs: BehaviorInputs | None) -> Reach:
+    key = "latlon" if params.latlon is not None else "position_m"
+    if not _resolvable(inputs, params.frame, params.latlon is not None):
+        return Reach(None, key, key, 0.0, key)
+    target = resolve_point(inputs, params.frame, params.position_m, params.latlon)
+    return Reach(target[None, :], key, key, _transit_m(inputs, target[None, :]), key)
+
+
+def orbit_reach(params: OrbitParams, inputs: BehaviorInputs | None) -> Reach:
+    key = "center_latlon" if params.center_latlon is not None else "center_m"
+    path = 2.0 * math.pi * params.radius_m * params.laps
+    if not _resolvable(inputs, params.frame, params.center_latlon is not None):
+        return Reach(None, key, "altitude_m", path, "laps", params.images)
+    centre = resolve_ne(inputs, params.frame, params.center_m, params.center_latlon)
+    down = resolve_down(inputs, params.frame, params.altitude_m, params.center_latlon is not None)
+    angle = np.linspace(0.0, 2.0 * math.pi, 72, endpoint=False)
+    ring = np.column_stack([centre[0] + params.radius_m * np.cos(angle),
+                            centre[1] + params.radius_m * np.sin(angle),
+                            np.full(len(angle), down)])
+    return Reach(ring, key, "altitude_m", path + _transit_m(inputs, ring), "laps",
+                 params.images)
+
+
+def survey_reach(params: SurveyParams, inputs: BehaviorInputs | None, spacing_m: float,
+                 turnaround_m: float) -> Reach:
+    """The lines' length (the area over the spacing, each line flown ``turnaround_m`` beyond
+    both ends, the turns between them) and the photos along them."""
+    key = "polygon_latlon" if params.polygon_latlon is not None else "polygon_m"
+    latlon = params.polygon_latlon is not None
+    if latlon:  # (its size, not its place: metres from its first corner)
+        lat0, lon0 = params.polygon_latlon[0]
+        k = math.pi / 180.0 * 6_371_000.0
+        ring = [((lat - lat0) * k, (lon - lon0) * k * math.cos(math.radians(lat0)))
+                for lat, lon in params.polygon_latlon]
+        area = Polygon(ring)
+    else:
+        area = Polygon(params.polygon_m, params.holes_m)
+    rect = area.minimum_rotated_rectangle
+    if rect.geom_type != "Polygon":  # (a degenerate outline: a line or a point)
+        width = 0.0
+    elif params.angle_deg is None:  # the planner's fewest lines: across the narrowest width
+        corners = np.array(rect.exterior.coords, dtype=float)
+        width = float(np.min(np.linalg.norm(np.diff(corners[:3], axis=0), axis=1)))
+    else:
+        a = math.radians(params.angle_deg)
+        corners = np.array(area.exterior.coords, dtype=float)
+        across = corners @ np.array([-math.sin(a), math.cos(a)])
+        width = float(across.max() - across.min())
+    lines = math.ceil(width / spacing_m) + 1
+    photo = params.photo_spacing_m or spacing_m
+    path = area.area / spacing_m + lines * (spacing_m + 2.0 * turnaround_m)
+    photos = math.ceil(area.area / spacing_m / photo) + 2 * lines
+    path_key = "spacing_m" if params.spacing_m is not None else "polygon_m"
+    if not _resolvable(inputs, params.frame, latlon):
+        return Reach(None, key, "altitude_m", path, path_key, photos, "photo_spacing_m")
+    corners = [resolve_ne(inputs, params.frame, latlon=c) for c in params.polygon_latlon] \
+        if latlon else [resolve_ne(inputs, params.frame, c) for c in params.polygon_m]
+    outline = Polygon([tuple(c) for c in corners]).buffer(turnaround_m, join_style="mitre")
+    down = resolve_down(inputs, params.frame, params.altitude_m, latlon)
+    pts = np.array(outline.exterior.coords, dtype=float)
+    pts = np.column_stack([pts, np.full(len(pts), down)])
+    return Reach(pts, key, "altitude_m", path + _transit_m(inputs, pts), path_key, photos,
+                 "photo_spacing_m")
 
 
 # ------------------------------------------------------------------------------------------
@@ -240,18 +442,22 @@ def photo_arc_lengths(traj: Trajectory, points: np.ndarray, tolerance_m: float =
     from scipy.spatial import cKDTree
 
     positions = traj.positions
+    points = np.asarray(points, dtype=float).reshape(-1, 3)
+    if not len(points):
+        return np.zeros(0)
     tree = cKDTree(positions)
     out = []
     start = 0
-    for p in points:
-        near = np.array(sorted(i for i in tree.query_ball_point(p, tolerance_m) if i >= start),
-                        dtype=int)
-        if len(near):  # the first pass by it, at its closest
-            breaks = np.flatnonzero(np.diff(near) > 1)
-            run = near[:breaks[0] + 1] if len(breaks) else near
-            i = int(run[np.argmin(np.linalg.norm(positions[run] - p, axis=1))])
+    for p, ball in zip(points, tree.query_ball_point(points, tolerance_m), strict=True):
+        near = sorted(i for i in ball if i >= start)
+        if near:  # the first pass by it, at its closest
+            end = 1
+            while end < len(near) and near[end] == near[end - 1] + 1:
+                end += 1
+            run = near[:end]
+            i = run[int(np.argmin(np.sum((positions[run] - p) ** 2, axis=1)))]
         else:
-            i = start + int(np.argmin(np.linalg.norm(positions[start:] - p, axis=1)))
+            i = start + int(np.argmin(np.sum((positions[start:] - p) ** 2, axis=1)))
         out.append(float(traj.s_m[i]))
         start = i
     return np.array(out)
@@ -276,9 +482,16 @@ class FollowTrajectory(Behavior):
     name = "trajectory"
     #: the photos' camera (None: a step that takes none)
     photo_camera: str | None = None
+    #: what planning sets on the behaviour besides the plan (brought back from a worker)
+    _plan_state: tuple[str, ...] = ()
 
-    def __init__(self, settings: TrajectorySettings) -> None:
+    def __init__(self, settings: TrajectorySettings, offload: Offload | None = None) -> None:
         self.settings = settings
+        #: plans off the control loop (real time); None: at once, on the caller's thread
+        #: (lockstep: the same plan at the same simulated moment, every run)
+        self._offload = offload
+        self._pending: Future | None = None
+        self._hold: Setpoint | None = None
         self.trajectory: Trajectory | None = None
         self.plan_: PathPlan | None = None
         self._tau = 0.0
@@ -297,6 +510,10 @@ class FollowTrajectory(Behavior):
         """(the path and its photo points, the heading law, the cruise speed)."""
         raise NotImplementedError
 
+    def reach(self, inputs: BehaviorInputs) -> Reach:
+        """Where it would fly, before planning (checked against the bounds first)."""
+        raise NotImplementedError
+
     def phase_at(self, s_m: float) -> str:
         return "flying"
 
@@ -306,43 +523,102 @@ class FollowTrajectory(Behavior):
         s = inputs.state
         if not s.in_air:
             return BehaviorOutput(Status.FAILED, reason="not flying: take off first")
-        try:
-            plan, yaw_law, speed = self.plan(inputs)
-        except ValueError as exc:  # PlanError, or geometry that cannot be flown
-            return BehaviorOutput(Status.FAILED, reason=f"cannot plan: {exc}")
-        start = np.asarray(s.position_ned_m, dtype=float)
+        if self._offload is None:
+            try:
+                prepared = self._prepare(inputs)
+            except ValueError as exc:  # PlanError, or geometry that cannot be flown
+                return BehaviorOutput(Status.FAILED, reason=f"cannot plan: {exc}")
+            return self._begin(prepared, inputs)
+        # planned by a worker: the vehicle holds where it is meanwhile (the control loop
+        # never waits for a plan, however long)
+        self._hold = Setpoint.position_velocity(
+            np.asarray(s.position_ned_m, dtype=float), np.zeros(3), yaw_rad=s.yaw_rad,
+            time_s=inputs.now_s)
+        # (a worker process gets a copy of the behaviour and what planning reads of inputs)
+        self._pending = self._offload(functools.partial(
+            self._prepare, dataclasses.replace(inputs, percept=None, percepts=())))
+        return BehaviorOutput(Status.RUNNING, setpoint=self._hold,
+                              requests=(VehicleRequest(RequestKind.START_OFFBOARD),),
+                              phase="planning", progress=0.0)
+
+    def _prepare(self, inputs: BehaviorInputs) -> tuple:
+        """The bounds checked, then the plan, its trajectory, its photos' places and its record
+        (all of the planning's work: a worker may run it)."""
         st = self.settings
+        check_reach(self.reach(inputs), st.bounds, inputs.home_ned_m)
+        plan, yaw_law, speed = self.plan(inputs)
+        # ... and the plan itself (the way in and the turns as planned)
+        pts = np.asarray(plan.points, dtype=float)
+        length = float(np.sum(np.linalg.norm(np.diff(pts, axis=0), axis=1)))
+        reach = self.reach(inputs)
+        check_reach(Reach(np.vstack([pts[::max(len(pts) // 5000, 1)], pts[-1:]]),
+                          reach.place_key, reach.altitude_key, length, reach.path_key,
+                          len(plan.photo_points), reach.photos_key),
+                    _from_here(st.bounds, pts[0], inputs.home_ned_m), inputs.home_ned_m)
+        state = {name: getattr(self, name) for name in self._plan_state}
+        if float(np.max(np.linalg.norm(pts - pts[0], axis=1))) < 0.01:
+            return plan, None, np.zeros(0), None, state
+        start = np.asarray(inputs.state.position_ned_m, dtype=float)
         limits = Limits(speed, st.limits.accel_m_s2, st.limits.lateral_accel_m_s2,
                         st.limits.jerk_m_s3, st.limits.climb_speed_m_s,
                         st.limits.descent_speed_m_s)
-        self.plan_ = plan
-        if float(np.max(np.linalg.norm(plan.points - plan.points[0], axis=1))) < 0.01:
-            return BehaviorOutput(Status.SUCCEEDED, reason="already there", progress=1.0)
-        path = Path(plan.points)
+        path = Path(pts)
         # turn onto the law's heading no faster than the yaw-rate limit allows at cruise
-        turn = abs(wrap_pi(s.yaw_rad - float(yaw_law(np.zeros(1), start[None, :])[0])))
+        yaw0 = inputs.state.yaw_rad
+        turn = abs(wrap_pi(yaw0 - float(yaw_law(np.zeros(1), start[None, :])[0])))
         blend_m = min(max(turn / st.yaw_rate_rad_s * speed * 1.5, 1.0), path.length_m)
-        self.trajectory = Trajectory(path, limits, blended_yaw(yaw_law, s.yaw_rad, start,
-                                                               blend_m))
-        traj = self.trajectory
-        self._photo_s = photo_arc_lengths(traj, plan.photo_points)
+        traj = Trajectory(path, limits, blended_yaw(yaw_law, yaw0, start, blend_m))
+        photo_s = photo_arc_lengths(traj, plan.photo_points)
+        return plan, traj, photo_s, self._plan_record(plan, traj, speed), state
+
+    def __getstate__(self) -> dict:
+        state = self.__dict__.copy()  # (to a worker: not its executor, nor a pending plan)
+        state.update(_offload=None, _pending=None)
+        return state
+
+    def _begin(self, prepared: tuple, inputs: BehaviorInputs) -> BehaviorOutput:
+        plan, traj, photo_s, record, state = prepared
+        for name, value in state.items():
+            setattr(self, name, value)
+        self.plan_ = plan
+        if traj is None:
+            return BehaviorOutput(Status.SUCCEEDED, reason="already there", progress=1.0)
+        self.trajectory = traj
+        self._photo_s = photo_s
         self._tau = 0.0
         self._last_tick = inputs.now_s
         self._progress_s = 0.0
-        self._progress_time = s.time_s
+        self._progress_time = inputs.state.time_s
         return BehaviorOutput(Status.RUNNING,
-                              setpoint=self._setpoint(inputs.now_s, 1.0, self.trajectory.at(0.0)),
+                              setpoint=self._setpoint(inputs.now_s, 1.0, traj.at(0.0)),
                               requests=(VehicleRequest(RequestKind.START_OFFBOARD),),
-                              phase=self.phase_at(0.0), progress=0.0,
-                              plan=self.plan_record(speed))
+                              phase=self.phase_at(0.0), progress=0.0, plan=record)
+
+    def _waiting(self, inputs: BehaviorInputs) -> BehaviorOutput:
+        """While the worker plans: hold, and begin once the plan is there."""
+        if not self._pending.done():
+            return BehaviorOutput(Status.RUNNING, setpoint=dataclasses.replace(
+                self._hold, time_s=inputs.now_s), phase="planning", progress=0.0)
+        pending, self._pending = self._pending, None
+        try:
+            prepared = pending.result()
+        except ValueError as exc:
+            return BehaviorOutput(Status.FAILED, setpoint=self._hold,
+                                  reason=f"cannot plan: {exc}")
+        return self._begin(prepared, inputs)
 
     def plan_record(self, speed: float) -> dict:
+        return self._plan_record(self.plan_, self.trajectory, speed)
+
+    def _plan_record(self, plan: PathPlan, traj: Trajectory, speed: float) -> dict:
         """The plan as the flight log keeps it (what the metrics and the report score the
-        flight against): the path every 5 cm, the photo points, the time law every 0.2 s."""
-        traj, plan = self.trajectory, self.plan_
-        every = max(round(0.2 / (traj.times_s[1] - traj.times_s[0])), 1) \
-            if len(traj.times_s) > 1 else 1
-        return {"points_ned_m": traj.path.polyline(0.05), "photo_points_ned_m": plan.photo_points,
+        flight against): the path every 5 cm (at most 20,000 points: a longer path less
+        densely), the photo points, the time law every 0.2 s."""
+        every = max(round(0.2 / (traj.times_s[1] - traj.times_s[0])), 1,
+                    len(traj.times_s) // 5000) if len(traj.times_s) > 1 else 1
+        step_m = max(0.05, traj.length_m / 20_000)
+        return {"points_ned_m": traj.path.polyline(step_m),
+                "photo_points_ned_m": plan.photo_points,
                 "look_at_ned_m": plan.look_at_ned_m,
                 "lines": [[list(a), list(b)] for a, b in plan.lines],
                 "angle_deg": plan.angle_deg, "speed_m_s": speed,
@@ -355,6 +631,8 @@ class FollowTrajectory(Behavior):
         return {}
 
     def update(self, inputs: BehaviorInputs) -> BehaviorOutput:
+        if self._pending is not None:
+            return self._waiting(inputs)
         traj, st = self.trajectory, self.settings
         now = inputs.now_s
         dt = min(max(now - self._last_tick, 0.0), 0.5)
@@ -457,9 +735,13 @@ class Goto(FollowTrajectory):
 
     name = "goto"
 
-    def __init__(self, params: GotoParams, settings: TrajectorySettings) -> None:
-        super().__init__(settings)
+    def __init__(self, params: GotoParams, settings: TrajectorySettings,
+                 offload: Offload | None = None) -> None:
+        super().__init__(settings, offload)
         self.params = params
+
+    def reach(self, inputs: BehaviorInputs) -> Reach:
+        return goto_reach(self.params, inputs)
 
     def plan(self, inputs: BehaviorInputs) -> tuple[PathPlan, YawLaw, float]:
         p = self.params
@@ -478,12 +760,17 @@ class Orbit(FollowTrajectory):
     get-images: ω = v/r, heading = tangent + π/2)."""
 
     name = "orbit"
+    _plan_state = ("_circle",)
 
-    def __init__(self, params: OrbitParams, settings: TrajectorySettings, camera: str) -> None:
-        super().__init__(settings)
+    def __init__(self, params: OrbitParams, settings: TrajectorySettings, camera: str,
+                 offload: Offload | None = None) -> None:
+        super().__init__(settings, offload)
         self.params = params
         self.photo_camera = camera if params.images > 0 else None
         self._circle = (0.0, 0.0)
+
+    def reach(self, inputs: BehaviorInputs) -> Reach:
+        return orbit_reach(self.params, inputs)
 
     def plan(self, inputs: BehaviorInputs) -> tuple[PathPlan, YawLaw, float]:
         p = self.params
@@ -520,15 +807,25 @@ class Survey(FollowTrajectory):
     (seed 004's area coverage, with its B-spline smoothing)."""
 
     name = "survey"
+    _plan_state = ("_lines_s", "_area")
 
     def __init__(self, params: SurveyParams, settings: TrajectorySettings, camera: str,
-                 spacing_m: float) -> None:
-        super().__init__(settings)
+                 spacing_m: float, offload: Offload | None = None) -> None:
+        super().__init__(settings, offload)
         self.params = params
         self.photo_camera = camera
         self.spacing_m = spacing_m
         self._lines_s: list[tuple[float, float]] = []
         self._area: Polygon | None = None
+
+    @property
+    def turnaround_m(self) -> float:
+        p = self.params
+        return p.turnaround_m if p.turnaround_m is not None else \
+            p.speed_m_s ** 2 / (2.0 * self.settings.limits.accel_m_s2)
+
+    def reach(self, inputs: BehaviorInputs) -> Reach:
+        return survey_reach(self.params, inputs, self.spacing_m, self.turnaround_m)
 
     def plan_extra(self) -> dict:
         area = self._area
@@ -555,11 +852,9 @@ class Survey(FollowTrajectory):
         self._area = area
         down = resolve_down(inputs, p.frame, p.altitude_m, p.polygon_latlon is not None)
         start = np.asarray(inputs.state.position_ned_m, dtype=float)
-        turnaround = p.turnaround_m if p.turnaround_m is not None else \
-            p.speed_m_s ** 2 / (2.0 * self.settings.limits.accel_m_s2)
         plan = survey_plan(start, area, down, self.spacing_m,
                            p.photo_spacing_m or self.spacing_m, angle_deg=p.angle_deg,
-                           smoothing=p.smoothing, turnaround_m=turnaround)
+                           smoothing=p.smoothing, turnaround_m=self.turnaround_m)
         # one heading for the whole survey (the footprints stay aligned with the lines): the
         # line direction nearer the present heading
         line_yaw = math.radians(plan.angle_deg)
@@ -569,10 +864,13 @@ class Survey(FollowTrajectory):
         seg = np.linalg.norm(np.diff(traj_pts, axis=0), axis=1)
         s = np.concatenate(([0.0], np.cumsum(seg)))
         self._lines_s = []
-        for a, b in plan.lines:
-            ia = int(np.argmin(np.linalg.norm(traj_pts[:, :2] - a, axis=1)))
-            ib = int(np.argmin(np.linalg.norm(traj_pts[:, :2] - b, axis=1)))
-            self._lines_s.append((float(s[ia]), float(s[ib])))
+        if plan.lines:
+            from scipy.spatial import cKDTree
+
+            ends = np.array([[a, b] for a, b in plan.lines], dtype=float).reshape(-1, 2)
+            _, nearest = cKDTree(traj_pts[:, :2]).query(ends)
+            self._lines_s = [(float(s[ia]), float(s[ib]))
+                             for ia, ib in nearest.reshape(-1, 2).tolist()]
         return plan, lambda ss, pts: np.full(len(ss), line_yaw), p.speed_m_s
 
     def phase_at(self, s_m: float) -> str:

@@ -3,8 +3,8 @@
 in the field).
 
 =====================================  =====================================================
-``GET /``                              the page (``/?token=…`` once, off loopback: it sets
-                                       a same-site cookie, then the page needs no token)
+``GET /``                              the page (off loopback, first a sign-in page: the
+                                       token typed in becomes a same-site cookie)
 ``GET /video/{camera}.mjpg``           live MJPEG of a camera with the autopilot's overlays
                                        (``?fps=`` at most the configured rate;
                                        ``?overlay=0`` for the bare image)

@@ -101,6 +101,9 @@ class SimConsoleSource:
                          "that talks MAVLink to it (autopilot run --driver mavsdk, "
                          "QGroundControl, …)")
 
+    def goal_site(self):
+        return None  # (no goal is taken: nothing to check a goal's reach against)
+
     def submit_goal(self, step):
         raise GoalError(409, "the simulator takes no goals: send them to 'autopilot run "
                         "--console/--api'")

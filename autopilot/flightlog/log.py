@@ -27,6 +27,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import IO
 
+import numpy as np
 import orjson
 from mcap.writer import Writer
 
@@ -38,9 +39,15 @@ log = logging.getLogger(__name__)
 CHUNK_SIZE_B = 64 * 1024
 
 
+def _plain(value):
+    if isinstance(value, np.ndarray):  # (a strided view, which orjson does not take as is)
+        return np.ascontiguousarray(value)
+    raise TypeError(f"{type(value).__name__} is not JSON")
+
+
 def encode(record: dict) -> bytes:
     """Strict JSON: numpy arrays and scalars as numbers, NaN and infinities as null."""
-    return orjson.dumps(record, option=orjson.OPT_SERIALIZE_NUMPY)
+    return orjson.dumps(record, default=_plain, option=orjson.OPT_SERIALIZE_NUMPY)
 
 
 #: Bytes waiting for the writer thread above which camera frames are dropped (and counted)
@@ -50,6 +57,11 @@ MAX_PENDING_B = 64 << 20
 #: (wall): woken per message, it fights the event loop for the GIL thousands of times a second.
 WAKE_B = 1 << 20
 WAKE_S = 0.25
+
+
+def _has_arrays(record: dict) -> bool:
+    return any(isinstance(v, np.ndarray) or (isinstance(v, dict) and any(
+        isinstance(w, np.ndarray) for w in v.values())) for v in record.values())
 
 
 class FlightLog:
@@ -79,11 +91,12 @@ class FlightLog:
             self._thread.start()
 
     def write(self, topic: str, time_s: float, record: dict) -> None:
-        if self._queue is not None and self._put(topic, time_s, encode(record), None):
-            if self.keep:
-                self.records[topic].append(record)
-        else:  # no file, or it failed
-            self.records[topic].append(record)
+        """Log ``record`` (plain values, or numpy arrays: a large record — a planned path —
+        is encoded from its arrays at C speed; kept in memory as read back, in plain lists)."""
+        data = encode(record)
+        if self._queue is not None and self._put(topic, time_s, data, None) and not self.keep:
+            return
+        self.records[topic].append(orjson.loads(data) if _has_arrays(record) else record)
 
     def all_records(self) -> dict[str, list[dict]]:
         """Every record of the flight, after :meth:`close`: read back from the file (as

@@ -11,9 +11,10 @@ module that registers its step kind (see :mod:`autopilot.steps`).
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import Future
 from dataclasses import dataclass
 
-from autopilot.behaviors.base import Behavior, Params
+from autopilot.behaviors.base import Behavior, BehaviorInputs, Params
 from autopilot.config import AppConfig
 from autopilot.pipeline import PipelineSpec
 from drivers.base import CameraInfo
@@ -28,6 +29,9 @@ class StepContext:
 
     config: AppConfig
     cameras: Mapping[str, CameraInfo]
+    #: runs heavy planning off the control loop (the runtime's planner thread in real time);
+    #: None: the behaviour plans at once (lockstep, tests)
+    offload: Callable[[Callable[[], object]], Future] | None = None
 
 
 def _no_pipelines(params: Params, config: AppConfig) -> tuple[PipelineSpec, ...]:
@@ -68,6 +72,10 @@ class StepKind:
     status: tuple[int, int] | None = (3, 3)
     #: the camera it takes photos with (its frames are kept while it runs), or None
     photo_camera: Callable[[Params, AppConfig], str | None] = _no_camera
+    #: where it would fly and how far, from where the vehicle is (``inputs``): raises
+    #: ValueError (a LimitError naming its key) beyond the plan bounds or the geofence; a goal
+    #: is checked so before it is accepted. None: a kind that plans no path
+    reach: Callable[[Params, AppConfig, BehaviorInputs], None] | None = None
 
 
 STEP_KINDS: dict[str, StepKind] = {}

@@ -29,14 +29,20 @@ from scipy.spatial import cKDTree
 from shapely.geometry import Polygon
 from shapely.ops import unary_union
 
+from autopilot.behaviors.base import BehaviorInputs
 from autopilot.behaviors.trajectory import (
     Goto,
     GotoParams,
     Orbit,
     OrbitParams,
+    PlanBounds,
     Survey,
     SurveyParams,
     TrajectorySettings,
+    check_reach,
+    goto_reach,
+    orbit_reach,
+    survey_reach,
 )
 from autopilot.config import AppConfig
 from autopilot.estimation.pose_history import slerp
@@ -51,9 +57,18 @@ from drivers.camera_model import pinhole
 Records = Mapping[str, Sequence[Mapping]]
 
 
+def plan_bounds(config: AppConfig) -> PlanBounds:
+    """What one goto, orbit or survey may plan: control.trajectory's max_path_m and
+    max_photos, and failsafe.geofence's distances and heights from home."""
+    t, gf = config.control.trajectory, config.failsafe.geofence
+    return PlanBounds(t.max_path_m, t.max_photos, gf.max_distance_m or None,
+                      gf.max_altitude_m or None, gf.min_altitude_m,
+                      tuple(tuple(p) for p in gf.polygon_m) if gf.polygon_m else None)
+
+
 def trajectory_settings(config: AppConfig) -> TrajectorySettings:
     t = config.control.trajectory
-    return TrajectorySettings(
+    return TrajectorySettings(bounds=plan_bounds(config),
         limits=Limits(t.max_speed_m_s, t.accel_m_s2, t.lateral_accel_m_s2, t.jerk_m_s3,
                       t.climb_speed_m_s, t.descent_speed_m_s),
         yaw_rate_rad_s=math.radians(t.yaw_rate_deg_s), rounding_m=t.rounding_m,
@@ -112,6 +127,29 @@ def _check_camera(params, config: AppConfig) -> None:
                          f"vehicle.cameras (enabled: {known})")
 
 
+def _turnaround_m(params: SurveyParams, config: AppConfig) -> float:
+    return params.turnaround_m if params.turnaround_m is not None else \
+        params.speed_m_s ** 2 / (2.0 * config.control.trajectory.accel_m_s2)
+
+
+def _goto_reach(params: GotoParams, config: AppConfig, inputs: BehaviorInputs | None) -> None:
+    check_reach(goto_reach(params, inputs), plan_bounds(config),
+                None if inputs is None else inputs.home_ned_m)
+
+
+def _orbit_reach(params: OrbitParams, config: AppConfig, inputs: BehaviorInputs | None
+                 ) -> None:
+    check_reach(orbit_reach(params, inputs), plan_bounds(config),
+                None if inputs is None else inputs.home_ned_m)
+
+
+def _survey_reach(params: SurveyParams, config: AppConfig, inputs: BehaviorInputs | None
+                  ) -> None:
+    check_reach(survey_reach(params, inputs, survey_spacing_m(params, config),
+                             _turnaround_m(params, config)),
+                plan_bounds(config), None if inputs is None else inputs.home_ned_m)
+
+
 def _check_goto(params: GotoParams, config: AppConfig) -> None:
     _check_speed(params.speed_m_s, config)
     _check_frame(params.frame)
@@ -130,6 +168,7 @@ def _check_orbit(params: OrbitParams, config: AppConfig) -> None:
             f"{need:.2f} m/s² towards the centre, more than control.trajectory."
             f"lateral_accel_m_s2 ({lateral:g}): at most "
             f"{math.sqrt(lateral * params.radius_m):.2f} m/s on this radius")
+    _orbit_reach(params, config, None)  # its laps and photos (where: when it flies)
     yaw_rate = config.control.trajectory.yaw_rate_deg_s
     turning = math.degrees(params.speed_m_s / params.radius_m)
     if turning > yaw_rate * 1.001:
@@ -155,6 +194,7 @@ def _check_survey(params: SurveyParams, config: AppConfig) -> None:
         raise ValueError(f"photo_spacing_m {photo:g} is longer than the camera sees along the "
                          f"lines from {params.altitude_m:g} m ({along:.1f} m): the photos "
                          "would leave gaps; lower photo_spacing_m (or spacing_m) or fly higher")
+    _survey_reach(params, config, None)  # its lines and photos (where: when it flies)
 
 
 # ------------------------------------------------------------------------------------------
@@ -420,16 +460,17 @@ def goto_metrics(log: Records, intervals: list[tuple[float, float]], step: Mappi
 
 
 def _goto(params: GotoParams, ctx: StepContext) -> Goto:
-    return Goto(params, trajectory_settings(ctx.config))
+    return Goto(params, trajectory_settings(ctx.config), ctx.offload)
 
 
 def _orbit(params: OrbitParams, ctx: StepContext) -> Orbit:
-    return Orbit(params, trajectory_settings(ctx.config), _photo_camera(params, ctx.config))
+    return Orbit(params, trajectory_settings(ctx.config), _photo_camera(params, ctx.config),
+                 ctx.offload)
 
 
 def _survey(params: SurveyParams, ctx: StepContext) -> Survey:
     return Survey(params, trajectory_settings(ctx.config), _photo_camera(params, ctx.config),
-                  survey_spacing_m(params, ctx.config))
+                  survey_spacing_m(params, ctx.config), ctx.offload)
 
 
 def _survey_info(params: SurveyParams, config: AppConfig) -> dict:
@@ -438,12 +479,12 @@ def _survey_info(params: SurveyParams, config: AppConfig) -> dict:
 
 
 register(StepKind(
-    "goto", GotoParams, _goto, check=_check_goto, metrics=goto_metrics,
+    "goto", GotoParams, _goto, check=_check_goto, metrics=goto_metrics, reach=_goto_reach,
     pipelines=_frame_pipelines,
     report=("trajectory", "path"), status=(4, 5),
     description="fly a straight line to position_m (or latlon) at speed_m_s"))
 register(StepKind(
-    "orbit", OrbitParams, _orbit, check=_check_orbit, metrics=orbit_metrics,
+    "orbit", OrbitParams, _orbit, check=_check_orbit, metrics=orbit_metrics, reach=_orbit_reach,
     pipelines=_frame_pipelines,
     report=("trajectory", "path"), status=(6, 7),
     photo_camera=lambda params, config: _photo_camera(params, config) if params.images
@@ -451,6 +492,7 @@ register(StepKind(
     description="circle center_m at radius_m facing it, taking `images` photos"))
 register(StepKind(
     "survey", SurveyParams, _survey, check=_check_survey, metrics=survey_metrics,
+    reach=_survey_reach,
     pipelines=_frame_pipelines,
     report=("trajectory", "path"), status=(10, 11), photo_camera=_photo_camera,
     plan_info=_survey_info,

@@ -117,6 +117,23 @@ def test_goal_api_flow(tmp_path):
         code, body = c.call("POST", "/api/goals", b'{"hold": {"duration_s": 1, "x": "' +
                             b"a" * (100 << 10) + b'"}}')
         assert code == 413, body
+        # goals beyond the plan bounds or the default geofence (issue 31): 422 naming the key
+        # and the limit, before anything is planned
+        for goal, key, limit in [
+                ({"orbit": {"center_m": [8600, 0], "radius_m": 500, "laps": 100,
+                            "altitude_m": 8}}, "orbit.laps", "max_path_m"),
+                ({"survey": {"polygon_m": [[0, 0], [200, 0], [200, 200], [0, 200]],
+                             "spacing_m": 0.25, "altitude_m": 10}}, "survey.spacing_m",
+                 "max_path_m"),
+                ({"goto": {"position_m": [10_000, 0, 8]}}, "goto.position_m",
+                 "max_distance_m"),
+                ({"goto": {"position_m": [5, 0, -50]}}, "goto.position_m", "min_altitude_m"),
+                ({"orbit": {"center_m": [6, 0], "altitude_m": 300}}, "orbit.altitude_m",
+                 "max_altitude_m")]:
+            code, body = c.call("POST", "/api/goals", goal)
+            assert code == 422, (goal, body)
+            assert body["problems"][0]["key"] == key, body
+            assert limit in body["error"], body
         code, _ = c.call("POST", "/api/goals", b"orbit", content_type="text/plain")
         assert code == 415
         code, _ = c.call("POST", "/api/goals", {"orbit": {"center_m": [6, 0]}},

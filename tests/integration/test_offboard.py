@@ -143,9 +143,10 @@ scenario: {ball: null}
     assert statuses[:6] == [1, 2, 4, 5, 4, 5]
 
 
-def test_a_goto_beyond_the_geofence_is_stopped_at_it_and_lands(tmp_path):
-    """failsafe.geofence (the autopilot's own, on every setpoint): a goto 30 m out with a fence
-    at 12 m sends nothing past it; the mission's fallback holds and lands inside a margin."""
+def test_a_goto_beyond_the_geofence_is_refused_when_it_starts_and_lands(tmp_path):
+    """failsafe.geofence: a goto 30 m out with a fence at 12 m is refused when the step starts
+    (where it goes is known then), naming the limit; nothing is flown towards it; the
+    mission's fallback lands."""
     mission = tmp_path / "far.yaml"
     mission.write_text("name: far\ndescription: too far\nsteps:\n"
                        "  - takeoff: {altitude_m: 3.0}\n"
@@ -153,16 +154,25 @@ def test_a_goto_beyond_the_geofence_is_stopped_at_it_and_lands(tmp_path):
                        "  - land: {}\nfallback: land\n")
     plan = load_mission(str(mission), ["failsafe.geofence.max_distance_m=12"])
     summary = asyncio.run(fly(plan, tmp_path / "run"))
-    assert summary["status"] == "aborted"
+    assert summary["status"] == "failed"
+    assert "max_distance_m (12)" in summary["reason"]
+    records = read_log(tmp_path / "run" / "flight.mcap")
+    truth = records[ch.GROUND_TRUTH]
+    assert max(math.hypot(*r["vehicle_position_ned_m"][:2]) for r in truth) < 1.0
+    assert truth[-1]["vehicle_position_ned_m"][2] > -0.3  # landed
+    assert ch.PLANNED_PATH not in records or not records[ch.PLANNED_PATH]
+
+
+def test_following_out_of_the_geofence_is_stopped_at_it_and_lands(tmp_path):
+    """The fence on every setpoint: following the ball with the fence 1 m from home, no
+    position target is sent past it, a velocity carrying the vehicle out stops it; the mission's
+    fallback holds and lands inside a margin."""
+    plan = load_mission("follow_ball", ["failsafe.geofence.max_distance_m=1.0"])
+    summary = asyncio.run(fly(plan, tmp_path / "run"))
+    assert summary["status"] == "aborted", summary["reason"]
     assert "geofence" in summary["reason"]
     records = read_log(tmp_path / "run" / "flight.mcap")
     truth = records[ch.GROUND_TRUTH]
     furthest = max(math.hypot(*r["vehicle_position_ned_m"][:2]) for r in truth)
-    assert furthest < 12.0 + 1.5  # braking from 3 m/s at the fence
-    last = truth[-1]["vehicle_position_ned_m"]
-    assert last[2] > -0.3  # landed
-    targets = [r["position_ned_m"][:2] for r in records[ch.SETPOINTS]
-               if r.get("position_ned_m") is not None]
-    targets = [t for t in targets if all(v is not None and math.isfinite(v) for v in t)]
-    assert targets
-    assert max(math.hypot(*t) for t in targets) <= 12.0 + 1e-6  # none sent past the fence
+    assert furthest < 1.0 + 1.0  # braking at the fence
+    assert truth[-1]["vehicle_position_ned_m"][2] > -0.3  # landed

@@ -89,3 +89,37 @@ def test_idle_and_slow_connections_are_capped_and_timed_out():
     assert out["slow_closed_s"] is not None  # before its headers were complete
     assert out["ws"][0]["status_code"] == 3
     assert out["ws"][1]["status_code"] == 3
+
+
+def _from_many_addresses(port: int) -> dict:
+    """Idle sockets from 12 addresses (127.0.1.x, each within its own cap) fill the server;
+    a client that speaks is still answered, the longest-silent socket making room."""
+    idle = [socket.create_connection(("127.0.0.1", port), timeout=5,
+                                     source_address=(f"127.0.1.{1 + i % 12}", 0))
+            for i in range(2 * LIMITS.max_connections)]
+    time.sleep(0.3)
+    answered = [_status(port) for _ in range(5)]
+    closed = [_closed(s, 0.05) for s in idle]
+    for s in idle:
+        s.close()
+    return {"answered": answered, "closed": closed}
+
+
+def test_idle_sockets_from_many_addresses_do_not_lock_out_a_client_that_speaks():
+    runtime = SimpleNamespace(api_status=lambda: {"status_code": 3}, goals=None)
+
+    async def main():
+        server = ApiServer(runtime, "127.0.0.1", 0, None, limits=LIMITS)
+        task = asyncio.ensure_future(server.run())
+        await server.started.wait()
+        try:
+            return await asyncio.to_thread(_from_many_addresses, server.bound_port)
+        finally:
+            await server.stop(graceful=False)
+            task.cancel()
+
+    out = asyncio.run(main())
+    assert out["answered"] == [200] * 5
+    # the oldest made room: the first ones are gone, at most the cap's worth are open
+    assert out["closed"][0]
+    assert sum(not c for c in out["closed"]) <= LIMITS.max_connections
