@@ -37,6 +37,7 @@ import dataclasses
 import logging
 import math
 import multiprocessing
+import sys
 import time
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
@@ -169,6 +170,24 @@ class RunStats:
     loop_lag_p99_ms: float | None = None
     loop_lag_max_ms: float | None = None
     loop_stalls: int = 0  # the loop silent for runtime.loop_stall_s or longer
+
+
+@contextlib.contextmanager
+def _program_hidden():
+    """While a worker process is started: the program that embeds the autopilot out of its
+    sight. A spawned worker otherwise runs the main script again to find its functions — a
+    script without ``if __name__ == "__main__":`` would start a second flight in it, and one
+    read from standard input cannot be found at all. The planner's jobs need only the
+    autopilot's own modules."""
+    import types
+
+    main = sys.modules.get("__main__")
+    sys.modules["__main__"] = types.ModuleType("__main__")
+    try:
+        yield
+    finally:
+        if main is not None:
+            sys.modules["__main__"] = main
 
 
 def _warm_planner() -> None:
@@ -1381,6 +1400,8 @@ class Runtime:
             self._planner = ProcessPoolExecutor(
                 max_workers=1, mp_context=multiprocessing.get_context("spawn"),
                 initializer=lower_this_thread)
+            with _program_hidden():  # (its worker starts with this first job)
+                return self._planner.submit(job)
         return self._planner.submit(job)
 
     def _start_planner(self) -> None:

@@ -236,3 +236,34 @@ def test_a_path_from_below_the_floor_or_outside_the_fence_may_come_back():
                              _site(pos=pos))
         out = build_behavior(step, plan.config, CAMERAS).activate(_site(pos=pos))
         assert out.status is Status.RUNNING, out.reason
+
+
+_UNGUARDED = """
+import sys
+sys.path.insert(0, {root!r})
+print("top level ran", flush=True)
+from types import SimpleNamespace
+from autopilot.runtime import Runtime, _warm_planner
+holder = SimpleNamespace(_planner=None)
+print("planned", Runtime._plan_off_loop(holder, _warm_planner).result(timeout=120), flush=True)
+holder._planner.shutdown()
+"""
+
+
+@pytest.mark.parametrize("how", ["script", "stdin"])
+def test_the_planning_worker_never_runs_the_embedding_program_again(tmp_path, how):
+    """A program without ``if __name__ == "__main__":`` (or read from standard input) that
+    flies in real time: its planning worker starts without running it a second time."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    code = _UNGUARDED.format(root=str(Path(__file__).resolve().parents[2]))
+    script = tmp_path / "fly.py"
+    script.write_text(code)
+    args = [sys.executable, str(script)] if how == "script" else [sys.executable, "-"]
+    out = subprocess.run(args, input=None if how == "script" else code, text=True,
+                         capture_output=True, timeout=180, cwd=tmp_path)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.count("top level ran") == 1
+    assert "planned None" in out.stdout
