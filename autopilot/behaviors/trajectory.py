@@ -545,12 +545,12 @@ class FollowTrajectory(Behavior):
         """The bounds checked, then the plan, its trajectory, its photos' places and its record
         (all of the planning's work: a worker may run it)."""
         st = self.settings
-        check_reach(self.reach(inputs), st.bounds, inputs.home_ned_m)
+        reach = self.reach(inputs)
+        check_reach(reach, st.bounds, inputs.home_ned_m)
         plan, yaw_law, speed = self.plan(inputs)
         # ... and the plan itself (the way in and the turns as planned)
         pts = np.asarray(plan.points, dtype=float)
         length = float(np.sum(np.linalg.norm(np.diff(pts, axis=0), axis=1)))
-        reach = self.reach(inputs)
         check_reach(Reach(np.vstack([pts[::max(len(pts) // 5000, 1)], pts[-1:]]),
                           reach.place_key, reach.altitude_key, length, reach.path_key,
                           len(plan.photo_points), reach.photos_key),

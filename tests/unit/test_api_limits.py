@@ -68,7 +68,8 @@ def _abuse(port: int) -> dict:
     return out
 
 
-def test_idle_and_slow_connections_are_capped_and_timed_out():
+def _against_a_server(script) -> dict:
+    """``script(port)`` (in a thread) against an API server with :data:`LIMITS`."""
     runtime = SimpleNamespace(api_status=lambda: {"status_code": 3}, goals=None)
 
     async def main():
@@ -76,12 +77,16 @@ def test_idle_and_slow_connections_are_capped_and_timed_out():
         task = asyncio.ensure_future(server.run())
         await server.started.wait()
         try:
-            return await asyncio.to_thread(_abuse, server.bound_port)
+            return await asyncio.to_thread(script, server.bound_port)
         finally:
             await server.stop(graceful=False)
             task.cancel()
 
-    out = asyncio.run(main())
+    return asyncio.run(main())
+
+
+def test_idle_and_slow_connections_are_capped_and_timed_out():
+    out = _against_a_server(_abuse)
     if out["early_s"] < LIMITS.header_timeout_s:  # (a machine too busy to tell: skipped)
         assert out["closed_at_once"] >= 60 - LIMITS.max_per_client  # beyond the cap: at once
     assert out["closed_after_timeout"] == 60  # within it: at the header deadline
@@ -106,19 +111,7 @@ def _from_many_addresses(port: int) -> dict:
 
 
 def test_idle_sockets_from_many_addresses_do_not_lock_out_a_client_that_speaks():
-    runtime = SimpleNamespace(api_status=lambda: {"status_code": 3}, goals=None)
-
-    async def main():
-        server = ApiServer(runtime, "127.0.0.1", 0, None, limits=LIMITS)
-        task = asyncio.ensure_future(server.run())
-        await server.started.wait()
-        try:
-            return await asyncio.to_thread(_from_many_addresses, server.bound_port)
-        finally:
-            await server.stop(graceful=False)
-            task.cancel()
-
-    out = asyncio.run(main())
+    out = _against_a_server(_from_many_addresses)
     assert out["answered"] == [200] * 5
     # the oldest made room: the first ones are gone, at most the cap's worth are open
     assert out["closed"][0]
