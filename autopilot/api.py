@@ -328,7 +328,10 @@ def build_app(runtime: Runtime, token: str | None, stream_rate_hz: float = 5.0,
             goal = runtime.submit_goal(step)
         except GoalError as exc:
             return JSONResponse(exc.as_dict(), status_code=exc.status)
-        return {"goal_id": goal.id, "state": goal.state}
+        # what may not go as the sender expects, though it flies (e.g. an orbit whose centre
+        # its photos will not show)
+        warnings = list(STEP_KINDS[step.name].warnings(step.params, runtime.config))
+        return {"goal_id": goal.id, "state": goal.state, "warnings": warnings}
 
     @app.get("/api/goals", summary="Every goal so far")
     async def goals() -> list[dict]:

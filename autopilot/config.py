@@ -8,7 +8,10 @@ the file, the line and the dotted key path, and what was expected, e.g.::
 
 from __future__ import annotations
 
+import collections.abc
 import copy
+import functools
+import typing
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -660,6 +663,14 @@ MAX_YAML_NODES = 100_000  # values in one file, aliases expanded (a "billion lau
 
 
 def parse_yaml(text: str, source: str) -> Located:
+    """``text`` parsed, with each key's line; a file read again (a mission loaded for every
+    trial, the configuration under each ``--set``) is parsed once: the caller gets its own
+    copy to change."""
+    return copy.deepcopy(_parse_yaml(text, source))
+
+
+@functools.lru_cache(maxsize=32)
+def _parse_yaml(text: str, source: str) -> Located:
     try:
         node = yaml.compose(text, Loader=yaml.SafeLoader)
     except yaml.YAMLError as exc:
@@ -776,10 +787,14 @@ def apply_overrides(located: Located, overrides: Iterable[str]) -> Located:
                 break
             if last:
                 target[part] = value
-                lines[tuple(parts)] = ("--set", None)
+                key_path = tuple(parts)
+                for old in [k for k in lines if k[:len(key_path)] == key_path]:
+                    del lines[old]  # (what the file said inside it is gone with it)
+                lines[key_path] = ("--set", None)
             else:
                 if isinstance(target, dict) and target.get(part) is None:
-                    target[part] = {}
+                    target[part] = {}  # (a section the --set makes: its problems are its)
+                    lines[tuple(parts[:depth + 1])] = ("--set", None)
                 target = target[part]
     if problems:
         raise ConfigError(problems)
@@ -799,7 +814,7 @@ def validate(model: type[BaseModel], located: Located) -> Any:
                 loc = tuple(moved)
             source, line = located.locate(loc)
             if err["type"] == "extra_forbidden":
-                message = "unknown key"
+                message = "unknown key" + unknown_key_hint(model, loc)
             elif err["type"] == "missing":
                 message = "missing required key"
             elif moved:
@@ -808,6 +823,41 @@ def validate(model: type[BaseModel], located: Located) -> Any:
                 message = f"{err['msg']} (got {_short(err.get('input'))})"
             problems.append(Problem(source, line, _dotted(loc), message))
         raise ConfigError(problems) from None
+
+
+def known_keys(model: Any, loc: Sequence[Any]) -> list[str]:
+    """The keys a model allows beside the last of ``loc`` (a path into it): the fields of the
+    models that path ends in, through nested models, lists, mappings and unions."""
+    current = [model]
+    for part in loc[:-1]:
+        current = [found for each in current for found in _types_at(each, part)]
+    return list(dict.fromkeys(name for each in current for found in _models_in(each)
+                              for name in found.model_fields))
+
+
+def _types_at(annotation: Any, part: Any) -> list[Any]:
+    """The types one key (or index) into a value of ``annotation``."""
+    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+        field = annotation.model_fields.get(str(part))
+        return [field.annotation] if field is not None else []
+    origin, args = typing.get_origin(annotation), typing.get_args(annotation)
+    if origin in (list, tuple, set, frozenset, dict, collections.abc.Sequence,
+                  collections.abc.Mapping):
+        return [args[-1]] if args else []
+    return [found for arg in args for found in _types_at(arg, part)]  # unions, Annotated
+
+
+def _models_in(annotation: Any) -> list[type[BaseModel]]:
+    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+        return [annotation]
+    return [found for arg in typing.get_args(annotation) for found in _models_in(arg)]
+
+
+def unknown_key_hint(model: Any, loc: Sequence[Any]) -> str:
+    """``" (did you mean 'x'?)"`` for an unknown key at ``loc``, or ``""``."""
+    from autopilot.suggest import did_you_mean
+
+    return did_you_mean(str(loc[-1]), known_keys(model, loc)) if loc else ""
 
 
 def _short(value: Any) -> str:

@@ -173,8 +173,8 @@ async def _camera_checks(vehicle, name: str, url: str, duration_s: float,
              f"{delays[len(delays) // 2] * 1e3:.0f} ms"
     add("capture times", "PASS" if "arrival" not in mode else "WARN",
         detail + ("" if "arrival" not in mode else
-                  f" (assumed: vehicle.cameras.{name}.stream_latency_s; measure it, see the "
-                  "README)"))
+                  f" (assumed: vehicle.cameras.{name}.stream_latency_s; measure it, see "
+                  "docs/companion.md)"))
 
 
 def _clock_check() -> tuple[str, str, str]:

@@ -51,6 +51,7 @@ from autopilot.config import (
     apply_overrides,
     load_yaml,
     merge_located,
+    unknown_key_hint,
     validate,
     with_profile,
 )
@@ -58,6 +59,7 @@ from autopilot.perception.colors import COLORS
 from autopilot.pipeline import PipelineSpec
 from autopilot.resources import default_config_path, missions_dir
 from autopilot.steps import STEP_KINDS, StepContext, step_kind
+from autopilot.suggest import did_you_mean
 from drivers.base import CameraInfo, Setpoint
 from drivers.sim.faults import Fault
 
@@ -259,7 +261,9 @@ class MissionPlan:
     steps: tuple[Step, ...]
     config: AppConfig
     source: Path
-
+    #: what may not go as the mission's author expects, though it can fly (e.g. an orbit's
+    #: centre outside its photos), each naming its step; shown before the flight
+    warnings: tuple[str, ...] = ()
 
     def pipelines(self, index: int) -> tuple[PipelineSpec, ...]:
         """The perception pipelines step ``index`` needs while it runs."""
@@ -303,9 +307,10 @@ def find_mission(name_or_path: str) -> Path:
         return path
     candidate = missions_dir() / f"{name_or_path}.yaml"
     if not candidate.is_file():
-        known = ", ".join(p.stem for p in shipped_missions()) or "none"
+        names = [p.stem for p in shipped_missions()]
         raise ConfigError([Problem(name_or_path, None, "",
-                                   f"no mission of that name (shipped missions: {known})")])
+                                   f"no mission of that name{did_you_mean(name_or_path, names)} "
+                                   f"(shipped missions: {', '.join(names) or 'none'})")])
     return candidate
 
 
@@ -379,7 +384,9 @@ def load_mission(name_or_path: str, overrides: list[str] = (),
     if problems:
         problems.sort(key=lambda p: (p.source == "--set", p.source, p.line or 0))
         raise ConfigError(problems)
-    return MissionPlan(mission, steps, config, path)
+    warnings = tuple(f"steps[{i}].{step.name}: {text}" for i, step in enumerate(steps)
+                     for text in step_kind(step.name).warnings(step.params, config))
+    return MissionPlan(mission, steps, config, path, warnings)
 
 
 def is_mission_file(path: str | Path) -> bool:
@@ -401,7 +408,8 @@ def _validate_steps(raw_steps: list[dict[str, Any]], located: Located) -> tuple[
         if name not in STEP_KINDS:
             source, line = located.locate((*where, name))
             problems.append(Problem(source, line, _dotted((*where, name)),
-                                    f"unknown step kind (known: {', '.join(STEP_KINDS)})"))
+                                    f"unknown step kind{did_you_mean(name, STEP_KINDS)} "
+                                    f"(known: {', '.join(STEP_KINDS)})"))
             continue
         try:
             steps.append(Step(name, STEP_KINDS[name].params.model_validate(params or {})))
@@ -409,7 +417,8 @@ def _validate_steps(raw_steps: list[dict[str, Any]], located: Located) -> tuple[
             for err in exc.errors(include_url=False):
                 loc = (*where, name, *err["loc"])
                 source, line = located.locate(loc)
-                message = {"extra_forbidden": "unknown key",
+                message = {"extra_forbidden": "unknown key" + unknown_key_hint(
+                               STEP_KINDS[name].params, err["loc"]),
                            "missing": "missing required key"}.get(
                     err["type"], f"{err['msg']} (got {err.get('input')!r})")
                 problems.append(Problem(source, line, _dotted(loc), message))

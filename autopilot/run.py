@@ -62,8 +62,8 @@ def make_vehicle(plan: MissionPlan, *, realtime: bool = False, connect: str | No
         from autopilot.scenario import build_world  # MuJoCo loads only when the simulator flies
         from drivers.sim.driver import SimDriver
 
-        sim_config, objects = build_world(plan.mission.scenario, plan.config.sim,
-                                          plan.config.rover)
+        sim = with_calibrations(plan, calibration) if calibration else plan.config.sim
+        sim_config, objects = build_world(plan.mission.scenario, sim, plan.config.rover)
         return SimDriver(sim_config, scenario=objects, lockstep=not realtime), sim_config.seed
     if driver in ("pymavlink", "mavsdk"):
         from drivers.mavlink.link import Endpoint, UrlError
@@ -117,6 +117,35 @@ def make_vehicle(plan: MissionPlan, *, realtime: bool = False, connect: str | No
         return vehicle, None
     raise ConfigError([Problem("config", None, "driver",
                                f"unknown driver {driver!r} (sim, mavsdk, pymavlink)")])
+
+
+def with_calibrations(plan: MissionPlan, calibration: str | Path | Sequence[str]):
+    """The simulator's configuration with ``--calibration`` files as what its cameras report
+    (as a real camera reports its calibration file): each checked now, by its option."""
+    from drivers.calibration import CalibrationError, load_calibration
+
+    sim = plan.config.sim
+    used = plan.cameras_used()
+    values = [str(calibration)] if isinstance(calibration, (str, Path)) else calibration
+    cameras, problems = dict(sim.cameras), []
+    for name, file in parse_camera_options(values, "--calibration",
+                                           used[0] if used else None).items():
+        cam = cameras.get(name)
+        if cam is None or not cam.enabled:
+            known = [n for n, c in cameras.items() if c.enabled]
+            problems.append(Problem("command line", None, "--calibration",
+                                    f"{name}={file}: the simulated vehicle has no camera "
+                                    f"{name!r} (its cameras: {', '.join(known) or 'none'})"))
+            continue
+        try:
+            load_calibration(Path(file))
+        except CalibrationError as exc:
+            problems.append(Problem("command line", None, "--calibration", str(exc)))
+            continue
+        cameras[name] = cam.model_copy(update={"calibration": str(file)})
+    if problems:
+        raise ConfigError(problems)
+    return sim.model_copy(update={"cameras": cameras})
 
 
 async def first_frame(vehicle: Vehicle, camera: str, timeout_s: float, where: str) -> None:
@@ -187,6 +216,8 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
         if progress is not None:
             progress(f"warning: {text}")
 
+    for text in plan.warnings:
+        warn(text)
     set_background_nice(plan.config.runtime.background_nice)
     vehicle, seed = make_vehicle(plan, realtime=realtime, connect=connect, video=video,
                                  calibration=calibration, signing_key=signing_key, warn=warn)
@@ -211,6 +242,9 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
         elif main_task is not None:  # a second signal: stop waiting for the safe stop
             main_task.cancel()
 
+    if handle_signals:  # from the start: a Ctrl-C while connecting stops the run as cleanly
+        for sig in signals:
+            loop.add_signal_handler(sig, on_signal, sig.name)
     try:
         await vehicle.connect(plan.config.link.connect_timeout_s if plan.config.driver != "sim"
                               else 10.0)
@@ -233,9 +267,6 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
                 progress(f"console on {scheme}://{host}:{port}/ (goal API at /api, documented "
                          "at /docs)" if console else
                          f"goal API on {scheme}://{host}:{port}/api (documented at /docs)")
-        if handle_signals:
-            for sig in signals:
-                loop.add_signal_handler(sig, on_signal, sig.name)
         mapping = asyncio.create_task(_log_time_mapping(vehicle, log), name="time-mapping") \
             if hasattr(vehicle, "vehicle_to_local_s") else None
         try:
@@ -246,7 +277,9 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
                 await asyncio.gather(mapping, return_exceptions=True)
         reason = runtime.reason
     except asyncio.CancelledError:
-        status, reason = "aborted", f"{' then '.join(received) or 'cancelled'}: forced exit"
+        status, reason = "aborted", (
+            f"{' then '.join(received) or 'cancelled'} before the flight started"
+            if runtime is None else f"{' then '.join(received) or 'cancelled'}: forced exit")
         with contextlib.suppress(Exception):
             await asyncio.wait_for(vehicle.land(), 2.0)
     finally:
@@ -288,6 +321,10 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
             "latency_ms": metrics["latency_ms"],
             **({"safety": metrics["safety"]} if metrics["safety"] else {}),
         },
+        # the signal that stopped the run (SIGINT: Ctrl-C, SIGTERM), if one did
+        "signal": received[0] if received else None,
+        # whether the vehicle was ever armed (a run stopped before takeoff flew nothing)
+        "flown": runtime is not None and runtime.stats.armed,
         "stats": vars(runtime.stats) if runtime is not None else {},
         "mission_status": int(runtime.status_code) if runtime is not None else None,
         "goals": [g.as_dict() for g in runtime.goals.goals.values()]

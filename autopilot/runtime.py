@@ -170,6 +170,7 @@ class RunStats:
     loop_lag_p99_ms: float | None = None
     loop_lag_max_ms: float | None = None
     loop_stalls: int = 0  # the loop silent for runtime.loop_stall_s or longer
+    armed: bool = False  # the vehicle was armed at some time during the run (it flew)
 
 
 @contextlib.contextmanager
@@ -1089,6 +1090,7 @@ class Runtime:
         self.status, self.reason = "aborted", reason
 
     def _state_events(self, previous: VehicleState | None, state: VehicleState) -> None:
+        self.stats.armed = self.stats.armed or state.armed
         if previous is None:
             return
         t = state.time_s

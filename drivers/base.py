@@ -414,7 +414,8 @@ class Vehicle(abc.ABC):
         """Open the link and wait until the vehicle is seen."""
 
     @abc.abstractmethod
-    async def arm(self) -> None: ...
+    async def arm(self) -> None:
+        """Arm the motors; refused (:class:`CommandDenied`) while the vehicle is not armable."""
 
     @abc.abstractmethod
     async def disarm(self, *, force: bool = False) -> None:
@@ -426,7 +427,9 @@ class Vehicle(abc.ABC):
         vehicle's own takeoff-altitude parameter) and then holds."""
 
     @abc.abstractmethod
-    async def land(self) -> None: ...
+    async def land(self) -> None:
+        """Switch to the vehicle's LAND mode: it descends where it is, detects the touchdown
+        and disarms."""
 
     @abc.abstractmethod
     async def hold(self) -> None:

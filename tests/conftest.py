@@ -85,6 +85,33 @@ def pytest_addoption(parser):
 def pytest_configure(config):
     config.addinivalue_line("markers", "long: a long case (a real-time flight, a heavy closed "
                             "loop); runs with --run-long")
+    config.addinivalue_line("markers", "serial: runs on the wall clock, measures time or "
+                            "listens on fixed ports: with pytest-xdist (-n), the modules that "
+                            "mark it run one test at a time in one worker while the lockstep "
+                            "tests share the others (set it as the module's pytestmark)")
+
+
+def pytest_xdist_make_scheduler(config, log):
+    """With ``-n`` (``--dist load``, the default): each test is its own unit of work, except
+    the modules that mark tests ``serial`` (``pytestmark = pytest.mark.serial``), which are one
+    unit together, run in one worker one test at a time, while the other workers take the
+    lockstep tests. (xdist's own ``--dist loadgroup`` cannot do it under pytest ≥ 9.2: the
+    group it writes into a test's node id no longer reaches the scheduler.)"""
+    if config.getvalue("dist") != "load":
+        return None
+    from pathlib import Path
+
+    from xdist.scheduler import LoadScopeScheduling
+
+    root = Path(config.rootpath)
+    serial = {str(path.relative_to(root)) for path in (root / "tests").rglob("test_*.py")
+              if "pytest.mark.serial" in path.read_text(encoding="utf-8")}
+
+    class SerialGroupScheduling(LoadScopeScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            return "serial" if nodeid.split("::", 1)[0] in serial else nodeid
+
+    return SerialGroupScheduling(config, log)
 
 
 def pytest_collection_modifyitems(config, items):

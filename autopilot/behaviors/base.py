@@ -117,7 +117,14 @@ class BehaviorOutput:
 
 
 class Params(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+    """A step kind's parameters: what a mission file's step, or a goal, may say.
+
+    Each field is documented by the string on the line after it (an attribute docstring):
+    pydantic keeps it as the field's description (``model_fields[name].description``), which
+    the goal API's schema and the documentation's step reference show."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False,
+                              use_attribute_docstrings=True)
 
 
 class Behavior(abc.ABC):
@@ -127,10 +134,13 @@ class Behavior(abc.ABC):
     name: ClassVar[str]
 
     @abc.abstractmethod
-    def activate(self, inputs: BehaviorInputs) -> BehaviorOutput: ...
+    def activate(self, inputs: BehaviorInputs) -> BehaviorOutput:
+        """The step starts (or resumes, after manual flight or a goal): ``inputs`` as they are
+        at that moment; returns the first output."""
 
     @abc.abstractmethod
-    def update(self, inputs: BehaviorInputs) -> BehaviorOutput: ...
+    def update(self, inputs: BehaviorInputs) -> BehaviorOutput:
+        """One control tick: what to fly now, and whether the step is done."""
 
     def request_failed(self, request: VehicleRequest, reason: str) -> BehaviorOutput:
         """A request was refused or could not be carried out. Default: the step fails."""

@@ -22,7 +22,10 @@ _ALTITUDE_TOLERANCE_M = 0.3
 
 class TakeoffParams(Params):
     altitude_m: Annotated[float, Field(gt=0.3, le=100)] = 2.0
+    """Height to climb to, above where the vehicle armed."""
     timeout_s: Annotated[float, Field(gt=0)] = 30.0
+    """The step fails if the vehicle is not armable, or not at ``altitude_m``, this long after
+    the step started."""
 
 
 class Takeoff(Behavior):
@@ -69,6 +72,8 @@ class Takeoff(Behavior):
 
 class LandParams(Params):
     timeout_s: Annotated[float, Field(gt=0)] = 60.0
+    """The step fails if the vehicle has not touched down and disarmed this long after the
+    step started."""
 
 
 class Land(Behavior):
@@ -97,6 +102,7 @@ class Land(Behavior):
 
 class HoldParams(Params):
     duration_s: Annotated[float, Field(ge=0)] = 5.0
+    """How long to hold position (the vehicle's HOLD mode)."""
 
 
 class Hold(Behavior):

@@ -47,9 +47,17 @@ Controller = Literal["estimator", "seed001", "seed003"]
 
 class FollowBallParams(Params):
     duration_s: Annotated[float, Field(gt=0)]
-    mode: Literal["yaw", "lateral"] | None = None  # default: control.follow.mode
-    standoff_m: Annotated[float, Field(gt=0.3, le=20)] | None = None  # control.follow
+    """How long to follow, from the step's start; then the vehicle holds where it is and the
+    step succeeds."""
+    mode: Literal["yaw", "lateral"] | None = None
+    """``yaw``: turn to face the ball; ``lateral``: keep the heading and translate. None:
+    ``control.follow.mode`` (config.yaml)."""
+    standoff_m: Annotated[float, Field(gt=0.3, le=20)] | None = None
+    """Distance kept from the ball along the camera's line of sight. None:
+    ``control.follow.standoff_m`` (config.yaml)."""
     controller: Controller = "estimator"
+    """``estimator``: ours, on the filtered estimate; ``seed001`` / ``seed003``: the seed
+    reports' pixel rules, kept as baselines (flown as AR.Drone tilt commands)."""
 
 
 class FollowBall(FollowTarget):

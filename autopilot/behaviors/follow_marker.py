@@ -36,9 +36,16 @@ from drivers.base import CameraInfo, Setpoint
 
 class FollowMarkerParams(Params):
     duration_s: Annotated[float, Field(gt=0)]
-    standoff_m: Annotated[float, Field(gt=0.3, le=20)] = 1.0  # seed 002: 1 m
+    """How long to follow, from the step's start; then the vehicle holds where it is and the
+    step succeeds."""
+    standoff_m: Annotated[float, Field(gt=0.3, le=20)] = 1.0
+    """Distance kept from the marker (seed 002: 1 m)."""
     mode: Literal["face", "yaw", "lateral"] = "face"
+    """``face``: stand in front of the marker, along its normal, facing it; ``yaw``: turn to
+    face it from wherever the vehicle is; ``lateral``: keep the heading and translate."""
     controller: Literal["estimator", "seed002"] = "estimator"
+    """``estimator``: ours, on the filtered estimate; ``seed002``: seed 002's proportional rule
+    on the marker's camera translation, kept as a baseline."""
 
 
 class FollowMarker(FollowTarget):

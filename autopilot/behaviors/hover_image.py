@@ -40,18 +40,32 @@ from drivers.base import Setpoint
 
 class HoverImageParams(Params):
     duration_s: Annotated[float, Field(gt=0)]
-    image: str = "default"  # the reference image: "default" (generated) or an image file
-    size_m: Annotated[float, Field(gt=0.05, le=50)] = 1.0  # its printed width
-    altitude_m: Annotated[float, Field(gt=0.3, le=50)] = 2.0  # above the image
-    offset_m: tuple[float, float] = (0.0, 0.0)  # forward (towards its top), right
-    yaw_deg: Annotated[float, Field(ge=-360, le=360)] = 0.0  # heading from its top
-    #: the search (as land_pad's): above the take-off point; the default 1 m image is found
-    #: wholly in view from 4 m (about 4 × size_m; 8 m: never)
+    """How long to hover, from when the image is first found."""
+    image: str = "default"
+    """The reference image: ``default`` (the project's generated target) or an image file."""
+    size_m: Annotated[float, Field(gt=0.05, le=50)] = 1.0
+    """The image's printed width."""
+    altitude_m: Annotated[float, Field(gt=0.3, le=50)] = 2.0
+    """Height of the hover point above the image."""
+    offset_m: tuple[float, float] = (0.0, 0.0)
+    """Where to hover from the image's centre: [forward (towards its top), right]."""
+    yaw_deg: Annotated[float, Field(ge=-360, le=360)] = 0.0
+    """The vehicle's heading while hovering, from the direction the image's top points."""
     search_altitude_m: Annotated[float, Field(gt=0.5, le=100)] = 4.0
+    """Height of the search above the take-off point (the search is land_pad's). The default
+    1 m image is found wholly in view from 4 m (about 4 × ``size_m``; from 8 m never)."""
     search_timeout_s: Annotated[float, Field(gt=0, le=600)] = 40.0
-    search_radius_m: Annotated[float, Field(ge=0, le=100)] = 4.0  # 0: climb and look only
+    """The step fails (the mission's fallback lands) if the image is not found this long after
+    the search began."""
+    search_radius_m: Annotated[float, Field(ge=0, le=100)] = 4.0
+    """Half the side of the search's expanding square, around where the step began; 0: climb
+    and look only."""
     search_speed_m_s: Annotated[float, Field(gt=0, le=10)] = 2.0
-    max_retries: Annotated[int, Field(ge=0, le=20)] = 2  # searches again after losing it
+    """The search's setpoint is placed this × 1 s ahead of the vehicle, towards the next
+    corner (on the simulated vehicle's position gain, 2 gives about 3 m/s)."""
+    max_retries: Annotated[int, Field(ge=0, le=20)] = 2
+    """How many times to search again around the image after losing it for
+    ``control.follow.lost_timeout_s``; then the step fails."""
 
     @field_validator("image")
     @classmethod

@@ -65,34 +65,64 @@ Positive = Annotated[float, Field(gt=0)]
 
 
 class LandOnRoverParams(Params):
-    use_uwb: bool = True  # fuse UWB ranges (seed 004's use_uwb)
-    use_marker: bool = True  # fuse the deck's tag seen by the down camera (use_marker)
-    approach_height_m: Annotated[float, Field(gt=0.5, le=30)] = 3.0  # above the deck
-    approach_distance_m: Annotated[float, Field(ge=0, le=20)] = 2.0  # behind it
-    approach_speed_m_s: Annotated[float, Field(gt=0, le=15)] = 4.0  # relative to the rover
+    use_uwb: bool = True
+    """Fuse the UWB ranges to the rover's anchors (seed 004's ``use_uwb``)."""
+    use_marker: bool = True
+    """Fuse the deck's tag seen by the down camera (seed 004's ``use_marker``)."""
+    approach_height_m: Annotated[float, Field(gt=0.5, le=30)] = 3.0
+    """Height above the deck to approach and align at."""
+    approach_distance_m: Annotated[float, Field(ge=0, le=20)] = 2.0
+    """How far behind the deck the approach aims for."""
+    approach_speed_m_s: Annotated[float, Field(gt=0, le=15)] = 4.0
+    """The fastest the approach closes in, relative to the rover."""
     acceptance_radius_m: Annotated[float, Field(gt=0, le=2)] = 0.1
-    #: the skids' half-span: the body's centre must touch down this far inside the deck's edge
+    """Horizontal distance from the deck's centre within which the vehicle counts as aligned,
+    and the width of the descent cone at the deck."""
     landing_margin_m: Annotated[float, Field(ge=0, le=2)] = 0.12
+    """The skids' half-span: the body's centre must touch down this far inside the deck's
+    edge."""
     settle_s: Annotated[float, Field(ge=0, le=10)] = 0.5
+    """How long the vehicle must stay aligned (the estimate certain enough) before the descent
+    starts."""
     cone_slope: Annotated[float, Field(ge=0, le=2)] = 0.15
+    """How much wider the descent cone gets per metre of height (m/m): the descent goes on
+    only inside it, and the room the error plus the estimate's 2σ may take grows with it."""
     descent_speed_m_s: Annotated[float, Field(gt=0, le=3)] = 0.8
+    """Descent speed above ``slow_height_m``."""
     final_speed_m_s: Annotated[float, Field(gt=0, le=1.5)] = 0.4
+    """Descent speed below ``slow_height_m``, and while committed."""
     slow_height_m: Annotated[float, Field(gt=0, le=20)] = 1.0
-    abort_height_m: Annotated[float, Field(ge=0, le=10)] = 1.2  # the abort checks apply below
-    abort_error_m: Annotated[float, Field(gt=0, le=2)] = 0.2  # off the estimate's centre
-    commit_height_m: Annotated[float, Field(ge=0, le=3)] = 0.35  # no abort below
-    #: contact: the rangefinder (at the body origin) this close to the deck (the skids' depth
-    #: below it plus a little)
+    """Height above the deck below which the descent slows to ``final_speed_m_s``."""
+    abort_height_m: Annotated[float, Field(ge=0, le=10)] = 1.2
+    """Below this height above the deck the abort checks apply (error, uncertainty, a stale
+    estimate)."""
+    abort_error_m: Annotated[float, Field(gt=0, le=2)] = 0.2
+    """Below ``abort_height_m``, a horizontal error from the estimate's centre beyond this, or
+    an estimate whose horizontal 2σ exceeds it, aborts: climb back and try again."""
+    commit_height_m: Annotated[float, Field(ge=0, le=3)] = 0.35
+    """Below this height the descent goes on over the newest estimate and never aborts."""
     touchdown_height_m: Annotated[float, Field(gt=0, le=1)] = 0.12
+    """Contact: the rangefinder (at the body origin) this close to the deck (the skids' depth
+    below it plus a little); the motors are cut."""
     max_retries: Annotated[int, Field(ge=0, le=10)] = 3
+    """How many aborts (climb back, align again) before the step fails into the mission's
+    fallback."""
     wait_timeout_s: Positive = 10.0
+    """How long to hold waiting for a first estimate of the deck (no rover report, range or
+    tag yet) before the step fails."""
     timeout_s: Positive = 180.0
-    face_rover_heading: bool = True  # else keep the heading at the start
-    #: ours, or seed004: seed 004's (a baseline for `autopilot bench landing`): its fused filter
-    #: (PX4 position, UWB, tag, rover compass, altimeter) and its gain-scheduled PID
+    """The step fails if the vehicle has not landed this long after the step started."""
+    face_rover_heading: bool = True
+    """Turn with the rover's heading; false: keep the heading the vehicle had at the start."""
     strategy: Literal["ours", "seed004"] = "ours"
-    trim_gain_per_s: Annotated[float, Field(ge=0, le=5)] = 0.6  # integral action over the deck
+    """``ours``, or ``seed004``: seed 004's (a baseline for ``autopilot bench landing``): its
+    fused filter (PX4 position, UWB, tag, rover compass, altimeter) and its gain-scheduled
+    PID."""
+    trim_gain_per_s: Annotated[float, Field(ge=0, le=5)] = 0.6
+    """Gain of the integral trim on the offset the estimate shows over the deck (the position
+    controller settles a little off a moving setpoint)."""
     max_trim_m: Annotated[float, Field(ge=0, le=1)] = 0.15
+    """The largest that trim may grow."""
 
 
 @dataclass(frozen=True, slots=True)

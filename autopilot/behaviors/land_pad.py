@@ -72,34 +72,69 @@ Positive = Annotated[float, Field(gt=0)]
 
 
 class LandPadParams(Params):
-    pad: Literal["circle", "markers"] = "circle"  # a coloured disc, or the nested marker pad
-    color: ColorName = "red"  # circle: its colour (seed 001: red = land here)
-    size_m: Annotated[float, Field(gt=0.1, le=10)] = 0.8  # disc diameter / marker pad side
-    ids: tuple[int, int, int, int, int] = (0, 1, 2, 3, 4)  # markers: centre first
-    #: offboard: this step flies the descent; px4_precland: PX4's precision landing does
+    pad: Literal["circle", "markers"] = "circle"
+    """``circle``: a coloured disc on a white square; ``markers``: the nested marker pad."""
+    color: ColorName = "red"
+    """``circle``: the disc's colour (seed 001: red = land here)."""
+    size_m: Annotated[float, Field(gt=0.1, le=10)] = 0.8
+    """``circle``: the disc's diameter; ``markers``: the square pad's side."""
+    ids: tuple[int, int, int, int, int] = (0, 1, 2, 3, 4)
+    """``markers``: the five markers' ids, the centre one first."""
     method: Literal["offboard", "px4_precland"] = "offboard"
-    #: ours, or seed001: seed 001's own landing logic once the pad is seen (a baseline for
-    #: `autopilot bench land_pad`; :mod:`autopilot.behaviors.land_pad_seed001`)
+    """``offboard``: this step flies the descent; ``px4_precland``: once aligned, PX4's own
+    precision landing does (AUTO.PRECLAND, fed LANDING_TARGET)."""
     lander: Literal["ours", "seed001"] = "ours"
-    search_altitude_m: Annotated[float, Field(gt=0.5, le=100)] = 6.0  # PLD_SRCH_ALT
-    search_timeout_s: Positive = 40.0  # PLD_SRCH_TOUT
-    search_radius_m: Annotated[float, Field(ge=0, le=100)] = 4.0  # 0: climb and look only
+    """``ours``, or ``seed001``: seed 001's own landing logic once the pad is seen (a baseline
+    for ``autopilot bench land_pad``; :mod:`autopilot.behaviors.land_pad_seed001`)."""
+    search_altitude_m: Annotated[float, Field(gt=0.5, le=100)] = 6.0
+    """Height of the search above the take-off point (PX4: ``PLD_SRCH_ALT``)."""
+    search_timeout_s: Positive = 40.0
+    """The step fails (the mission's fallback lands) if the pad is not found this long after
+    the search began (PX4: ``PLD_SRCH_TOUT``)."""
+    search_radius_m: Annotated[float, Field(ge=0, le=100)] = 4.0
+    """Half the side of the search's expanding square, around where the step began; 0: climb
+    and look only."""
     search_speed_m_s: Annotated[float, Field(gt=0, le=10)] = 2.0
-    acceptance_radius_m: Annotated[float, Field(gt=0, le=5)] = 0.1  # PLD_HACC_RAD
+    """The search's setpoint is placed this × 1 s ahead of the vehicle, towards the next
+    corner."""
+    acceptance_radius_m: Annotated[float, Field(gt=0, le=5)] = 0.1
+    """Horizontal distance from the pad's estimate within which the vehicle counts as aligned,
+    and the width of the descent cone at the pad (PX4: ``PLD_HACC_RAD``)."""
     settle_s: Annotated[float, Field(ge=0, le=10)] = 1.0
+    """How long the vehicle must stay aligned before the descent starts."""
     cone_slope: Annotated[float, Field(ge=0, le=2)] = 0.15
+    """How much wider the descent cone gets per metre of height (m/m): the descent pauses
+    while the vehicle is outside ``acceptance_radius_m`` + ``cone_slope`` × height."""
     descent_speed_m_s: Annotated[float, Field(gt=0, le=3)] = 1.0
+    """Descent speed above ``slow_height_m``."""
     final_speed_m_s: Annotated[float, Field(gt=0, le=1.5)] = 0.35
+    """Descent speed below ``slow_height_m``, and while committed."""
     slow_height_m: Annotated[float, Field(gt=0, le=20)] = 1.5
-    commit_height_m: Annotated[float, Field(gt=0, le=5)] = 0.5  # blind below this
-    touchdown_height_m: Annotated[float, Field(ge=0, le=2)] = 0.15  # LAND takes over
-    lost_timeout_s: Annotated[float, Field(gt=0, le=60)] = 2.0  # PLD_BTOUT
+    """Height above the pad below which the descent slows to ``final_speed_m_s``."""
+    commit_height_m: Annotated[float, Field(gt=0, le=5)] = 0.5
+    """Below this height the pad may overflow the frame: the descent goes on over the newest
+    estimate, and losing the pad no longer aborts."""
+    touchdown_height_m: Annotated[float, Field(ge=0, le=2)] = 0.15
+    """At this height (or on ground contact) the vehicle's own LAND mode finishes the landing
+    and disarms."""
+    lost_timeout_s: Annotated[float, Field(gt=0, le=60)] = 2.0
+    """How long to hold without a fresh estimate (above the commit height) before climbing to
+    look again (PX4: ``PLD_BTOUT``)."""
     reacquire_climb_m: Annotated[float, Field(gt=0, le=20)] = 1.5
-    max_retries: Annotated[int, Field(ge=0, le=20)] = 3  # PLD_MAX_SRCH
-    yaw_deg: float | None = None  # markers: heading from the pad's top; None: keep the heading
-    trim_gain_per_s: Annotated[float, Field(ge=0, le=5)] = 0.6  # integral action over the pad
+    """How far to climb (up to the search altitude) over where the pad was, to look again."""
+    max_retries: Annotated[int, Field(ge=0, le=20)] = 3
+    """How many times to climb and look again after losing the pad; then the step fails
+    (PX4: ``PLD_MAX_SRCH``)."""
+    yaw_deg: float | None = None
+    """``markers``: the heading to land at, from the direction the pad's top points; None:
+    keep the heading."""
+    trim_gain_per_s: Annotated[float, Field(ge=0, le=5)] = 0.6
+    """Gain of the integral trim on the offset the camera sees over the pad (it removes the
+    few centimetres a position controller settles off its setpoint)."""
     max_trim_m: Annotated[float, Field(ge=0, le=2)] = 0.3
+    """The largest that trim may grow."""
     timeout_s: Positive = 180.0
+    """The step fails if the vehicle has not landed this long after the step started."""
 
 
 @dataclass(frozen=True, slots=True)

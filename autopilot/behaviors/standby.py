@@ -31,9 +31,15 @@ from drivers.base import Setpoint
 
 
 class StandbyParams(Params):
-    timeout_s: Annotated[float, Field(gt=0)] | None = None  # None: until landed
-    exit_when_landed: bool = True  # done once on the ground and disarmed after flying
+    timeout_s: Annotated[float, Field(gt=0)] | None = None
+    """The step ends this long after it started, goals included; None: it waits until the
+    vehicle has landed."""
+    exit_when_landed: bool = True
+    """Done once the vehicle is on the ground and disarmed after having flown (a land goal)."""
     brake_accel_m_s2: Annotated[float, Field(gt=0, le=10)] = 2.5
+    """The deceleration the hover point is worked out with: the vehicle holds where braking
+    at this rate from its present velocity would stop it (no overshoot after a cancelled
+    goal)."""
 
 
 class Standby(Behavior):

@@ -92,12 +92,20 @@ def _finite(values, name: str):
 
 
 class GotoParams(Params):
-    position_m: tuple[float, float, float] | None = None  # north, east, altitude (in `frame`)
+    position_m: tuple[float, float, float] | None = None
+    """Where to go: [north, east, altitude] in ``frame``. Give this or ``latlon``."""
     latlon: tuple[Annotated[float, Field(ge=-90, le=90)],
-                  Annotated[float, Field(ge=-180, le=180)], float] | None = None  # + alt over home
+                  Annotated[float, Field(ge=-180, le=180)], float] | None = None
+    """Where to go: [latitude, longitude] (WGS-84, degrees) and the altitude above home. Give
+    this or ``position_m``."""
     frame: Frame = "world"
+    """What ``position_m`` is measured from: ``world`` (the local NED frame, altitudes above
+    its origin), ``home`` (from where the vehicle armed) or ``rover`` (from the rover's deck,
+    where its estimate puts it when the step starts)."""
     speed_m_s: Speed = 2.0
-    yaw_deg: Annotated[float, Field(ge=-360, le=360)] | None = None  # None: keep the heading
+    """Cruise speed along the line (within ``control.trajectory``'s limits)."""
+    yaw_deg: Annotated[float, Field(ge=-360, le=360)] | None = None
+    """The heading to fly at (degrees from north, towards east); None: keep the heading."""
 
     @model_validator(mode="after")
     def _one_target(self) -> GotoParams:
@@ -110,18 +118,37 @@ class GotoParams(Params):
 
 
 class OrbitParams(Params):
-    center_m: NorthEast | None = None  # in `frame`
+    center_m: NorthEast | None = None
+    """The centre: [north, east] in ``frame``. Give this or ``center_latlon``."""
     center_latlon: LatLon | None = None
+    """The centre: [latitude, longitude] (WGS-84, degrees). Give this or ``center_m``."""
     frame: Frame = "world"
+    """What ``center_m`` and the altitudes are measured from: ``world`` (the local NED frame,
+    altitudes above its origin), ``home`` (from where the vehicle armed) or ``rover`` (from the
+    rover's deck, where its estimate puts it when the step starts)."""
     radius_m: Annotated[float, Field(ge=1.0, le=500)] = 3.0
-    altitude_m: Annotated[float, Field(gt=0.5, le=500)] = 8.0  # in `frame`
+    """The circle's radius (the path's joins are rounded; the circle itself is flown at this
+    radius)."""
+    altitude_m: Annotated[float, Field(gt=0.5, le=500)] = 8.0
+    """The height to circle at, in ``frame`` (above home for ``center_latlon``)."""
     speed_m_s: Speed = 2.0
-    images: Annotated[int, Field(ge=0, le=1000)] = 8  # evenly spaced over all the laps
+    """Cruise speed along the circle (slower where ``control.trajectory`` limits the lateral
+    acceleration)."""
+    images: Annotated[int, Field(ge=0, le=1000)] = 8
+    """How many photos, evenly spaced over all the laps, each facing the centre."""
     laps: Annotated[float, Field(gt=0, le=100)] = 1.0
-    direction: Literal["clockwise", "counterclockwise"] = "clockwise"  # seen from above
-    start_bearing_deg: Annotated[float, Field(ge=-360, le=360)] | None = None  # entry point
-    camera: str | None = None  # the photos' camera (None: photos.camera)
-    center_altitude_m: Annotated[float, Field(ge=-100, le=500)] = 0.0  # what the photos are of
+    """How many times round (a fraction flies part of a lap)."""
+    direction: Literal["clockwise", "counterclockwise"] = "clockwise"
+    """The way round, seen from above (clockwise: from north towards east)."""
+    start_bearing_deg: Annotated[float, Field(ge=-360, le=360)] | None = None
+    """Where the circle is entered: the bearing of the entry point from the centre (degrees
+    from north, towards east); None: where the tangent from the vehicle's position touches the
+    circle."""
+    camera: str | None = None
+    """The camera the photos are taken with; None: ``photos.camera`` (config.yaml)."""
+    center_altitude_m: Annotated[float, Field(ge=-100, le=500)] = 0.0
+    """The height of what the photos are of, in the step's ``frame`` (above home for
+    ``center_latlon``): the point at the centre the camera looks at."""
 
     @model_validator(mode="after")
     def _one_center(self) -> OrbitParams:
@@ -133,22 +160,43 @@ class OrbitParams(Params):
 
 
 class SurveyParams(Params):
-    polygon_m: list[NorthEast] | None = None  # in `frame`
+    polygon_m: list[NorthEast] | None = None
+    """The area to cover: its corners, [[north, east], ...] in ``frame`` (at least 3; concave
+    is fine). Give this or ``polygon_latlon``."""
     polygon_latlon: list[LatLon] | None = None
-    holes_m: list[list[NorthEast]] = Field(default_factory=list)  # areas not to cover
+    """The area to cover: its corners as [[latitude, longitude], ...] (WGS-84, degrees). Give
+    this or ``polygon_m``."""
+    holes_m: list[list[NorthEast]] = Field(default_factory=list)
+    """Areas inside the polygon not to cover, each a list of corners like ``polygon_m``."""
     frame: Frame = "world"
+    """What ``polygon_m`` and ``altitude_m`` are measured from: ``world`` (the local NED frame,
+    altitudes above its origin), ``home`` (from where the vehicle armed) or ``rover`` (from the
+    rover's deck, where its estimate puts it when the step starts)."""
     altitude_m: Annotated[float, Field(gt=0.5, le=500)] = 10.0
-    #: between lines; None: the camera's footprint across the lines × (1 − side_overlap)
+    """The height to fly the lines at, in ``frame`` (above home for ``polygon_latlon``)."""
     spacing_m: Annotated[float, Field(gt=0.2, le=500)] | None = None
+    """Distance between neighbouring lines; None: the camera's footprint across the lines ×
+    (1 − ``side_overlap``)."""
     side_overlap: Annotated[float, Field(ge=0, lt=0.95)] = 0.6
-    photo_spacing_m: Annotated[float, Field(gt=0.1, le=500)] | None = None  # None: spacing_m
+    """The share of a photo's footprint neighbouring lines overlap by, when ``spacing_m`` is
+    None."""
+    photo_spacing_m: Annotated[float, Field(gt=0.1, le=500)] | None = None
+    """The greatest distance between photos along a line (they are spaced evenly, the line's
+    ends included); None: ``spacing_m``."""
     speed_m_s: Speed = 3.0
-    angle_deg: Annotated[float, Field(ge=-360, le=360)] | None = None  # None: fewest lines
+    """Cruise speed along the lines (slower in the turns)."""
+    angle_deg: Annotated[float, Field(ge=-360, le=360)] | None = None
+    """The lines' direction (degrees from north, towards east); None: the direction that needs
+    the fewest lines."""
     smoothing: Literal["bspline", "none"] = "bspline"
-    #: each line flown this far beyond its ends, to be level and at speed at its first and last
-    #: photo (None: what braking from speed_m_s takes at control.trajectory.accel_m_s2)
+    """``bspline``: turns between lines are smooth B-splines (no jerk entering or leaving
+    them); ``none``: stop and turn at the corners."""
     turnaround_m: Annotated[float, Field(ge=0, le=100)] | None = None
-    camera: str | None = None  # None: photos.camera
+    """Each line is flown this far beyond its ends, to be level and at speed at its first and
+    last photo; None: what braking from ``speed_m_s`` takes at
+    ``control.trajectory.accel_m_s2``."""
+    camera: str | None = None
+    """The camera the photos are taken with; None: ``photos.camera`` (config.yaml)."""
 
     @model_validator(mode="after")
     def _area(self) -> SurveyParams:

@@ -57,7 +57,22 @@ def sample(sim_s: float, runs: int) -> dict:
     return {"runs": runs, "sim_s": round(sim_s, 1), "wall_s": round(time.perf_counter(), 1),
             "rss_mb": round(_rss_mb(), 1),
             "tasks": len([t for t in asyncio.all_tasks() if t is not current]),
-            "threads": threading.active_count(), "fds": _fds()}
+            "threads": len(_own_threads()), "fds": _fds()}
+
+
+#: how long the verdict waits for threads on their way out (see :func:`soak`)
+SETTLE_S = 5.0
+
+
+def _thread_names() -> list[str]:
+    return sorted(t.name for t in _own_threads())
+
+
+def _own_threads() -> list[threading.Thread]:
+    """The process's threads but the event loop's default executor's (``asyncio_N``): that
+    pool grows to at most its ``max_workers`` when more blocking calls overlap (as they do on
+    a busy machine), and is not a leak; every other thread counts."""
+    return [t for t in threading.enumerate() if not t.name.startswith("asyncio_")]
 
 
 async def soak(duration_s: float, missions: Sequence[str] = MISSIONS,
@@ -65,6 +80,7 @@ async def soak(duration_s: float, missions: Sequence[str] = MISSIONS,
                max_growth_pct: float = MAX_GROWTH_PCT) -> dict:
     runs: list[dict] = []
     samples = [sample(0.0, 0)]
+    names: list[list[str]] = [_thread_names()]  # (each sample's threads, for the verdict)
     started = time.perf_counter()
     sim_total = 0.0
     with tempfile.TemporaryDirectory(prefix="autopilot-soak-") as tmp:
@@ -89,12 +105,22 @@ async def soak(duration_s: float, missions: Sequence[str] = MISSIONS,
                          "loop_lag_max_ms": stats.get("loop_lag_max_ms"),
                          "loop_stalls": stats.get("loop_stalls", 0)})
             samples.append(sample(sim_total, len(runs)))
+            names.append(_thread_names())
             s = samples[-1]
             log(f"{len(runs)}: {mission} {summary['status']} ({kind}); {sim_total:.0f} s "
                 f"simulated; RSS {s['rss_mb']:.0f} MB, {s['tasks']} tasks, {s['threads']} "
                 f"threads, {s['fds']} fds; loop lag p99 {stats.get('loop_lag_p99_ms') or 0:.1f} ms")
-    base = samples[min(len(missions), len(samples) - 1)]
-    end = samples[-1]
+    base_index = min(len(missions), len(samples) - 1)
+    base, end = samples[base_index], samples[-1]
+    # a thread the last flight told to stop may still be on its way out on a busy machine:
+    # a leak is one still there after a few seconds
+    waited = 0.0
+    while len(_own_threads()) > base["threads"] and waited < SETTLE_S:
+        await asyncio.sleep(0.1)
+        waited += 0.1
+    if waited:
+        end = samples[-1] = {**end, "threads": len(_own_threads())}
+        names[-1] = _thread_names()
     growth = 100.0 * (end["rss_mb"] - base["rss_mb"]) / base["rss_mb"]
     p99 = [r["loop_lag_p99_ms"] for r in runs if r["loop_lag_p99_ms"] is not None]
     worst = [r["loop_lag_max_ms"] for r in runs if r["loop_lag_max_ms"] is not None]
@@ -103,6 +129,8 @@ async def soak(duration_s: float, missions: Sequence[str] = MISSIONS,
         "memory_ok": growth <= max_growth_pct,
         "tasks_ok": end["tasks"] <= base["tasks"],
         "threads_ok": end["threads"] <= base["threads"],
+        # the threads alive at the end that were not at the baseline (a leak names itself)
+        "new_threads": sorted(set(names[-1]) - set(names[base_index])),
         "fds_ok": end["fds"] is None or base["fds"] is None or end["fds"] <= base["fds"],
         "runs_ok": all(r["outcome"] != "unsafe" for r in runs),
     }

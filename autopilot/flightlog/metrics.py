@@ -131,10 +131,10 @@ def _first_follow(log) -> tuple[list[tuple[float, float]], FollowedTarget] | Non
     if not targets:
         return None
     index, step, target = targets[0]
-    return _intervals_of(log, index, step.get("name")), target
+    return intervals_of(log, index, step.get("name")), target
 
 
-def _intervals_of(log, index: int, name: str | None) -> list[tuple[float, float]]:
+def intervals_of(log, index: int, name: str | None) -> list[tuple[float, float]]:
     events = log.get(ch.MISSION_EVENTS, [])
     end = max((r["time_s"] for topic in (ch.GROUND_TRUTH, ch.VEHICLE_STATE)
                for r in log.get(topic, [])), default=0.0)

@@ -18,6 +18,7 @@ from autopilot.flightlog.metrics import (
     TruthTrack,
     followed_targets,
     fully_in_image,
+    intervals_of,
     project_target,
 )
 from autopilot.flightlog.truth import truth_table
@@ -38,6 +39,16 @@ def targets(records: Records) -> list[FollowedTarget]:
                 seen.setdefault(p["name"], FollowedTarget(
                     p["name"], p["camera"], p["truth_body"], p.get("size_m") or 0.0, 0.0))
     return list(seen.values())
+
+
+def followed_spans(records: Records, target: FollowedTarget | None
+                   ) -> list[tuple[float, float]]:
+    """When ``target`` was followed: the intervals of the steps that followed it."""
+    if target is None:
+        return []
+    return [span for index, step, followed in followed_targets(records)
+            if followed.pipeline == target.pipeline
+            for span in intervals_of(records, index, step.get("name"))]
 
 
 def _estimates(records: Records, target: FollowedTarget | None) -> list[Mapping]:

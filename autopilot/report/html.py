@@ -97,6 +97,9 @@ def _faults_table(records) -> str:
 
 
 def _channels_table(channels: Sequence[ChannelInfo]) -> str:
+    """The log's channels that hold messages (a channel declared but never written is not a
+    channel of this flight)."""
+    channels = [c for c in channels if c.messages]
     if not channels:
         return ""
     cells = "".join(f"<tr><td>{html.escape(c.topic)}</td><td>{html.escape(c.schema)}</td>"
@@ -124,10 +127,12 @@ def _figure(draw: Callable) -> str:
 
 
 def _shade(ax, phases) -> None:
+    """Each step shaded, its name above the plot: staggered over three rows so that short
+    neighbouring steps' names do not print over each other."""
     for i, (a, b, step) in enumerate(phases):
         ax.axvspan(a, b, color=_COLOURS[i % len(_COLOURS)], zorder=0)
-        ax.text(a, 1.0, f" {step}", transform=ax.get_xaxis_transform(), va="top", fontsize=8,
-                color="#555")
+        ax.text(a, 1.02 + 0.07 * (i % 3), f" {step}", transform=ax.get_xaxis_transform(),
+                va="bottom", fontsize=7, color="#555", clip_on=False)
 
 
 def _trajectories(fig, records, phases, target) -> None:
@@ -161,8 +166,28 @@ def _standoff(fig, records, phases, target) -> None:
                 lw=1)
     ax.axhline(0.0, color="k", lw=0.5)
     ax.set(xlabel="time (s)", ylabel="standoff error (m)")
+    # scaled to the stretches the target was followed: a climb or landing before or after
+    # (metres from the target) would flatten the centimetres that matter to a line
+    spans = data.followed_spans(records, target)
+    values = [s["error_m"][_within(s["t"], spans)],
+              s["estimated_error_m"][_within(s["estimated_t"], spans)]]
+    values = np.concatenate([v[np.isfinite(v)] for v in values])
+    if spans and len(values):
+        low, high = np.percentile(values, [0.5, 99.5])
+        pad = max(0.1 * (high - low), 0.02)
+        ax.set_ylim(min(low - pad, -0.02), max(high + pad, 0.02))
+        note = "scaled to the following (off-scale outside it)"
+    else:
+        note = None
     _shade(ax, phases)
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=8, title=note, title_fontsize=7)
+
+
+def _within(t: np.ndarray, spans: Sequence[tuple[float, float]]) -> np.ndarray:
+    inside = np.zeros(len(t), dtype=bool)
+    for a, b in spans:
+        inside |= (t >= a) & (t <= b)
+    return inside
 
 
 def _over_target(fig, records, phases, target) -> None:
@@ -255,14 +280,19 @@ def _latency(fig, records, phases, target) -> None:
     if not len(lat):
         raise _NoData("no setpoint was computed from a frame")
     ax = fig.subplots()
-    if np.ptp(lat) < 2.0:  # lockstep: (nearly) one value; half-millisecond bins around it
-        bins = np.arange(math.floor(lat.min()) - 1.0, math.ceil(lat.max()) + 1.5, 0.5)
+    values, counts = np.unique(np.round(lat, 2), return_counts=True)
+    if len(values) <= 40 and len(lat) >= 2 * len(values):  # (lockstep: the steps apart)
+        step = float(np.min(np.diff(values))) if len(values) > 1 else 1.0
+        ax.bar(values, counts, width=0.8 * step)
+        ax.set_xlim(values[0] - step, values[-1] + step)
+        ax.set_title(f"{len(values)} distinct values, a bar each (in lockstep: multiples "
+                     "of the simulation step)", fontsize=8)
     else:
-        bins = min(60, max(10, int(math.sqrt(len(lat)))))
-    ax.hist(lat, bins=bins)
+        ax.hist(lat, bins=min(60, max(10, int(math.sqrt(len(lat))))))
     ax.ticklabel_format(axis="x", useOffset=False)
     for q, style in ((50, "--"), (95, ":")):
-        ax.axvline(np.percentile(lat, q), color="k", ls=style, label=f"p{q}")
+        ax.axvline(np.percentile(lat, q), color="k", ls=style,
+                   label=f"p{q} {np.percentile(lat, q):.1f} ms")
     ax.set(xlabel="frame capture → setpoint (ms)", ylabel="setpoints")
     ax.legend(fontsize=8)
 
@@ -343,10 +373,14 @@ def _status(fig, records, phases, target) -> None:
     codes = [r["code"] for r in rows]
     end = max([t[-1], *[s["time_s"] for s in records.get(ch.VEHICLE_STATE, [])[-1:]]])
     ax.step([*t, end], [*codes, codes[-1]], where="post", color="#333")
-    for ti, code, r in zip(t, codes, rows, strict=True):
-        ax.text(ti, code + 0.3, f"{code} {r.get('status', '')}", fontsize=7, rotation=20)
-    ax.set(xlabel="time (s)", ylabel="status code", title="mission status",
-           ylim=(-0.5, max(codes) + 2.5))
+    # each code's meaning once, in a legend-like list beside the plot, not over the line
+    names = {}
+    for code, r in zip(codes, rows, strict=True):
+        names.setdefault(code, r.get("status", ""))
+    ax.set(xlabel="time (s)", ylabel="status code", ylim=(-0.5, max(codes) + 0.5),
+           yticks=sorted(names))
+    ax.text(1.01, 1.0, "\n".join(f"{code}: {name}" for code, name in sorted(names.items())),
+            transform=ax.transAxes, va="top", fontsize=7, color="#333")
     _shade(ax, phases)
 
 

@@ -14,7 +14,13 @@ from autopilot.config import AppConfig, ConfigError, Problem
 from autopilot.control.follow import FollowSettings
 from autopilot.flightlog.metrics import follow_step_metrics
 from autopilot.perception.ball_pipeline import ball_spec
-from autopilot.steps.registry import StepContext, StepKind, register
+from autopilot.steps.registry import (
+    ESTIMATE_FIGURES,
+    Figure,
+    StepContext,
+    StepKind,
+    register,
+)
 
 
 def follow_settings(config: AppConfig, mode: str | None, standoff_m: float | None
@@ -68,6 +74,11 @@ register(StepKind(
     "follow_ball", FollowBallParams, _behavior,
     pipelines=lambda params, config: (ball_spec(config),),
     metrics=follow_step_metrics,
+    summary=((Figure("follow", "detection_rate", "detected in", "%"),
+              Figure("follow", "rms_range_error_m", "range error RMS", "m"),
+              Figure("follow", "p95_abs_range_error_m", "p95", "m"),
+              Figure("follow", "rms_image_error_px", "image error RMS", "px"),
+              Figure("follow", "max_lost_s", "longest loss", "s")), ESTIMATE_FIGURES),
     report=("trajectory", "standoff", "detections", "estimate", "velocity", "latency"),
     plan_info=_plan_info,
     description="follow a coloured ball with a camera for duration_s",

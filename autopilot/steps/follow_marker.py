@@ -11,7 +11,13 @@ from autopilot.behaviors.follow_marker import FollowMarker, FollowMarkerParams
 from autopilot.flightlog.metrics import follow_step_metrics
 from autopilot.perception.marker_pipeline import marker_spec
 from autopilot.steps.follow_ball import camera_of, follow_settings, lost_settings
-from autopilot.steps.registry import StepContext, StepKind, register
+from autopilot.steps.registry import (
+    ESTIMATE_FIGURES,
+    Figure,
+    StepContext,
+    StepKind,
+    register,
+)
 
 
 def _behavior(params: FollowMarkerParams, ctx: StepContext) -> FollowMarker:
@@ -25,6 +31,11 @@ register(StepKind(
     "follow_marker", FollowMarkerParams, _behavior,
     pipelines=lambda params, config: (marker_spec(config),),
     metrics=follow_step_metrics,
+    summary=((Figure("follow", "detection_rate", "detected in", "%"),
+              Figure("follow", "rms_range_error_m", "range error RMS", "m"),
+              Figure("follow", "p95_abs_range_error_m", "p95", "m"),
+              Figure("follow", "rms_image_error_px", "image error RMS", "px"),
+              Figure("follow", "max_lost_s", "longest loss", "s")), ESTIMATE_FIGURES),
     report=("trajectory", "standoff", "detections", "estimate", "velocity", "latency"),
     plan_info=lambda params, config: {"standoff_m": params.standoff_m},
     description="follow a fiducial marker (ArUco/AprilTag) at standoff_m for duration_s",

@@ -34,7 +34,13 @@ from autopilot.flightlog.metrics import (
 from autopilot.flightlog.truth import truth_table
 from autopilot.perception.image_pipeline import image_spec
 from autopilot.steps.land_pad import search_footprint_per_m
-from autopilot.steps.registry import StepContext, StepKind, register
+from autopilot.steps.registry import (
+    ESTIMATE_FIGURES,
+    Figure,
+    StepContext,
+    StepKind,
+    register,
+)
 from drivers.geometry import quat_to_matrix
 
 #: scored from this long after the image was first found (the approach to the hover point)
@@ -136,6 +142,13 @@ register(StepKind(
     "hover_image", HoverImageParams, _behavior,
     pipelines=lambda params, config: (image_spec(config, params.image, params.size_m),),
     metrics=hover_metrics,
+    summary=((Figure("hover", "rms_horizontal_error_m", "horizontal error over the image RMS",
+                     "m"),
+              Figure("hover", "p95_horizontal_error_m", "p95", "m"),
+              Figure("hover", "rms_vertical_error_m", "height error RMS", "m"),
+              Figure("hover", "rms_yaw_error_deg", "yaw error RMS", "°"),
+              Figure("hover", "detection_rate", "image found in", "%"),
+              Figure("hover", "found_after_s", "first found after", "s")), ESTIMATE_FIGURES),
     report=("trajectory", "over_target", "detections", "estimate", "latency"),
     description="hover over a known image on the ground (down camera) for duration_s",
     status=(17, 18)))

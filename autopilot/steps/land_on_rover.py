@@ -41,7 +41,7 @@ from autopilot.flightlog.metrics import Estimates, phase_entries
 from autopilot.flightlog.truth import extend_floats, truth_table
 from autopilot.perception.deck_pipeline import ROVER_BODY, deck_spec
 from autopilot.steps.follow_ball import camera_of
-from autopilot.steps.registry import StepContext, StepKind, register
+from autopilot.steps.registry import Figure, StepContext, StepKind, register
 from drivers.geometry import yaw_from_quat as _yaw_of
 
 #: resting: within this of the height the vehicle finally rests at over the deck
@@ -277,6 +277,17 @@ def relative_tracks(log: Mapping[str, Sequence[Mapping]], body: str = ROVER_BODY
 
 register(StepKind(
     "land_on_rover", LandOnRoverParams, _behavior, pipelines=_spec, metrics=landing_metrics,
+    summary=((Figure("landing", "on_deck", "on the deck"),
+              Figure("landing", "error_m", "touchdown error", "m"),
+              Figure("landing", "relative_horizontal_speed_m_s", "relative speed at touchdown",
+                     "m/s"),
+              Figure("landing", "time_to_land_s", "time to land", "s"),
+              Figure("landing", "retries", "retries")),
+             (Figure("relative", "rms_horizontal_error_m",
+                     "rover estimate flown on: horizontal error RMS", "m"),
+              Figure("relative", "within_2sigma", "within its 2σ", "%"),
+              Figure("relative", "lost_share", "rover lost (no estimate)", "%",
+                     "of the step"))),
     report=("trajectory", "rover", "latency"), check=_check,
     description="land on a moving rover's deck: UWB, its tag and its reports fused "
                 "(seed 004)",

@@ -25,7 +25,13 @@ from autopilot.flightlog.truth import truth_table
 from autopilot.perception.pad_pipeline import pad_spec
 from autopilot.planning.footprint import footprint_width_per_m
 from autopilot.steps.follow_ball import camera_of
-from autopilot.steps.registry import StepContext, StepKind, register
+from autopilot.steps.registry import (
+    ESTIMATE_FIGURES,
+    Figure,
+    StepContext,
+    StepKind,
+    register,
+)
 
 #: resting: within this of the height the vehicle finally rests at
 _REST_BAND_M = 0.015
@@ -143,6 +149,11 @@ def landing_metrics(log: Mapping[str, Sequence[Mapping]], intervals: list[tuple[
 
 register(StepKind(
     "land_pad", LandPadParams, _behavior, pipelines=_spec, metrics=landing_metrics,
+    summary=((Figure("landing", "on_pad", "on the pad"),
+              Figure("landing", "error_m", "touchdown error", "m"),
+              Figure("landing", "touchdown_speed_m_s", "touchdown speed", "m/s"),
+              Figure("landing", "time_to_land_s", "time to land", "s"),
+              Figure("landing", "retries", "retries")), ESTIMATE_FIGURES),
     report=("trajectory", "over_target", "detections", "estimate", "latency"),
     description="search for a landing pad with the down camera, descend onto it, disarm",
     status=(19, 20)))

@@ -50,6 +50,51 @@ def _no_camera(params: Params, config: AppConfig) -> str | None:
     return None
 
 
+def _no_warnings(params: Params, config: AppConfig) -> tuple[str, ...]:
+    return ()
+
+
+@dataclass(frozen=True, slots=True)
+class Figure:
+    """One number the terminal shows of a finished step: ``key`` of its metric group
+    ``group``, with what it is (``label``) and its unit (``"%"``: a share shown as a
+    percentage; ``""``: a count or a yes/no)."""
+
+    group: str
+    key: str
+    label: str
+    unit: str = ""
+    after: str = ""  # what follows the number (e.g. "of the step")
+
+    def text(self, groups: Mapping[str, Mapping]) -> str | None:
+        value = (groups.get(self.group) or {}).get(self.key)
+        if value is None or isinstance(value, (dict, list)):
+            return None
+        after = f" {self.after}" if self.after else ""
+        if isinstance(value, bool):
+            return f"{self.label} {'yes' if value else 'no'}{after}"
+        if self.unit == "%":
+            return f"{self.label} {100 * value:.1f} %{after}"
+        unit = f" {self.unit}" if self.unit else ""
+        if isinstance(value, float):
+            digits = 1 if self.unit in ("px", "s", "°", "ms") else 3
+            return f"{self.label} {value:.{digits}f}{unit}{after}"
+        return f"{self.label} {value}{unit}{after}"
+
+
+#: what the terminal shows of the estimate a step flew on (a followed or landed-on target)
+ESTIMATE_FIGURES = (
+    Figure("estimation", "rms_relative_position_error_m", "estimate flown on: relative error RMS",
+           "m"),
+    Figure("estimation", "relative_within_2sigma", "within its 2σ", "%"),
+    Figure("estimation", "rms_position_error_m", "world position error RMS", "m"),
+    Figure("estimation", "rms_velocity_error_m_s", "velocity error RMS", "m/s"),
+    Figure("estimation", "coasting_share", "coasting (predicted, not seen)", "%",
+           "of the step"),
+    Figure("estimation", "lost_share", "target lost (no estimate)", "%", "of the step"),
+)
+
+
 @dataclass(frozen=True)
 class StepKind:
     name: str
@@ -76,6 +121,11 @@ class StepKind:
     #: ValueError (a LimitError naming its key) beyond the plan bounds or the geofence; a goal
     #: is checked so before it is accepted. None: a kind that plans no path
     reach: Callable[[Params, AppConfig, BehaviorInputs], None] | None = None
+    #: what the terminal shows of it when the run ends (its main figures first); each tuple
+    #: is one line
+    summary: tuple[tuple[Figure, ...], ...] = ()
+    #: what may not go as its author expects though it can fly (shown before the flight)
+    warnings: Callable[[Params, AppConfig], tuple[str, ...]] = _no_warnings
 
 
 STEP_KINDS: dict[str, StepKind] = {}
@@ -94,3 +144,19 @@ def step_kind(name: str) -> StepKind:
     except KeyError:
         raise KeyError(f"no step kind {name!r} (known: {', '.join(sorted(STEP_KINDS))})") \
             from None
+
+
+def summary_lines(metrics: Mapping) -> list[str]:
+    """The terminal's lines for a flight's scored steps: each step's figures (its kind's
+    :attr:`StepKind.summary`), a line per group of them."""
+    lines = []
+    for step in metrics.get("steps") or ():
+        kind = STEP_KINDS.get(step.get("name"))
+        if kind is None:
+            continue
+        for i, figures in enumerate(kind.summary):
+            texts = [t for t in (f.text(step) for f in figures) if t is not None]
+            if texts:
+                head = f"step {step['index']} {step['name']}: " if i == 0 else "  "
+                lines.append(head + ", ".join(texts))
+    return lines

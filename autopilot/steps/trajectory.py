@@ -51,7 +51,7 @@ from autopilot.flightlog.metrics import _intrinsics, project_target, scoring_cam
 from autopilot.flightlog.truth import truth_table
 from autopilot.planning.footprint import ground_footprint
 from autopilot.planning.trajectory import Limits, cross_track_m, resample
-from autopilot.steps.registry import StepContext, StepKind, register
+from autopilot.steps.registry import Figure, StepContext, StepKind, register
 from drivers.camera_model import pinhole
 
 Records = Mapping[str, Sequence[Mapping]]
@@ -177,6 +177,43 @@ def _check_orbit(params: OrbitParams, config: AppConfig) -> None:
             f"heading (facing the centre) at {turning:.0f}°/s, more than control.trajectory."
             f"yaw_rate_deg_s ({yaw_rate:g}): at most "
             f"{math.radians(yaw_rate) * params.radius_m:.2f} m/s on this radius")
+
+
+def centre_in_image(params: OrbitParams, config: AppConfig) -> tuple[float, float] | None:
+    """Where the orbit's centre falls in its photos' camera (pixels, on the nominal pinhole),
+    the vehicle level and facing it from ``radius_m`` out and its height above the centre;
+    None if it is behind the camera."""
+    cam = config.vehicle.cameras[_photo_camera(params, config)]
+    intr = pinhole(cam.width_px, cam.height_px, cam.hfov_deg)
+    pitch, yaw = math.radians(cam.pitch_deg), math.radians(cam.yaw_deg)
+    ahead = np.array([math.cos(pitch) * math.cos(yaw), math.cos(pitch) * math.sin(yaw),
+                      -math.sin(pitch)])  # the boresight, body FRD
+    right = np.array([-math.sin(yaw), math.cos(yaw), 0.0])
+    down = np.cross(ahead, right)
+    centre = np.array([params.radius_m, 0.0, params.altitude_m - params.center_altitude_m])
+    z = float(centre @ ahead)
+    if z <= 1e-6:
+        return None
+    return (intr.cx + intr.fx * float(centre @ right) / z,
+            intr.cy + intr.fy * float(centre @ down) / z)
+
+
+def _orbit_warnings(params: OrbitParams, config: AppConfig) -> tuple[str, ...]:
+    if not params.images:
+        return ()
+    camera = _photo_camera(params, config)
+    cam = config.vehicle.cameras[camera]
+    where = centre_in_image(params, config)
+    inside = where is not None and 0 <= where[0] < cam.width_px and 0 <= where[1] < cam.height_px
+    if inside:
+        return ()
+    seen = "behind the camera" if where is None else \
+        f"at pixel ({where[0]:.0f}, {where[1]:.0f}) of {cam.width_px}×{cam.height_px}"
+    height = params.altitude_m - params.center_altitude_m
+    return (f"the centre will not be in the photos: the {camera} camera (pitch "
+            f"{cam.pitch_deg:g}°) sees it {seen} from {height:g} m above it at "
+            f"{params.radius_m:g} m out; change altitude_m, radius_m or camera "
+            "(center_altitude_m: the height of what the photos are of)",)
 
 
 def _check_survey(params: SurveyParams, config: AppConfig) -> None:
@@ -480,11 +517,21 @@ def _survey_info(params: SurveyParams, config: AppConfig) -> dict:
 
 register(StepKind(
     "goto", GotoParams, _goto, check=_check_goto, metrics=goto_metrics, reach=_goto_reach,
+    summary=((Figure("goto", "final_error_m", "final position error", "m"),
+              Figure("goto", "rms_cross_track_m", "cross-track error RMS", "m"),
+              Figure("goto", "rms_cross_track_nav_m", "as navigation saw it RMS", "m")),),
     pipelines=_frame_pipelines,
     report=("trajectory", "path"), status=(4, 5),
     description="fly a straight line to position_m (or latlon) at speed_m_s"))
 register(StepKind(
     "orbit", OrbitParams, _orbit, check=_check_orbit, metrics=orbit_metrics, reach=_orbit_reach,
+    warnings=_orbit_warnings,
+    summary=((Figure("orbit", "rms_cross_track_m", "cross-track error RMS", "m"),
+              Figure("orbit", "max_cross_track_m", "max", "m"),
+              Figure("orbit", "rms_cross_track_nav_m", "as navigation saw it RMS", "m"),
+              Figure("orbit", "rms_navigation_error_m", "navigation error RMS", "m"),
+              Figure("orbit", "photos", "photos"), Figure("orbit", "images_planned", "of"),
+              Figure("orbit", "centre_in_frame", "with the centre in frame")),),
     pipelines=_frame_pipelines,
     report=("trajectory", "path"), status=(6, 7),
     photo_camera=lambda params, config: _photo_camera(params, config) if params.images
@@ -492,6 +539,12 @@ register(StepKind(
     description="circle center_m at radius_m facing it, taking `images` photos"))
 register(StepKind(
     "survey", SurveyParams, _survey, check=_check_survey, metrics=survey_metrics,
+    summary=((Figure("survey", "rms_cross_track_m", "cross-track error RMS", "m"),
+              Figure("survey", "max_cross_track_m", "max", "m"),
+              Figure("survey", "rms_cross_track_nav_m", "as navigation saw it RMS", "m"),
+              Figure("survey", "rms_navigation_error_m", "navigation error RMS", "m"),
+              Figure("survey", "coverage", "coverage", "%"),
+              Figure("survey", "photos", "photos"), Figure("survey", "photos_planned", "of")),),
     reach=_survey_reach,
     pipelines=_frame_pipelines,
     report=("trajectory", "path"), status=(10, 11), photo_camera=_photo_camera,

@@ -175,6 +175,12 @@ _ADAPTER: TypeAdapter = TypeAdapter(Fault)
 CAMERA_FAULTS = ("camera_dropout", "camera_freeze", "camera_corrupt")
 
 
+def fault_model(kind: str) -> type[_Fault]:
+    """The model of a fault kind (its parameters are its fields)."""
+    return next(cls for cls in Fault.__origin__.__args__
+                if cls.model_fields["kind"].annotation.__args__ == (kind,))
+
+
 class FaultError(ValueError):
     """A ``--fault`` that does not parse or validate."""
 
@@ -183,15 +189,24 @@ def parse_fault(text: str) -> dict:
     """``KIND[:key=value,...]`` (values as YAML scalars) → the fault's mapping, validated.
     E.g. ``camera_dropout:start_s=12,duration_s=3`` or ``link_loss:fraction=0.3``."""
     kind, _, rest = text.strip().partition(":")
+    from autopilot.suggest import did_you_mean
+
     kind = kind.strip()
     if kind not in FAULT_KINDS:
-        raise FaultError(f"--fault {text!r}: unknown kind {kind!r} (expected one of "
+        raise FaultError(f"--fault {text!r}: unknown kind {kind!r}"
+                         f"{did_you_mean(kind, FAULT_KINDS)} (expected one of "
                          f"{', '.join(FAULT_KINDS)})")
+    fields = [name for name in fault_model(kind).model_fields if name != "kind"]
     item: dict = {"kind": kind}
     for part in filter(None, (p.strip() for p in rest.split(","))):
         key, sep, value = part.partition("=")
         if not sep or not key.strip():
-            raise FaultError(f"--fault {text!r}: expected KEY=VALUE, got {part!r}")
+            raise FaultError(f"--fault {text!r}: expected KEY=VALUE, got {part!r} ({kind}'s "
+                             f"parameters: {', '.join(fields)})")
+        if key.strip() not in fields:
+            raise FaultError(f"--fault {text!r}: {kind} has no parameter {key.strip()!r}"
+                             f"{did_you_mean(key.strip(), fields)} (its parameters: "
+                             f"{', '.join(fields)})")
         try:
             item[key.strip()] = yaml.safe_load(value) if value.strip() else None
         except yaml.YAMLError:

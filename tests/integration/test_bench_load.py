@@ -14,6 +14,7 @@ import pytest
 from autopilot.bench import load
 
 pytestmark = [
+    pytest.mark.serial,  # busy processes against a real-time flight
     pytest.mark.long,
     pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2, reason="the bench needs two cores"),
 ]

@@ -24,6 +24,8 @@ from autopilot.calibrate import FrameSource, calibrate_frames, parse_board_spec
 from autopilot.cli import EXIT_OK, main
 from drivers.calibration import load_calibration
 
+pytestmark = pytest.mark.serial  # a live RTP video source
+
 BOARD = QUICK_OPTIONS.boards[0]
 
 

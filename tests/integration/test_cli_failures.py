@@ -3,12 +3,15 @@ do, a distinct exit code, never a traceback, and none of the libraries' own chat
 
 from __future__ import annotations
 
+import json
 import os
 import socket
 import subprocess
 import sys
 
 import pytest
+
+pytestmark = pytest.mark.serial  # fixed MAVLink ports, a run's wall time
 
 PORT = 14549  # clear of a running SITL and of the other tests' instances
 
@@ -140,3 +143,33 @@ def test_a_camera_that_never_delivers_a_frame(no_camera_config, tmp_path):
     assert result.returncode == 5
     line = _one_error_line(result)
     assert "no video from the front camera on udp://127.0.0.1:5609 within 3 s" in line
+
+
+def test_an_early_ctrl_c_flew_nothing_and_says_so(tmp_path):
+    """Ctrl-C before anything took off: exit 130 (and only a signal gives 130), "nothing
+    flown", no "forced exit" and no flight time."""
+    import signal
+    import time
+
+    mission = tmp_path / "ground.yaml"
+    mission.write_text("name: ground\nsteps:\n  - standby: {timeout_s: 3000}\n")
+    proc = subprocess.Popen([sys.executable, "-m", "autopilot", "run", "--mission",
+                             str(mission), "--out", str(tmp_path / "run")],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        for line in proc.stderr:  # the run has begun once its first step starts
+            if "step standby started" in line:
+                break
+        time.sleep(0.5)
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=120)
+    finally:
+        proc.kill()
+    assert proc.returncode == 130, err[-2000:]
+    assert "Traceback" not in err
+    assert "forced exit" not in out + err
+    assert "nothing flown" in out, out
+    assert "flew for" not in out
+    summary = json.loads((tmp_path / "run" / "summary.json").read_text())
+    assert summary["signal"] == "SIGINT"
+    assert summary["flown"] is False

@@ -22,6 +22,8 @@ from autopilot.mission import load_mission
 
 from .test_goal_api import Client, _fly_with_client
 
+pytestmark = pytest.mark.serial  # real-time flights, fixed ports
+
 
 def _fly_console(plan, out, script):
     """A flight with the console; Python hooks (a callback and ``async for``) watch it."""

@@ -29,6 +29,7 @@ except ImportError:  # pragma: no cover - the test extra installs it
     sync_playwright = None
 
 pytestmark = [
+    pytest.mark.serial,  # a real-time flight watched in Chromium
     pytest.mark.skipif(CHROMIUM is None, reason="needs Chromium (Debian: apt install chromium)"),
     pytest.mark.skipif(sync_playwright is None,
                        reason="needs Playwright (pip install -e '.[test]')"),

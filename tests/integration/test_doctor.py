@@ -14,6 +14,8 @@ from autopilot.doctor import run_doctor
 from autopilot.mission import load_mission
 from autopilot.sim_server import serve
 
+pytestmark = pytest.mark.serial  # fixed video ports, rates on the wall clock
+
 INSTANCE = 8
 VIDEO = "udp://127.0.0.1:5608"
 CONNECT = f"udpin://127.0.0.1:{14540 + INSTANCE}"

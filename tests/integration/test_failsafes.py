@@ -23,6 +23,8 @@ from drivers.sim.driver import SimDriver
 
 from .simtools import fly_short
 
+pytestmark = pytest.mark.serial  # real-time flights
+
 _fly = fly_short
 
 

@@ -52,7 +52,7 @@ def test_parse_fault_and_override():
         'scenario.faults=[{"kind": "link_loss", "fraction": 0.3}]'
     for bad, said in (("nope", "unknown kind 'nope'"), ("link_loss:fraction=2", "fraction"),
                       ("ekf_glitch:magnitude", "expected KEY=VALUE"),
-                      ("wind_step:speed=3", "speed: Extra inputs")):
+                      ("wind_step:speed=3", "no parameter 'speed' .did you mean 'speed_m_s'.")):
         with pytest.raises(FaultError, match=said):
             parse_fault(bad)
 

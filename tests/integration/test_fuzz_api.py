@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import time
 
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from websockets.sync.client import connect
@@ -17,6 +18,8 @@ from autopilot.mission import load_mission
 
 from ..unit.test_finite_numbers import EXAMPLES, _numeric_leaves, _replaced
 from .test_goal_api import Client, _fly_with_client
+
+pytestmark = pytest.mark.serial  # a real-time flight's goal API
 
 json_values = st.recursive(
     st.one_of(st.none(), st.booleans(), st.integers(min_value=-(10 ** 20), max_value=10 ** 20),

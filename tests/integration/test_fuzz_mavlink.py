@@ -21,6 +21,8 @@ from drivers.mavlink.pymavlink_driver import PymavlinkDriver
 
 from .mavtools import CLIENT_URL, INSTANCE, collected, served
 
+pytestmark = pytest.mark.serial  # the simulator's MAVLink face in real time
+
 _MAV = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
 _VALID = [
     _MAV.heartbeat_encode(2, 12, 129, 0x00060000, 4).pack(_MAV),

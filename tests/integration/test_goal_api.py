@@ -21,6 +21,8 @@ from autopilot.goals import GoalManager
 from autopilot.mission import load_mission
 from autopilot.run import fly
 
+pytestmark = pytest.mark.serial  # real-time flights with the goal API
+
 
 class Client:
     def __init__(self, port: int, token: str | None = None) -> None:
@@ -154,6 +156,7 @@ def test_goal_api_flow(tmp_path):
             "orbit": {"center_m": [6, 0], "radius_m": 3, "altitude_m": 4, "images": 0,
                       "laps": 2}})
         assert code == 202, body
+        assert body["warnings"] == []  # (no photos: nothing to warn of)
         goal = body["goal_id"]
         code, body = c.call("POST", "/api/goals", {"goto": {"position_m": [0, 0, 3]}})
         assert code == 409

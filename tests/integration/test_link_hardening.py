@@ -26,6 +26,8 @@ from drivers.mavlink.signing import Signing
 
 from .mavtools import CLIENT_URL, INSTANCE, collected, served
 
+pytestmark = pytest.mark.serial  # the simulator's MAVLink face in real time
+
 CLIENT_PORT = 14540 + INSTANCE
 DRIVERS = [PymavlinkDriver, MavsdkDriver]
 

@@ -21,6 +21,8 @@ from drivers.mavlink.pymavlink_driver import PymavlinkDriver
 
 from .mavtools import served
 
+pytestmark = pytest.mark.serial  # MAVLink links on fixed ports
+
 DRIVERS = [PymavlinkDriver, MavsdkDriver]
 TCP_PORT = 15760
 

@@ -20,6 +20,8 @@ from drivers.mavlink.pymavlink_driver import PymavlinkDriver
 
 from .mavtools import CLIENT_URL, collected, served
 
+pytestmark = pytest.mark.serial  # the simulator's MAVLink face in real time
+
 
 async def _fly_offboard(driver) -> None:
     await wait_for_state(driver, lambda s: s.health.armable, 30.0, "armable")

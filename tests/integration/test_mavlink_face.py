@@ -20,6 +20,8 @@ from drivers.mavlink import px4
 
 from .mavtools import INSTANCE, served
 
+pytestmark = pytest.mark.serial  # the simulator's MAVLink face in real time
+
 
 async def _first(gen, predicate, what: str, timeout_s: float = 30.0):
     async with asyncio.timeout(timeout_s):

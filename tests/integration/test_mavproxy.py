@@ -24,6 +24,8 @@ from drivers.sim.flight.navigator import MissionState
 from ..conftest import sim_with
 from .mavtools import INSTANCE, LOSSY_LINK, served
 
+pytestmark = pytest.mark.serial  # MAVProxy against the simulator in real time
+
 MAVPROXY = shutil.which("mavproxy.py")
 GCS_PORT = 14557 + INSTANCE  # where mavtools' face sends its ground-station link
 

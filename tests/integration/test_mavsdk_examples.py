@@ -24,6 +24,8 @@ from drivers.base import FlightMode
 from ..conftest import sim_with
 from .mavtools import CLIENT_URL, LOSSY_LINK, served
 
+pytestmark = pytest.mark.serial  # MAVSDK's examples against the simulator in real time
+
 EXAMPLES = Path(__file__).parent / "mavsdk_examples"
 
 
@@ -77,9 +79,8 @@ def _check(code: int, out: str, *expected: str) -> None:
 
 
 @pytest.mark.parametrize("faults", [
-    # (long: the simulator's face flying MAVSDK through connect, arm, takeoff, offboard, land
-    # and disarm is in the default run, test_mavlink_face.py)
-    pytest.param([], id="clean", marks=pytest.mark.long),
+    # MAVSDK's own example as a user runs it (in CI: the short examples fly there)
+    pytest.param([], id="clean"),
     # MAVSDK over a link that loses 10 % each way, duplicates, reorders and delays (the
     # simulator's link_loss fault on its face): its retransmissions carry the example through
     pytest.param(LOSSY_LINK, id="lossy-link", marks=pytest.mark.long)])
@@ -162,7 +163,6 @@ def test_fly_mission_with_camera_pause_continue_and_rtl(sim_config):
     asyncio.run(main())
 
 
-@pytest.mark.long
 def test_offboard_velocity_ned(no_camera_config):
     async def main():
         async with served(no_camera_config) as (vehicle, _face):
@@ -187,7 +187,6 @@ def test_offboard_velocity_ned(no_camera_config):
     asyncio.run(main())
 
 
-@pytest.mark.long
 def test_offboard_position_ned(no_camera_config):
     async def main():
         async with served(no_camera_config) as (vehicle, _face):

@@ -18,6 +18,8 @@ from drivers.mavlink.pymavlink_driver import PymavlinkDriver
 
 from .mavtools import CLIENT_URL, served
 
+pytestmark = pytest.mark.serial  # the simulator's MAVLink face in real time
+
 
 async def _up(driver, altitude_m: float) -> np.ndarray:
     await wait_for_state(driver, lambda s: s.health.armable, 30.0, "armable")

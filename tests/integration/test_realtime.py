@@ -10,6 +10,8 @@ import pytest
 
 from .simtools import run, simulator
 
+pytestmark = pytest.mark.serial  # real-time flights
+
 
 def test_realtime_telemetry_and_frames(sim_config):
     async def main():

@@ -8,12 +8,15 @@ import contextlib
 import math
 
 import numpy as np
+import pytest
 
 from autopilot.mission import load_mission
 from autopilot.scenario import build_world
 from drivers.mavlink.pymavlink_driver import PymavlinkDriver
 
 from .mavtools import CLIENT_URL, served
+
+pytestmark = pytest.mark.serial  # the simulator's MAVLink face in real time
 
 
 def test_the_rovers_reports_reach_the_driver_as_a_second_system():

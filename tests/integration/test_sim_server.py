@@ -4,8 +4,12 @@ from __future__ import annotations
 
 import asyncio
 
+import pytest
+
 from autopilot.config import load_config
 from autopilot.sim_server import READY, serve
+
+pytestmark = pytest.mark.serial  # 'autopilot sim' in real time
 
 INSTANCE = 11  # ports clear of the other tests' simulators
 

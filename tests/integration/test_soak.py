@@ -14,7 +14,7 @@ def test_missions_back_to_back_leave_nothing_behind():
     assert len(result["runs"]) == 2  # the baseline after the first, the end after the second
     assert all(r["outcome"] == "completed" for r in result["runs"])
     assert result["tasks_ok"]
-    assert result["threads_ok"]
+    assert result["threads_ok"], result["new_threads"]
     assert result["fds_ok"]
     assert result["end"]["tasks"] == 0
     # every run measured its event loop's lag

@@ -19,6 +19,8 @@ import pytest
 from drivers.base import CameraInfo, CameraIntrinsics
 from drivers.video import TimeSource, VideoSender, VideoSource
 
+pytestmark = pytest.mark.serial  # RTP video on the wall clock
+
 W, H = 320, 240
 RATE_HZ = 30.0
 

@@ -10,9 +10,12 @@ import socket
 import time
 from types import SimpleNamespace
 
+import pytest
 from websockets.sync.client import connect
 
 from autopilot.api import ApiServer, ConnectionLimits
+
+pytestmark = pytest.mark.serial  # the API's timeouts on the wall clock
 
 LIMITS = ConnectionLimits(max_connections=24, max_per_client=12, header_timeout_s=3.0)
 

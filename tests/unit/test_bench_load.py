@@ -14,9 +14,11 @@ from pathlib import Path
 
 import pytest
 
-from autopilot import cli
+from autopilot import cli, process
 from autopilot.bench import load
 from autopilot.flightlog import records as ch
+
+pytestmark = pytest.mark.serial  # busy processes, the wall clock
 
 CORE = max(os.sched_getaffinity(0))  # (one this test process may use)
 
@@ -169,7 +171,7 @@ def test_hogs_are_parsed_and_one_core_is_refused(monkeypatch, capsys):
     with pytest.raises(load.LoadBenchError, match="needs two cores"):
         load.pick_cores([5])
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0})
-    monkeypatch.setattr(cli, "configure_for_flight", lambda: None)  # (this process's settings)
+    monkeypatch.setattr(process, "configure_for_flight", lambda: None)  # (this process's own)
     assert cli.main(["bench", "load", "--hogs", "0"]) == cli.EXIT_USAGE
     assert "needs two cores" in capsys.readouterr().err
 

@@ -5,6 +5,8 @@ import pytest
 from drivers.clock import LockstepClock
 from drivers.slots import Broadcast, LatestSlot, SlotClosed
 
+pytestmark = pytest.mark.serial  # the wall clock
+
 
 def test_latest_slot_keeps_newest_and_counts_drops():
     async def main():

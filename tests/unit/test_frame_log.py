@@ -12,6 +12,8 @@ from autopilot.flightlog.log import FlightLog, read_images, read_log
 from autopilot.framelog import FrameSampler, encode_jpeg
 from tests.factories import front_camera, vehicle_state
 
+pytestmark = pytest.mark.serial  # the log writer's timing
+
 
 @pytest.mark.parametrize(("rate_hz", "expected"), [(30.0, 30), (60.0, 30), (10.0, 10),
                                                (7.0, 7), (0.0, 0)])

@@ -12,6 +12,8 @@ import pytest
 
 from autopilot.hooks import Event, EventHub
 
+pytestmark = pytest.mark.serial  # the event loop's lag on the wall clock
+
 
 def test_hook_names_follow_seed_000():
     assert Event("status", "hover", 1.0).hook == "on_status_hover"

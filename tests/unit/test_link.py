@@ -14,6 +14,8 @@ from pymavlink.dialects.v20 import common as mavlink
 from drivers.mavlink.link import MAX_PENDING_B, Endpoint, MavlinkLink, UrlError
 from drivers.mavlink.signing import Signing, refresh, signing_timestamp
 
+pytestmark = pytest.mark.serial  # MAVLink links on fixed ports
+
 KEY = Signing(bytes(range(32)))
 
 

@@ -25,6 +25,8 @@ from drivers.video import (
     split_nal_units,
 )
 
+pytestmark = pytest.mark.serial  # RTP on fixed ports
+
 SPS = bytes([0x67, 1, 2, 3])
 PPS = bytes([0x68, 4, 5])
 IDR = bytes([0x65]) + bytes(range(256)) * 20  # 5 kB: fragmented

@@ -25,6 +25,8 @@ from drivers.video import (
     encode_source_description,
 )
 
+pytestmark = pytest.mark.serial  # video timing on the wall clock
+
 WALL_MINUS_LOCAL_S = 1_763_700_000.123  # time.time() − the local monotonic clock
 RATE_HZ = 30.0
 SSRC = 0x5EED_CAFE
