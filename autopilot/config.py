@@ -42,11 +42,13 @@ HsvTriple = tuple[Annotated[int, Field(ge=0, le=180)], Annotated[int, Field(ge=0
                   Annotated[int, Field(ge=0, le=255)]]
 
 
-class _Model(BaseModel):
+class ConfigModel(BaseModel):
+    """A section of the configuration: unknown keys refused, immutable, numbers finite."""
+
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
 
-class RuntimeConfig(_Model):
+class RuntimeConfig(ConfigModel):
     control_rate_hz: Annotated[float, Field(ge=5, le=200)]  # at least; also on every estimate
     #: nothing new (a newer position or attitude) received from the vehicle for this long,
     #: judged on our clock at receipt: the vehicle is silent; no more motion setpoints, the
@@ -82,7 +84,7 @@ class RuntimeConfig(_Model):
         return self
 
 
-class BallPerceptionConfig(_Model):
+class BallPerceptionConfig(ConfigModel):
     camera: str
     color: ColorName
     #: Explicit HSV ranges ([[h, s, v], [h, s, v]] pairs) instead of the colour's preset.
@@ -97,7 +99,7 @@ class BallPerceptionConfig(_Model):
     min_solidity: Annotated[float, Field(ge=0, le=1)] = 0.85  # blob area / its convex hull's
 
 
-class MarkerPerceptionConfig(_Model):
+class MarkerPerceptionConfig(ConfigModel):
     """The followed fiducial marker (seed 002: ArUco id 36, 16 cm) and how it is found."""
 
     camera: str
@@ -113,7 +115,7 @@ class MarkerPerceptionConfig(_Model):
     @field_validator("dictionary")
     @classmethod
     def _known_dictionary(cls, name: str, info: ValidationInfo) -> str:
-        from autopilot.perception.marker import apriltag_family_name, aruco_dictionary_name
+        from drivers.markers import apriltag_family_name, aruco_dictionary_name
 
         if info.data.get("backend") == "apriltag":
             apriltag_family_name(name)
@@ -122,7 +124,7 @@ class MarkerPerceptionConfig(_Model):
         return name
 
 
-class ImagePerceptionConfig(_Model):
+class ImagePerceptionConfig(ConfigModel):
     """How a known flat image (hover_image, seed 000) is found; which image, and its size, are
     the mission step's."""
 
@@ -140,7 +142,7 @@ class ImagePerceptionConfig(_Model):
     detector: Literal["ours", "seed000"] = "ours"
 
 
-class PadPerceptionConfig(_Model):
+class PadPerceptionConfig(ConfigModel):
     """How a landing pad (land_pad, seed 001) is found; its kind, colour and size are the
     mission step's."""
 
@@ -163,7 +165,7 @@ class PadPerceptionConfig(_Model):
     @field_validator("dictionary")
     @classmethod
     def _known_dictionary(cls, name: str, info: ValidationInfo) -> str:
-        from autopilot.perception.marker import apriltag_family_name, aruco_dictionary_name
+        from drivers.markers import apriltag_family_name, aruco_dictionary_name
 
         if info.data.get("backend") == "apriltag":
             apriltag_family_name(name)
@@ -171,14 +173,14 @@ class PadPerceptionConfig(_Model):
         return name
 
 
-class PerceptionConfig(_Model):
+class PerceptionConfig(ConfigModel):
     ball: BallPerceptionConfig
     marker: MarkerPerceptionConfig
     image: ImagePerceptionConfig
     pad: PadPerceptionConfig
 
 
-class ImageEstimationConfig(_Model):
+class ImageEstimationConfig(ConfigModel):
     #: an image lies still on the ground: how hard it may seem to move, and how fast at first
     accel_noise_m_s2: Positive = 0.3
     initial_velocity_std_m_s: Positive = 0.3
@@ -195,7 +197,7 @@ class ImageEstimationConfig(_Model):
     mount_max_tilt_deg: Annotated[float, Field(gt=0.0, le=30.0)] = 5.0
 
 
-class TargetEstimationConfig(_Model):
+class TargetEstimationConfig(ConfigModel):
     accel_noise_m_s2: Positive
     gate_chi2: Positive
     stale_after_s: Positive
@@ -208,7 +210,7 @@ class TargetEstimationConfig(_Model):
     confirm_after: Annotated[int, Field(ge=1, le=60)]
 
 
-class NavigationUncertaintyConfig(_Model):
+class NavigationUncertaintyConfig(ConfigModel):
     """The vehicle's own pose errors (slowly varying), which every target placed in the world
     with that pose inherits."""
 
@@ -225,7 +227,7 @@ class NavigationUncertaintyConfig(_Model):
     yaw_std_deg: NonNegative
 
 
-class MarkerEstimationConfig(_Model):
+class MarkerEstimationConfig(ConfigModel):
     """Measurement noise of marker detections (the motion model is ``estimation.target``'s)."""
 
     pixel_noise_px: Positive  # bearing noise of the marker's centre
@@ -235,7 +237,7 @@ class MarkerEstimationConfig(_Model):
     heading_accel_noise_deg_s2: Positive  # how hard the face may turn
 
 
-class PadEstimationConfig(_Model):
+class PadEstimationConfig(ConfigModel):
     accel_noise_m_s2: Positive  # how hard the pad may move (a pad on the ground: hardly)
     initial_velocity_std_m_s: Positive = 0.5  # how fast it may be moving when first seen
     position_noise_px: Positive  # bearing noise of the pad's centre
@@ -244,7 +246,7 @@ class PadEstimationConfig(_Model):
     heading_noise_deg: Positive  # marker pads: of the direction of its top, one detection
 
 
-class RelativeEstimationConfig(_Model):
+class RelativeEstimationConfig(ConfigModel):
     """The relative-state filter of land_on_rover (autopilot/estimation/relative.py): the drone
     relative to the rover's deck, fused from UWB ranges, the deck's tag, the rangefinder, the
     rover's own reports and the drone's velocity."""
@@ -273,7 +275,7 @@ class RelativeEstimationConfig(_Model):
     max_extrapolation_s: Positive  # the estimate is not predicted further than this
 
 
-class Seed004EstimationConfig(_Model):
+class Seed004EstimationConfig(ConfigModel):
     """Seed 004's fused filter (autopilot/estimation/seed004.py), the baseline of
     ``autopilot bench landing --strategy seed004``: its R values (each a single diagonal
     value), its timers, and what the seed does not give (Q, R_px4, R_compass, R_range)."""
@@ -292,7 +294,7 @@ class Seed004EstimationConfig(_Model):
     initial_velocity_std_m_s: Positive
 
 
-class EstimationConfig(_Model):
+class EstimationConfig(ConfigModel):
     target: TargetEstimationConfig
     marker: MarkerEstimationConfig
     image: ImageEstimationConfig
@@ -306,7 +308,7 @@ class EstimationConfig(_Model):
     camera_mount_std_deg: Annotated[float, Field(ge=0, le=10)]
 
 
-class FollowControlConfig(_Model):
+class FollowControlConfig(ConfigModel):
     mode: Literal["yaw", "lateral"]
     standoff_m: Annotated[float, Field(gt=0.3, le=20)]
     position_gain: Positive
@@ -328,7 +330,7 @@ class FollowControlConfig(_Model):
     lost_timeout_s: Positive
 
 
-class TrajectoryControlConfig(_Model):
+class TrajectoryControlConfig(ConfigModel):
     """Limits of the time-parametrised trajectories (goto, orbit, survey)."""
 
     max_speed_m_s: Annotated[float, Field(gt=0, le=20)]  # a step's speed_m_s above this: refused
@@ -353,7 +355,7 @@ class TrajectoryControlConfig(_Model):
     max_photos: Annotated[int, Field(ge=0, le=100_000)] = 2000  # one orbit's or survey's
 
 
-class PhotoConfig(_Model):
+class PhotoConfig(ConfigModel):
     """Photos of the offboard steps (orbit, survey): what the JPEGs' EXIF says of the camera."""
 
     camera: str  # default camera for photos (a step may name another)
@@ -363,7 +365,7 @@ class PhotoConfig(_Model):
     sensor_width_mm: Annotated[float, Field(gt=0, le=100)]  # focal length in mm = fx × this / width
 
 
-class Seed004LandingConfig(_Model):
+class Seed004LandingConfig(ConfigModel):
     """Seed 004's landing action's gain-scheduled PID (autopilot/behaviors/land_on_rover.py),
     the baseline of ``autopilot bench landing --strategy seed004``."""
 
@@ -376,23 +378,23 @@ class Seed004LandingConfig(_Model):
     max_speed_m_s: Positive
 
 
-class ControlConfig(_Model):
+class ControlConfig(ConfigModel):
     follow: FollowControlConfig
     trajectory: TrajectoryControlConfig
     seed004_landing: Seed004LandingConfig
 
 
-class FrameLogConfig(_Model):
+class FrameLogConfig(ConfigModel):
     sim_rate_hz: NonNegative  # camera frames logged per second with the simulator; 0: none
     vehicle_rate_hz: NonNegative  # ... with MAVLink drivers (a companion computer)
     jpeg_quality: Annotated[int, Field(ge=10, le=100)]
 
 
-class LogConfig(_Model):
+class LogConfig(ConfigModel):
     frames: FrameLogConfig
 
 
-class LinkConfig(_Model):
+class LinkConfig(ConfigModel):
     """How the MAVLink drivers reach a vehicle (``--connect``); its cameras are in
     ``vehicle.cameras``."""
 
@@ -418,13 +420,13 @@ class VehicleCameraConfig(CameraConfig):
     stream_latency_s: Annotated[float, Field(ge=0, lt=2)] = 0.0
 
 
-class VehicleSetup(_Model):
+class VehicleSetup(ConfigModel):
     """The vehicle's cameras (``vehicle.cameras``), shared by the simulator and MAVLink drivers."""
 
     cameras: dict[str, VehicleCameraConfig]
 
 
-class DeckTagConfig(_Model):
+class DeckTagConfig(ConfigModel):
     """The tag printed on the rover's deck: the nested marker pad (five markers of one
     dictionary — AprilTag families included — the small one in the centre), its top towards
     the rover's front."""
@@ -442,7 +444,7 @@ class DeckTagConfig(_Model):
         return self
 
 
-class RoverUwbConfig(_Model):
+class RoverUwbConfig(ConfigModel):
     """Where the UWB anchors are on the rover (FRD from its reference point, the ground under
     the deck's centre) and the tag on the drone (FRD from its body origin)."""
 
@@ -451,7 +453,7 @@ class RoverUwbConfig(_Model):
     tag_frd_m: tuple[float, float, float]
 
 
-class RoverConfig(_Model):
+class RoverConfig(ConfigModel):
     """The rover land_on_rover lands on, as the autopilot knows it (a scenario's rover is built
     to match unless it says otherwise)."""
 
@@ -473,7 +475,7 @@ class RoverConfig(_Model):
 KeyName = Annotated[str, Field(min_length=1, max_length=12)]
 
 
-class ConsoleKeysConfig(_Model):
+class ConsoleKeysConfig(ConfigModel):
     """The console's keys (``KeyboardEvent.key`` names, case-insensitive): seed 000's."""
 
     forward: KeyName = "w"
@@ -500,7 +502,7 @@ class ConsoleKeysConfig(_Model):
         return self
 
 
-class GeofenceConfig(_Model):
+class GeofenceConfig(ConfigModel):
     """The autopilot's own fence, checked on every setpoint and on every goto, orbit and
     survey before it flies (0 / null: that limit is off; on by default)."""
 
@@ -522,7 +524,7 @@ class GeofenceConfig(_Model):
         return value
 
 
-class BatteryReserveConfig(_Model):
+class BatteryReserveConfig(ConfigModel):
     """The battery reserve for the way home (autopilot/control/battery.py)."""
 
     reserve_fraction: Annotated[float, Field(ge=0, le=0.9)] = 0.0  # 0: off
@@ -538,12 +540,12 @@ class BatteryReserveConfig(_Model):
     climb_m_s: Annotated[float, Field(gt=0, le=20)] = 3.0
 
 
-class FailsafeConfig(_Model):
+class FailsafeConfig(ConfigModel):
     geofence: GeofenceConfig = GeofenceConfig()
     battery: BatteryReserveConfig = BatteryReserveConfig()
 
 
-class ConsoleConfig(_Model):
+class ConsoleConfig(ConfigModel):
     """The operator console (``--console HOST:PORT``): video, values, keyboard flying."""
 
     video_fps: Annotated[float, Field(gt=0, le=30)] = 15.0  # MJPEG rate (a viewer may ask less)
@@ -560,7 +562,7 @@ class ConsoleConfig(_Model):
     takeoff_altitude_m: Annotated[float, Field(ge=1, le=50)] = 3.0  # T
 
 
-class AppConfig(_Model):
+class AppConfig(ConfigModel):
     """The whole of ``config.yaml``."""
 
     driver: Literal["sim", "mavsdk", "pymavlink"]
@@ -705,17 +707,17 @@ def _walk(node: yaml.Node, path: KeyPath, source: str,
           stack: tuple[int, ...], budget: list[int]) -> None:
     line = node.start_mark.line + 1
     if id(node) in stack:
-        problems.append(Problem(source, line, _dotted(path), "an alias used inside its own "
+        problems.append(Problem(source, line, dotted_key(path), "an alias used inside its own "
                                 "anchor (the value would contain itself)"))
         return
     if len(stack) >= MAX_YAML_DEPTH:
-        problems.append(Problem(source, line, _dotted(path),
+        problems.append(Problem(source, line, dotted_key(path),
                                 f"nested more than {MAX_YAML_DEPTH} levels deep"))
         return
     budget[0] -= 1
     if budget[0] < 0:
         if budget[0] == -1:
-            problems.append(Problem(source, line, _dotted(path), f"more than {MAX_YAML_NODES} "
+            problems.append(Problem(source, line, dotted_key(path), f"more than {MAX_YAML_NODES} "
                                     "values (aliases expanding?)"))
         return
     inner = (*stack, id(node))
@@ -723,14 +725,14 @@ def _walk(node: yaml.Node, path: KeyPath, source: str,
         seen: set[str] = set()
         for key_node, value_node in node.value:
             if not isinstance(key_node, yaml.ScalarNode):
-                problems.append(Problem(source, key_node.start_mark.line + 1, _dotted(path),
+                problems.append(Problem(source, key_node.start_mark.line + 1, dotted_key(path),
                                         "a key must be a plain name, not a list or mapping"))
                 continue
             key = key_node.value
             child = (*path, key)
             key_line = key_node.start_mark.line + 1
             if key in seen:
-                problems.append(Problem(source, key_line, _dotted(child), "duplicate key"))
+                problems.append(Problem(source, key_line, dotted_key(child), "duplicate key"))
             seen.add(key)
             lines[child] = (source, key_line)
             _walk(value_node, child, source, lines, problems, inner, budget)
@@ -745,7 +747,8 @@ def _walk(node: yaml.Node, path: KeyPath, source: str,
                 return
 
 
-def _dotted(path: Iterable[str | int]) -> str:
+def dotted_key(path: Iterable[str | int]) -> str:
+    """A key path as the messages write it: ``steps[1].follow_ball.duration_s``."""
     out = ""
     for part in path:
         out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
@@ -778,11 +781,11 @@ def apply_overrides(located: Located, overrides: Iterable[str]) -> Located:
             last = depth == len(parts) - 1
             if isinstance(target, list) and isinstance(part, int):
                 if part >= len(target):
-                    problems.append(Problem("--set", None, _dotted(parts[:depth + 1]),
+                    problems.append(Problem("--set", None, dotted_key(parts[:depth + 1]),
                                             f"no item {part} (the list has {len(target)})"))
                     break
             elif not isinstance(target, dict) or isinstance(part, int):
-                problems.append(Problem("--set", None, _dotted(parts[:depth]),
+                problems.append(Problem("--set", None, dotted_key(parts[:depth]),
                                         "is not a section; cannot set a key inside it"))
                 break
             if last:
@@ -816,12 +819,13 @@ def validate(model: type[BaseModel], located: Located) -> Any:
             if err["type"] == "extra_forbidden":
                 message = "unknown key" + unknown_key_hint(model, loc)
             elif err["type"] == "missing":
-                message = "missing required key"
+                message = (f"missing item {loc[-1]}: too few items" if loc
+                           and isinstance(loc[-1], int) else "missing required key")
             elif moved:
                 message = err["msg"]
             else:
                 message = f"{err['msg']} (got {_short(err.get('input'))})"
-            problems.append(Problem(source, line, _dotted(loc), message))
+            problems.append(Problem(source, line, dotted_key(loc), message))
         raise ConfigError(problems) from None
 
 

@@ -43,12 +43,12 @@ from autopilot.config import (
     AppConfig,
     ColorName,
     ConfigError,
+    ConfigModel,
     Located,
     NonNegative,
     Problem,
-    _dotted,
-    _Model,
     apply_overrides,
+    dotted_key,
     load_yaml,
     merge_located,
     unknown_key_hint,
@@ -71,7 +71,7 @@ MISSION_KEYS = ("name", "description", "steps", "fallback", "scenario", "config"
 # ------------------------------------------------------------------------------------------
 
 
-class BallScenario(_Model):
+class BallScenario(ConfigModel):
     path: Literal["static", "circle", "figure8", "lissajous", "random_walk"] = "circle"
     speed_mps: Annotated[float, Field(ge=0, le=15)] = 1.0
     diameter_m: Annotated[float, Field(gt=0.02, le=2)] = 0.2
@@ -84,7 +84,7 @@ class BallScenario(_Model):
     size_m: Annotated[float, Field(gt=0.5, le=100)] = 8.0  # extent of the path
 
 
-class MarkerScenario(_Model):
+class MarkerScenario(ConfigModel):
     """A fiducial marker on a board (seed 002: ArUco id 36, 16 cm), moving like the ball."""
 
     dictionary: str = "DICT_ARUCO_ORIGINAL"  # OpenCV dictionary or AprilTag family
@@ -105,12 +105,12 @@ class MarkerScenario(_Model):
     yaw_deg: float | None = None
 
 
-class WindScenario(_Model):
+class WindScenario(ConfigModel):
     gust_mps: NonNegative = 0.0
     steady_ned_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
 
-class ImageScenario(_Model):
+class ImageScenario(ConfigModel):
     """A printed image lying on the ground (hover_image), on gravel and grass."""
 
     file: str = "default"  # "default": the generated target; else an image file
@@ -119,7 +119,7 @@ class ImageScenario(_Model):
     yaw_deg: Annotated[float, Field(ge=-360, le=360)] = 0.0  # heading of its top
 
 
-class PadScenario(_Model):
+class PadScenario(ConfigModel):
     """A landing pad on the ground (land_pad): a coloured circle (``size_m`` across, on a white
     square a quarter wider) or the nested marker pad (``size_m`` square; its markers' ``ids``:
     the small centre one first)."""
@@ -141,7 +141,7 @@ class PadScenario(_Model):
         return self
 
 
-class DeckTagScenario(_Model):
+class DeckTagScenario(ConfigModel):
     """The tag on the rover's deck (the nested marker pad)."""
 
     kind: Literal["markers"] = "markers"
@@ -157,7 +157,7 @@ class DeckTagScenario(_Model):
         return self
 
 
-class RoverScenario(_Model):
+class RoverScenario(ConfigModel):
     """A rover driving a path (land_on_rover), its deck carrying the tag. Deck, tag and UWB
     anchors default to the configuration's ``rover`` section (what the autopilot knows)."""
 
@@ -173,7 +173,7 @@ class RoverScenario(_Model):
     tag: DeckTagScenario | None = None
 
 
-class UwbScenario(_Model):
+class UwbScenario(ConfigModel):
     """The rover's UWB anchors (default: the configuration's ``rover.uwb.anchors_frd_m``) and
     the ranging's quality (default: ``sim.uwb``)."""
 
@@ -183,7 +183,7 @@ class UwbScenario(_Model):
     nlos_fraction: Annotated[float, Field(ge=0, le=1)] | None = None
 
 
-class Scenario(_Model):
+class Scenario(ConfigModel):
     seed: Annotated[int, Field(ge=0)] = 0
     ball: BallScenario | None = BallScenario()  # null: no ball
     distractors: Annotated[int, Field(ge=0, le=30)] = 0  # orange-ish objects near the ball
@@ -216,7 +216,7 @@ class Scenario(_Model):
     @model_validator(mode="after")
     def _marker_dictionary(self) -> Scenario:
         if self.marker is not None:
-            from autopilot.perception.marker import aruco_dictionary_name
+            from drivers.markers import aruco_dictionary_name
 
             try:
                 aruco_dictionary_name(self.marker.dictionary)
@@ -238,7 +238,7 @@ class Scenario(_Model):
         return self
 
 
-class Mission(_Model):
+class Mission(ConfigModel):
     name: str
     description: str = ""
     steps: Annotated[list[dict[str, Any]], Field(min_length=1)]
@@ -400,14 +400,14 @@ def _validate_steps(raw_steps: list[dict[str, Any]], located: Located) -> tuple[
         where = ("steps", i)
         if len(raw) != 1:
             source, line = located.locate(where)
-            problems.append(Problem(source, line, _dotted(where),
+            problems.append(Problem(source, line, dotted_key(where),
                                     "a step is one behaviour name with its parameters, e.g. "
                                     "'- takeoff: {altitude_m: 2}'"))
             continue
         (name, params), = raw.items()
         if name not in STEP_KINDS:
             source, line = located.locate((*where, name))
-            problems.append(Problem(source, line, _dotted((*where, name)),
+            problems.append(Problem(source, line, dotted_key((*where, name)),
                                     f"unknown step kind{did_you_mean(name, STEP_KINDS)} "
                                     f"(known: {', '.join(STEP_KINDS)})"))
             continue
@@ -421,7 +421,7 @@ def _validate_steps(raw_steps: list[dict[str, Any]], located: Located) -> tuple[
                                STEP_KINDS[name].params, err["loc"]),
                            "missing": "missing required key"}.get(
                     err["type"], f"{err['msg']} (got {err.get('input')!r})")
-                problems.append(Problem(source, line, _dotted(loc), message))
+                problems.append(Problem(source, line, dotted_key(loc), message))
     if problems:
         raise ConfigError(problems)
     return tuple(steps)

@@ -63,7 +63,7 @@ def fitted_calibration(name: str, sim: SimConfig) -> Path:
     if path.is_file():
         return path
     from autopilot.bench.calibration import BenchOptions, fit_camera
-    from autopilot.calibrate import parse_board_spec, write_result
+    from autopilot.calibration import parse_board_spec, write_result
 
     log.warning("fitting the %s camera's calibration on simulated board views (once; cached "
                 "in %s)", name, path.parent)

@@ -11,7 +11,7 @@ may be partly outside it, a chessboard must be whole), at a chosen distance and 
 50°, any direction) and camera roll, moving slightly as a hand-held or hovering camera does.
 Every tenth view is taken while the vehicle turns fast (motion blur of several pixels): the
 view selection should leave those out. The rendered frames go through
-:func:`autopilot.calibrate.calibrate_frames` exactly as an image folder's would.
+:func:`autopilot.calibration.calibrate_frames` exactly as an image folder's would.
 
 Reported per board and, as the headline, the worse of the boards: ``focal_error_pct`` (the
 larger of fx's and fy's relative errors; both, and their mean, are given too),
@@ -34,7 +34,7 @@ import cv2
 import numpy as np
 
 from autopilot.bench import perception
-from autopilot.calibrate import (
+from autopilot.calibration import (
     BoardSpec,
     CalibrationOptions,
     CalibrationResult,

@@ -19,13 +19,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from autopilot.bench.perception import (
-    BenchOptions,
-    DetectorBench,
-    _num,
-    _percentile,
-    register,
-)
+from autopilot.bench.detectors import BenchOptions, DetectorBench, num, percentile, register
 from autopilot.config import AppConfig
 from drivers.geometry import quat_from_euler, quat_to_matrix
 from drivers.sim.scenario import FeatureGround, GroundImage
@@ -124,11 +118,11 @@ def _stats(samples: list) -> dict:
     return {
         "frames": len(samples),
         "detection_rate": len(found) / len(samples) if samples else None,
-        "position_error_m_p50": _percentile([s[1] for s in found], 50),
-        "position_error_m_p95": _percentile([s[1] for s in found], 95),
-        "lateral_error_m_p50": _percentile([s[2] for s in found], 50),
-        "lateral_error_m_p95": _percentile([s[2] for s in found], 95),
-        "time_per_frame_ms_p50": _percentile([s[3] for s in samples], 50),
+        "position_error_m_p50": percentile([s[1] for s in found], 50),
+        "position_error_m_p95": percentile([s[1] for s in found], 95),
+        "lateral_error_m_p50": percentile([s[2] for s in found], 50),
+        "lateral_error_m_p95": percentile([s[2] for s in found], 95),
+        "time_per_frame_ms_p50": percentile([s[3] for s in samples], 50),
     }
 
 
@@ -176,13 +170,13 @@ def _table(title: str, section: dict) -> list[str]:
                       for k in ("position_error_m_p50", "lateral_error_m_p50")]
             lines.append(
                 f"  {f'{h:g} m {label}':<{width}}{s['frames']:>7}"
-                f"{_num(s['detection_rate'], '.2f'):>7}"
+                f"{num(s['detection_rate'], '.2f'):>7}"
                 f"{_mm(s['position_error_m_p50']):>10}"
                 f"{_mm(s['position_error_m_p95']):>7}"
                 f"{_mm(s['lateral_error_m_p50']):>12}"
                 f"{_mm(s['lateral_error_m_p95']):>7}"
-                f"{_num(s['time_per_frame_ms_p50'], '.1f'):>8}"
-                + "".join(f"{('' if label.startswith(labels[0]) else _num(x, '.1f') + '×'):>{w}}"
+                f"{num(s['time_per_frame_ms_p50'], '.1f'):>8}"
+                + "".join(f"{('' if label.startswith(labels[0]) else num(x, '.1f') + '×'):>{w}}"
                           for x, w in zip(ratios, (14, 16), strict=True)))
     return lines
 

@@ -38,6 +38,16 @@ from dataclasses import asdict, dataclass
 import mujoco
 import numpy as np
 
+from autopilot.bench.detectors import (
+    BENCHES,
+    DEFAULT_OPTIONS,
+    QUICK_OPTIONS,
+    BenchOptions,
+    DetectorBench,
+    num,
+    percentile,
+    register,
+)
 from autopilot.config import AppConfig, load_config
 from autopilot.perception import ball_pipeline, marker_pipeline
 from autopilot.perception.ball import BallDetector
@@ -68,46 +78,6 @@ _MIN_CAMERA_HEIGHT_M = 0.5
 #: The scene: the marker's centre and the ball this high above the ground (m).
 _MARKER_HEIGHT_M = 3.0
 _BALL_HEIGHT_M = 2.0
-
-
-@dataclass(frozen=True, slots=True)
-class BenchOptions:
-    """How many frames, and how the vehicle moves while each is exposed."""
-
-    #: Frames per marker distance and obliquity, and per ball distance.
-    marker_frames: int = 40
-    ball_frames: int = 30
-    seed: int = 0
-    #: The vehicle's angular velocity, per body axis: normal with this σ (rad/s). At the
-    #: front camera's 4 ms exposure, 0.15 rad/s blurs by 0.2 px (none below 0.5 px); one
-    #: frame in ten or so by more than that.
-    rate_std_rad_s: float = 0.15
-    #: Its velocity, per NED axis (m/s): blur from translation (over the distance to the
-    #: ground along the boresight, when the camera looks down).
-    speed_std_m_s: float = 0.3
-
-
-DEFAULT_OPTIONS = BenchOptions()
-#: For the test suite: a few frames per cell (about 20 s).
-QUICK_OPTIONS = BenchOptions(marker_frames=8, ball_frames=6)
-
-
-@dataclass(frozen=True)
-class DetectorBench:
-    """One detector's bench: ``run(config, options, log)`` returns its JSON section;
-    ``table(section)`` its lines of the printed table."""
-
-    name: str
-    run: Callable[[AppConfig, BenchOptions, Callable[[str], None]], dict]
-    table: Callable[[dict], list[str]]
-
-
-BENCHES: dict[str, DetectorBench] = {}
-
-
-def register(bench: DetectorBench) -> DetectorBench:
-    BENCHES[bench.name] = bench
-    return bench
 
 
 def run_bench(log: Callable[[str], None] = lambda message: None, quick: bool = False,
@@ -161,10 +131,6 @@ def format_table(result: dict) -> str:
 
 
 # -- shared ------------------------------------------------------------------------------------
-
-
-def _percentile(values: Sequence[float], q: float) -> float | None:
-    return float(np.percentile(values, q)) if len(values) else None
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -350,20 +316,20 @@ def _marker_stats(samples: Sequence[_MarkerSample]) -> dict:
         "frames": len(samples),
         "detected": len(found),
         "detection_rate": len(found) / len(samples) if samples else None,
-        "position_error_m_p50": _percentile(pos, 50),
-        "position_error_m_p95": _percentile(pos, 95),
-        "range_error_m_p50": _percentile(np.abs(rng), 50),
-        "range_error_m_p95": _percentile(np.abs(rng), 95),
-        "range_bias_m": _percentile(rng, 50),
-        "lateral_error_m_p50": _percentile(lat, 50),
-        "lateral_error_m_p95": _percentile(lat, 95),
-        "orientation_error_deg_p50": _percentile(ori, 50),
-        "orientation_error_deg_p95": _percentile(ori, 95),
+        "position_error_m_p50": percentile(pos, 50),
+        "position_error_m_p95": percentile(pos, 95),
+        "range_error_m_p50": percentile(np.abs(rng), 50),
+        "range_error_m_p95": percentile(np.abs(rng), 95),
+        "range_bias_m": percentile(rng, 50),
+        "lateral_error_m_p50": percentile(lat, 50),
+        "lateral_error_m_p95": percentile(lat, 95),
+        "orientation_error_deg_p50": percentile(ori, 50),
+        "orientation_error_deg_p95": percentile(ori, 95),
         "ambiguous_rate": (sum(s.ambiguous for s in found) / len(found)) if found else None,
-        "size_px_p50": _percentile([s.size_px for s in found], 50),
-        "time_per_frame_ms_p50": _percentile([s.time_ms for s in samples], 50),
-        "time_per_frame_ms_p95": _percentile([s.time_ms for s in samples], 95),
-        "window_time_per_frame_ms_p50": _percentile([s.window_time_ms for s in samples], 50),
+        "size_px_p50": percentile([s.size_px for s in found], 50),
+        "time_per_frame_ms_p50": percentile([s.time_ms for s in samples], 50),
+        "time_per_frame_ms_p95": percentile([s.time_ms for s in samples], 95),
+        "window_time_per_frame_ms_p50": percentile([s.window_time_ms for s in samples], 50),
         "window_detection_rate": (sum(s.window_detected for s in samples) / len(samples))
         if samples else None,
     }
@@ -371,10 +337,6 @@ def _marker_stats(samples: Sequence[_MarkerSample]) -> dict:
 
 def _mm(value: float | None) -> str:
     return "—" if value is None else f"{value * 1e3:.1f}"
-
-
-def _num(value: float | None, fmt: str) -> str:
-    return "—" if value is None else format(value, fmt)
 
 
 def _marker_table(section: dict) -> list[str]:
@@ -387,14 +349,14 @@ def _marker_table(section: dict) -> list[str]:
              f"{'°':>11}{'°':>6}{'p50':>6}{'ms':>7}"]
 
     def row(label: str, s: dict) -> str:
-        return (f"  {label:<10}{s['frames']:>7}{_num(s['detection_rate'], '.2f'):>7}"
-                f"{_num(s['size_px_p50'], '.0f'):>6}"
+        return (f"  {label:<10}{s['frames']:>7}{num(s['detection_rate'], '.2f'):>7}"
+                f"{num(s['size_px_p50'], '.0f'):>6}"
                 f"{_mm(s['position_error_m_p50']):>9}{_mm(s['position_error_m_p95']):>7}"
                 f"{_mm(s['range_error_m_p50']):>7}{_mm(s['lateral_error_m_p50']):>6}"
-                f"{_num(s['orientation_error_deg_p50'], '.2f'):>11}"
-                f"{_num(s['orientation_error_deg_p95'], '.1f'):>6}"
-                f"{_num(s['time_per_frame_ms_p50'], '.1f'):>6}"
-                f"{_num(s['window_time_per_frame_ms_p50'], '.1f'):>7}")
+                f"{num(s['orientation_error_deg_p50'], '.2f'):>11}"
+                f"{num(s['orientation_error_deg_p95'], '.1f'):>6}"
+                f"{num(s['time_per_frame_ms_p50'], '.1f'):>6}"
+                f"{num(s['window_time_per_frame_ms_p50'], '.1f'):>7}")
 
     for distance in MARKER_DISTANCES_M:
         s = section.get(f"at_{distance:g}m")
@@ -461,7 +423,7 @@ def _run_ball(cfg: AppConfig, options: BenchOptions, log: Callable[[str], None])
             section[f"at_{distance:g}m"] = {"distance_m": distance, **_ball_stats(samples)}
             s = section[f"at_{distance:g}m"]
             log(f"ball at {distance:g} m: detected {s['detection_rate']:.2f}, centre error "
-                f"p50 {_num(s['centre_error_px_p50'], '.2f')} px")
+                f"p50 {num(s['centre_error_px_p50'], '.2f')} px")
         section["all"] = _ball_stats(everything)
     finally:
         sim.close()
@@ -491,15 +453,15 @@ def _ball_stats(samples: Sequence[_BallSample]) -> dict:
         "frames": len(samples),
         "detected": len(found),
         "detection_rate": len(found) / len(samples) if samples else None,
-        "centre_error_px_p50": _percentile(centre, 50),
-        "centre_error_px_p95": _percentile(centre, 95),
-        "range_error_m_p50": _percentile(rng, 50),
-        "range_error_m_p95": _percentile(rng, 95),
-        "range_error_pct_p50": _percentile(pct, 50),
-        "range_error_pct_p95": _percentile(pct, 95),
-        "range_bias_m": _percentile([s.range_error_m for s in found], 50),
-        "time_per_frame_ms_p50": _percentile([s.time_ms for s in samples], 50),
-        "time_per_frame_ms_p95": _percentile([s.time_ms for s in samples], 95),
+        "centre_error_px_p50": percentile(centre, 50),
+        "centre_error_px_p95": percentile(centre, 95),
+        "range_error_m_p50": percentile(rng, 50),
+        "range_error_m_p95": percentile(rng, 95),
+        "range_error_pct_p50": percentile(pct, 50),
+        "range_error_pct_p95": percentile(pct, 95),
+        "range_bias_m": percentile([s.range_error_m for s in found], 50),
+        "time_per_frame_ms_p50": percentile([s.time_ms for s in samples], 50),
+        "time_per_frame_ms_p95": percentile([s.time_ms for s in samples], 95),
     }
 
 
@@ -512,14 +474,14 @@ def _ball_table(section: dict) -> list[str]:
              f"{'p50':>6}"]
 
     def row(label: str, s: dict) -> str:
-        return (f"  {label:<10}{s['frames']:>7}{_num(s['detection_rate'], '.2f'):>7}"
-                f"{_num(s['centre_error_px_p50'], '.2f'):>11}"
-                f"{_num(s['centre_error_px_p95'], '.2f'):>6}"
-                f"{_num(s['range_error_m_p50'], '.3f'):>10}"
-                f"{_num(s['range_error_m_p95'], '.3f'):>6}"
-                f"{_num(s['range_error_pct_p50'], '.1f'):>7}"
-                f"{_num(s['range_error_pct_p95'], '.1f'):>6}"
-                f"{_num(s['time_per_frame_ms_p50'], '.1f'):>6}")
+        return (f"  {label:<10}{s['frames']:>7}{num(s['detection_rate'], '.2f'):>7}"
+                f"{num(s['centre_error_px_p50'], '.2f'):>11}"
+                f"{num(s['centre_error_px_p95'], '.2f'):>6}"
+                f"{num(s['range_error_m_p50'], '.3f'):>10}"
+                f"{num(s['range_error_m_p95'], '.3f'):>6}"
+                f"{num(s['range_error_pct_p50'], '.1f'):>7}"
+                f"{num(s['range_error_pct_p95'], '.1f'):>6}"
+                f"{num(s['time_per_frame_ms_p50'], '.1f'):>6}")
 
     for distance in BALL_DISTANCES_M:
         s = section.get(f"at_{distance:g}m")
@@ -533,4 +495,4 @@ register(DetectorBench("ball", _run_ball, _ball_table))
 register(DetectorBench("marker", _run_marker, _marker_table))
 
 # the down camera's detectors (image, pad) register themselves
-import autopilot.bench.down_perception  # noqa: E402, F401
+import autopilot.bench.down_perception  # noqa: E402, F401  (it imports the registry, not this)

@@ -52,8 +52,8 @@ def arguments(calibrate: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from autopilot.calibrate import CalibrationOptions, format_summary
-    from autopilot.calibrate import run as calibrate
+    from autopilot.calibration import CalibrationOptions, format_summary
+    from autopilot.calibration import run as calibrate
 
     if args.max_views < 3 or args.min_views < 3 or args.min_views > args.max_views:
         raise InputError(f"--min-views {args.min_views} / --max-views {args.max_views}: both "

@@ -176,7 +176,8 @@ class TruthTrack:
         return lerp(self.vp), slerp(self.vq[i], self.vq[i + 1], f), lerp(self.bp)
 
 
-def _intrinsics(cam: Mapping) -> CameraIntrinsics:
+def camera_intrinsics(cam: Mapping) -> CameraIntrinsics:
+    """A logged camera record's intrinsics (the plan record's ``cameras``)."""
     return CameraIntrinsics(int(cam["width_px"]), int(cam["height_px"]), cam["fx"], cam["fy"],
                             cam["cx"], cam["cy"], tuple(cam.get("distortion") or (0.0,) * 5))
 
@@ -195,7 +196,7 @@ def scoring_camera(log: Mapping[str, Sequence[Mapping]], name: str) -> Mapping |
 def pixel_of(cam: Mapping, point_cam_m) -> tuple[float, float]:
     """Pixel of a point in a camera's optical frame, lens distortion applied (as the camera
     info record describes it)."""
-    u, v = project_points(_intrinsics(cam), np.asarray(point_cam_m, dtype=float))
+    u, v = project_points(camera_intrinsics(cam), np.asarray(point_cam_m, dtype=float))
     return float(u), float(v)
 
 
@@ -209,7 +210,7 @@ def project_target(cam: Mapping, vehicle_p, vehicle_q, target_p, radius_m: float
     depth = float(np.linalg.norm(p_cam))
     if p_cam[2] <= 0.0 or depth <= radius_m:
         return None
-    u, v = project_points(_intrinsics(cam), p_cam)
+    u, v = project_points(camera_intrinsics(cam), p_cam)
     r_px = cam["fx"] * radius_m / math.sqrt(depth * depth - radius_m * radius_m)
     return float(u), float(v), r_px
 

@@ -58,15 +58,17 @@ import numpy as np
 
 from drivers.base import CameraInfo
 from drivers.geometry import matrix_to_quat, quat_canonical
+from drivers.markers import (
+    apriltag_family_name,
+    aruco_dictionary,
+    aruco_dictionary_name,
+)
 
 Backend = Literal["aruco", "apriltag"]
 CornerRefinement = Literal["edges", "subpix", "apriltag", "contour", "none"]
 
 #: AprilTag families whose detected corners are the black square's outer corners (what
 #: ``size_m`` measures), with OpenCV's name for the same dictionary.
-APRILTAG_FAMILIES = {"tag16h5": "DICT_APRILTAG_16h5", "tag25h9": "DICT_APRILTAG_25h9",
-                     "tag36h11": "DICT_APRILTAG_36h11"}
-
 _REFINE = {"edges": cv2.aruco.CORNER_REFINE_NONE,  # then refine_corners_on_edges
            "none": cv2.aruco.CORNER_REFINE_NONE, "subpix": cv2.aruco.CORNER_REFINE_SUBPIX,
            "contour": cv2.aruco.CORNER_REFINE_CONTOUR,
@@ -74,26 +76,6 @@ _REFINE = {"edges": cv2.aruco.CORNER_REFINE_NONE,  # then refine_corners_on_edge
 #: AprilTag's edge fits put pixel centres at half-integer coordinates; OpenCV at integers.
 _APRILTAG_PIXEL_OFFSET = 0.5
 _EPS_PX = 1e-3  # added to both reprojection errors: noise-free corners do not make a ratio
-
-
-def aruco_dictionary_name(name: str) -> str:
-    """OpenCV's name of a dictionary given either way (``DICT_4X4_50``, ``tag36h11``)."""
-    name = APRILTAG_FAMILIES.get(name, name)
-    if not name.startswith("DICT_") or not hasattr(cv2.aruco, name):
-        known = sorted(n for n in dir(cv2.aruco) if n.startswith("DICT_"))
-        raise ValueError(f"unknown marker dictionary {name!r}; expected one of "
-                         f"{', '.join(known)} or {', '.join(APRILTAG_FAMILIES)}")
-    return name
-
-
-def apriltag_family_name(name: str) -> str:
-    """The AprilTag family of a dictionary given either way (``tag36h11``,
-    ``DICT_APRILTAG_36h11``)."""
-    for family, dict_name in APRILTAG_FAMILIES.items():
-        if name.lower() in (family, dict_name.lower()):
-            return family
-    raise ValueError(f"the apriltag back end reads the families {', '.join(APRILTAG_FAMILIES)} "
-                     f"(or their DICT_APRILTAG_* names), not {name!r}")
 
 
 @dataclass(frozen=True, slots=True)
@@ -256,8 +238,7 @@ class MarkerDetector:
         self._apriltag = None
         self._lock = threading.Lock()  # the back ends' detectors are not re-entrant
         if s.backend == "aruco":
-            dictionary = cv2.aruco.getPredefinedDictionary(
-                getattr(cv2.aruco, aruco_dictionary_name(s.dictionary)))
+            dictionary = aruco_dictionary(s.dictionary)
             self._params = cv2.aruco.DetectorParameters()
             self._params.cornerRefinementMethod = _REFINE[s.corner_refinement]
             self._params.relativeCornerRefinmentWinSize = s.subpix_window_rel

@@ -34,6 +34,7 @@ from autopilot.perception.image_target import planar_pose
 from autopilot.perception.marker import MarkerDetector, MarkerDetectorSettings
 from drivers.base import CameraInfo
 from drivers.camera_model import distortion_coefficients, project_points, undistort_points
+from drivers.markers import aruco_dictionary
 
 PadKind = Literal["circle", "markers"]
 PAD_KINDS: tuple[str, ...] = ("circle", "markers")
@@ -74,12 +75,6 @@ class MarkerPadLayout:
         return tuple(m.marker_id for m in self.markers)
 
 
-def _dictionary(name: str):
-    from autopilot.perception.marker import aruco_dictionary_name
-
-    return cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, aruco_dictionary_name(name)))
-
-
 def marker_pad_layout(size_m: float, ids: tuple[int, ...] | list[int],
                       dictionary: str = "DICT_4X4_50") -> MarkerPadLayout:
     """The nested marker pad: ``ids[0]`` small in the centre, ``ids[1:5]`` large around it
@@ -88,7 +83,7 @@ def marker_pad_layout(size_m: float, ids: tuple[int, ...] | list[int],
     ids = tuple(int(i) for i in ids)
     if len(ids) != 5 or len(set(ids)) != 5:
         raise ValueError(f"a marker pad has five different marker ids, not {list(ids)}")
-    d = _dictionary(dictionary)
+    d = aruco_dictionary(dictionary)
     bad = [i for i in ids if not 0 <= i < d.bytesList.shape[0]]
     if bad:
         raise ValueError(f"{dictionary} has no marker {bad[0]} "
@@ -114,7 +109,7 @@ def marker_pad_layout(size_m: float, ids: tuple[int, ...] | list[int],
 def marker_pad_texture(layout: MarkerPadLayout) -> np.ndarray:
     """The marker pad as printed (BGR, :data:`_PAD_TEXELS` square)."""
     n = _PAD_TEXELS
-    d = _dictionary(layout.dictionary)
+    d = aruco_dictionary(layout.dictionary)
     image = np.full((n, n), 255, np.uint8)
     texel = layout.size_m / n
     for m in layout.markers:

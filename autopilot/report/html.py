@@ -302,7 +302,7 @@ def _path(fig, records, phases, target) -> None:
     the photos' footprints (true poses); beside it, the cross-track error over time."""
     from shapely.geometry import Polygon
 
-    from autopilot.flightlog.metrics import _intrinsics
+    from autopilot.flightlog.metrics import camera_intrinsics
     from autopilot.planning.footprint import ground_footprint
     from autopilot.planning.trajectory import cross_track_m, resample
 
@@ -349,7 +349,7 @@ def _path(fig, records, phases, target) -> None:
         if cam is None or not len(t_truth):
             continue
         i = min(int(np.searchsorted(t_truth, photo["time_s"])), len(t_truth) - 1)
-        outline = ground_footprint(_intrinsics(cam), np.array(cam["rotation_body_cam"]),
+        outline = ground_footprint(camera_intrinsics(cam), np.array(cam["rotation_body_cam"]),
                                    np.array(cam["position_body_m"]), p_truth[i], q_truth[i])
         if outline is not None:
             ring = np.vstack([outline, outline[:1]])

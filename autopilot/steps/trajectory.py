@@ -47,7 +47,7 @@ from autopilot.behaviors.trajectory import (
 from autopilot.config import AppConfig
 from autopilot.estimation.pose_history import slerp
 from autopilot.flightlog import records as ch
-from autopilot.flightlog.metrics import _intrinsics, project_target, scoring_camera
+from autopilot.flightlog.metrics import camera_intrinsics, project_target, scoring_camera
 from autopilot.flightlog.truth import truth_table
 from autopilot.planning.footprint import ground_footprint
 from autopilot.planning.trajectory import Limits, cross_track_m, resample
@@ -403,7 +403,7 @@ def _footprints(log: Records, photos: Sequence[Mapping], truth: _Truth, ground_d
         if cam is None or pose is None:
             out.append(None)
             continue
-        outline = ground_footprint(_intrinsics(cam), np.array(cam["rotation_body_cam"]),
+        outline = ground_footprint(camera_intrinsics(cam), np.array(cam["rotation_body_cam"]),
                                    np.array(cam["position_body_m"]), pose[0], pose[1],
                                    ground_down_m)
         out.append(Polygon(outline).buffer(0) if outline is not None else None)

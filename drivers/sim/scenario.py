@@ -29,6 +29,7 @@ import numpy as np
 
 from drivers.base import CameraInfo
 from drivers.geometry import quat_from_euler, quat_to_matrix
+from drivers.markers import aruco_dictionary
 from drivers.sim.frames import ENU_FROM_NED, enu_to_ned, ned_to_enu, quat_enu_flu_to_ned_frd
 
 
@@ -414,9 +415,6 @@ def named_path(path: PathName, start_ned_m, speed_m_s: float, size_m: float = 6.
 Facing = Literal["drone", "travel", "trail", "fixed"]
 
 #: AprilTag families by their OpenCV dictionary names (the same codes and ids).
-_APRILTAG_DICTIONARIES = {"tag16h5": "DICT_APRILTAG_16h5", "tag25h9": "DICT_APRILTAG_25h9",
-                          "tag36h11": "DICT_APRILTAG_36h11"}
-
 #: The printed marker's frame in a board's body frame (columns: the marker's axes in FRD). The
 #: marker frame is OpenCV's: x right and y up as the marker is read, z out of its face; the
 #: board's body x is the face's normal, so the marker's x is the body's left (−y) and its y the
@@ -427,20 +425,13 @@ _VEHICLE_BODY = "vehicle/base"  # drivers/sim/model.py's VEHICLE_BODY (it import
 _PLATE_M = 0.001  # the printed face's thickness, in front of the board
 
 
-def _aruco_dictionary(name: str):
-    name = _APRILTAG_DICTIONARIES.get(name, name)
-    if not name.startswith("DICT_") or not hasattr(cv2.aruco, name):
-        raise ValueError(f"unknown marker dictionary {name!r}")
-    return cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, name))
-
-
 def marker_texture(dictionary: str, marker_id: int, size_m: float, board_m: float,
                    px_per_cell: int = 16) -> tuple[np.ndarray, float]:
     """The board's face as a grey-scale image: the marker (black square of side ``size_m``,
     code cells of ``px_per_cell`` texels) centred in a white quiet zone. Returns the image and
     the board side it spans (within a texel of ``board_m``, so that the marker is exactly
     ``size_m``)."""
-    d = _aruco_dictionary(dictionary)
+    d = aruco_dictionary(dictionary)
     if not 0 <= marker_id < d.bytesList.shape[0]:
         raise ValueError(f"{dictionary} has no marker {marker_id}")
     if board_m < size_m:
@@ -622,7 +613,7 @@ def marker_objects(*, marker_id: int = 36, dictionary: str = "DICT_ARUCO_ORIGINA
     if decoys <= 0:
         return objects
     rng = np.random.default_rng(seed + 104729)
-    count = _aruco_dictionary(dictionary).bytesList.shape[0]
+    count = aruco_dictionary(dictionary).bytesList.shape[0]
     ids = [i for i in decoy_ids if i != marker_id]
     pool = [i for i in range(count) if i != marker_id and i not in ids]
     ids += [int(i) for i in rng.choice(pool, size=max(0, decoys - len(ids)), replace=False)]
@@ -697,7 +688,7 @@ def calibration_texture(pattern: CalibrationPattern, squares: tuple[int, int], *
 def charuco_board(squares: tuple[int, int], square_m: float, marker_m_or_ratio: float,
                   dictionary: str):
     """OpenCV's ChArUco board (``cv2.aruco.CharucoBoard``: columns × rows of squares)."""
-    d = _aruco_dictionary(dictionary)
+    d = aruco_dictionary(dictionary)
     needed = squares[0] * squares[1] // 2
     if d.bytesList.shape[0] < needed:
         raise ValueError(f"{dictionary} has {d.bytesList.shape[0]} markers; a "

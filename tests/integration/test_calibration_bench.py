@@ -20,7 +20,7 @@ from autopilot.bench.calibration import (
     QUICK_OPTIONS,
     REPROJECTION_RMS_MAX_PX,
 )
-from autopilot.calibrate import FrameSource, calibrate_frames, parse_board_spec
+from autopilot.calibration import FrameSource, calibrate_frames, parse_board_spec
 from autopilot.cli import EXIT_OK, main
 from drivers.calibration import load_calibration
 

@@ -1,4 +1,4 @@
-"""``autopilot calibrate``'s core (autopilot/calibrate.py): board specs, detection, view
+"""``autopilot calibrate``'s core (autopilot/calibration/): board specs, detection, view
 selection, the fit and its files, against a camera whose truth the test sets.
 
 Views are made with plain OpenCV, no simulator: board corners projected with
@@ -16,7 +16,7 @@ import cv2
 import numpy as np
 import pytest
 
-from autopilot.calibrate import (
+from autopilot.calibration import (
     BoardDetector,
     BoardSpec,
     BoardView,

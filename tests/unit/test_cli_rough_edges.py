@@ -96,6 +96,8 @@ def test_out_onto_a_previous_run_is_refused_unless_overwrite(tmp_path):
      "start_s, duration_s, camera)"),
     (["run", "--mission", "follow_ball", "--fault", "link_loss:0.3"],
      "(link_loss's parameters: start_s, duration_s, fraction"),
+    (["validate", "follow_ball", "--set", "sim.wind.steady_ned_m_s=[0,3]"],
+     "--set: sim.wind.steady_ned_m_s[2]: missing item 2: too few items"),
     (["bench", "follow_ball", "--scenario", "defalt"],
      "--scenario defalt: no such scenario (did you mean 'default'?)"),
     (["run", "--mission", "follow_ball", "--calibration", "/nonexistent/cam.yaml"],

@@ -17,11 +17,11 @@ from drivers.video import (
     SourceDescription,
     VideoSender,
     VideoSource,
-    _rtp_address,
     encode_goodbye,
     encode_sender_report,
     encode_source_description,
     parse_rtcp,
+    rtp_address,
     split_nal_units,
 )
 
@@ -134,7 +134,7 @@ def test_unknown_rtcp_packets_are_skipped_and_malformed_ones_end_parsing():
     ("/dev/video0", None),
 ])
 def test_rtp_urls_bind_loopback_unless_an_address_is_given(url, address):
-    assert _rtp_address(url) == address
+    assert rtp_address(url) == address
 
 
 def _camera() -> CameraInfo:
