@@ -132,15 +132,29 @@ def check_network_exposure(option: str, url: str, key: str | None, insecure: boo
                                "accept unsigned traffic from that network")])
 
 
+def listen_token(option: str, address: str, token_file: str | None) -> str | None:
+    """A served address (the goal API's, a console's) checked before anything starts: it
+    parses, can be listened on, and has a token if other machines can reach it. Its token."""
+    from autopilot.api import ApiSetupError, check_listen, is_loopback, parse_address, read_token
+
+    try:
+        host, port = parse_address(address)
+        token = read_token(token_file)
+        if not is_loopback(host) and not token:
+            raise ApiSetupError(f"{option} {address} is reachable from other machines: give "
+                                "a token (--api-token-file FILE, or AUTOPILOT_API_TOKEN)")
+        check_listen(host, port)
+    except ApiSetupError as exc:
+        raise InputError(str(exc)) from None
+    return token
+
+
 def check_api(args: argparse.Namespace) -> str | None:
     """The goal API's and console's options checked before anything flies; the token."""
     from autopilot.api import (
         ApiSetupError,
-        check_listen,
         check_tls,
-        is_loopback,
         parse_address,
-        read_token,
     )
 
     if args.console:
@@ -158,14 +172,9 @@ def check_api(args: argparse.Namespace) -> str | None:
             raise InputError("--api-tls-cert/--api-tls-key serve the goal API or the console: "
                              "give --api HOST:PORT or --console HOST:PORT")
         return None
-    option = "--console" if args.console else "--api"
+    token = listen_token("--console" if args.console else "--api", args.api,
+                         args.api_token_file)
     try:
-        host, port = parse_address(args.api)
-        token = read_token(args.api_token_file)
-        if not is_loopback(host) and not token:
-            raise ApiSetupError(f"{option} {args.api} is reachable from other machines: give "
-                                "a token (--api-token-file FILE, or AUTOPILOT_API_TOKEN)")
-        check_listen(host, port)
         if bool(args.api_tls_cert) != bool(args.api_tls_key):
             raise ApiSetupError("--api-tls-cert and --api-tls-key go together")
         if args.api_tls_cert:

@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from autopilot.cli.common import EXIT_OK, Command, add_config_options, add_fault_option
-from autopilot.cli.run import check_network_exposure, prepare_out_dir
+from autopilot.cli.run import check_network_exposure, listen_token, prepare_out_dir
 from autopilot.config import ConfigError, InputError, Problem, load_config
 
 
@@ -76,26 +76,8 @@ def run(args: argparse.Namespace) -> int:
 
     videos = None if args.no_video else (
         parse_camera_options(args.video, "--video", "front") if args.video else FROM_CONFIG)
-    token = None
-    if args.console:
-        from autopilot.api import (
-            ApiSetupError,
-            check_listen,
-            is_loopback,
-            parse_address,
-            read_token,
-        )
-
-        try:
-            host, port = parse_address(args.console)
-            token = read_token(args.api_token_file)
-            if not is_loopback(host) and not token:
-                raise ApiSetupError(f"--console {args.console} is reachable from other "
-                                    "machines: give a token (--api-token-file FILE, or "
-                                    "AUTOPILOT_API_TOKEN)")
-            check_listen(host, port)
-        except ApiSetupError as exc:
-            raise InputError(str(exc)) from None
+    token = listen_token("--console", args.console, args.api_token_file) if args.console \
+        else None
     asyncio.run(serve(config, scenario, instance=args.instance, videos=videos,
                       out_dir=Path(args.out) if args.out else None,
                       log=lambda line: print(line, file=sys.stderr, flush=True),
