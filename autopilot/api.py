@@ -56,7 +56,7 @@ from autopilot.steps import STEP_KINDS
 
 if TYPE_CHECKING:
     from autopilot.console import Console
-    from autopilot.runtime import Runtime
+    from autopilot.runtime.ports import ConsolePort, GoalDeskPort
 
 log = logging.getLogger(__name__)
 
@@ -196,7 +196,7 @@ def cookie_name(headers) -> str:
     return f"{TOKEN_COOKIE}_{port if port.isdigit() else '80'}"
 
 
-def build_app(runtime: Runtime, token: str | None, stream_rate_hz: float = 5.0,
+def build_app(desk: GoalDeskPort, token: str | None, stream_rate_hz: float = 5.0,
               loopback_only: bool = True, console: Console | None = None) -> FastAPI:
     app = FastAPI(title="autopilot goal API", version="1", docs_url=None, redoc_url=None,
                   description="Goals (mission steps) at runtime, status, cancel and abort. "
@@ -275,7 +275,7 @@ def build_app(runtime: Runtime, token: str | None, stream_rate_hz: float = 5.0,
 
     @app.get("/api/status", summary="The mission status and the vehicle's state")
     async def status() -> dict:
-        return runtime.api_status()
+        return desk.api_status()
 
     async def socket_allowed(ws: WebSocket) -> bool:
         if not host_ok(ws.headers) or not origin_ok(ws.headers):
@@ -294,7 +294,7 @@ def build_app(runtime: Runtime, token: str | None, stream_rate_hz: float = 5.0,
         period = 1.0 / stream_rate_hz
         try:
             while True:
-                await ws.send_text(json.dumps(runtime.api_status()))
+                await ws.send_text(json.dumps(desk.api_status()))
                 await asyncio.sleep(period)  # (wall clock: it is for people and programs)
         except Exception:  # the client went away, or the server is closing
             return
@@ -323,22 +323,22 @@ def build_app(runtime: Runtime, token: str | None, stream_rate_hz: float = 5.0,
                                 status_code=422)
         try:
             # (validation may read files, e.g. a hover_image goal's image: off the loop)
-            step = await asyncio.to_thread(validate_goal, body, runtime.config,
-                                           runtime.goal_site())
-            goal = runtime.submit_goal(step)
+            step = await asyncio.to_thread(validate_goal, body, desk.config,
+                                           desk.goal_site())
+            goal = desk.submit_goal(step)
         except GoalError as exc:
             return JSONResponse(exc.as_dict(), status_code=exc.status)
         # what may not go as the sender expects, though it flies (e.g. an orbit whose centre
         # its photos will not show)
-        warnings = list(STEP_KINDS[step.name].warnings(step.params, runtime.config))
+        warnings = list(STEP_KINDS[step.name].warnings(step.params, desk.config))
         return {"goal_id": goal.id, "state": goal.state, "warnings": warnings}
 
     @app.get("/api/goals", summary="Every goal so far")
     async def goals() -> list[dict]:
-        return [g.as_dict() for g in (runtime.goals.goals.values() if runtime.goals else [])]
+        return [g.as_dict() for g in (desk.goals.goals.values() if desk.goals else [])]
 
     def goal_answer(action, goal_id: str):
-        if runtime.goals is None:
+        if desk.goals is None:
             return JSONResponse({"error": "this run takes no goals"}, status_code=404)
         try:
             return action(goal_id).as_dict()
@@ -347,19 +347,19 @@ def build_app(runtime: Runtime, token: str | None, stream_rate_hz: float = 5.0,
 
     @app.get("/api/goals/{goal_id}", summary="A goal's state, feedback and result")
     async def goal(goal_id: str):
-        return goal_answer(runtime.goals.get if runtime.goals else None, goal_id)
+        return goal_answer(desk.goals.get if desk.goals else None, goal_id)
 
     @app.post("/api/goals/{goal_id}/cancel", summary="Cancel a goal: the vehicle hovers")
     async def cancel(goal_id: str):
-        return goal_answer(runtime.goals.cancel if runtime.goals else None, goal_id)
+        return goal_answer(desk.goals.cancel if desk.goals else None, goal_id)
 
     @app.post("/api/abort", summary="Abort: hold, land, disarm (status 12)")
     async def abort() -> dict:
-        runtime.abort("abort requested through the goal API")
+        desk.abort("abort requested through the goal API")
         return {"status": "aborting"}
 
     if console is not None:
-        _console_routes(app, runtime, console, socket_allowed, token_is)
+        _console_routes(app, console, socket_allowed, token_is)
 
     def openapi() -> dict:
         if app.openapi_schema is None:
@@ -414,7 +414,7 @@ def _docs_routes(app: FastAPI) -> None:
     app.mount("/docs/static", StaticFiles(directory=str(swagger_ui_path)), name="docs-static")
 
 
-def _console_routes(app: FastAPI, runtime: Runtime, console: Console, socket_allowed,
+def _console_routes(app: FastAPI, console: Console, socket_allowed,
                     token_is) -> None:
     from fastapi.responses import RedirectResponse, StreamingResponse
 
@@ -460,9 +460,9 @@ def _console_routes(app: FastAPI, runtime: Runtime, console: Console, socket_all
                                           {}}},
                         404: {"description": "no such camera"}})
     async def video(camera: str, fps: float | None = None, overlay: int = 1):
-        if camera not in runtime.vehicle.cameras:
+        if camera not in console.host.vehicle.cameras:
             return JSONResponse({"error": f"no camera {camera!r}; cameras: "
-                                 f"{sorted(runtime.vehicle.cameras)}"}, status_code=404)
+                                 f"{sorted(console.host.vehicle.cameras)}"}, status_code=404)
         if fps is not None and not MIN_VIDEO_FPS <= fps <= 60:  # (NaN fails this too)
             return JSONResponse({"error": f"fps: expected {MIN_VIDEO_FPS:g} <= fps <= 60"},
                                 status_code=422)
@@ -623,8 +623,8 @@ class ApiServer:
 
     name = "goal-api"
 
-    def __init__(self, runtime: Runtime, host: str, port: int, token: str | None,
-                 stream_rate_hz: float = 5.0, console: bool = False,
+    def __init__(self, desk: GoalDeskPort, host: str, port: int, token: str | None,
+                 stream_rate_hz: float = 5.0, console: ConsolePort | None = None,
                  limits: ConnectionLimits = ConnectionLimits(),
                  tls: tuple[str, str] | None = None) -> None:
         import uvicorn
@@ -640,8 +640,8 @@ class ApiServer:
         check_listen(host, port)
         from autopilot.console import Console
 
-        self.console = Console(runtime) if console else None
-        self.app = build_app(runtime, token if token else None, stream_rate_hz,
+        self.console = Console(console) if console is not None else None
+        self.app = build_app(desk, token if token else None, stream_rate_hz,
                              loopback_only=is_loopback(host), console=self.console)
         _raise_open_files_limit()
         self.protocol = _guarded_protocol(limits)

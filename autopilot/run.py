@@ -258,7 +258,8 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
                           goals=goals)
         if api is not None:
             host, port = parse_address(api)
-            server = ApiServer(runtime, host, port, api_token, console=console, tls=api_tls)
+            server = ApiServer(runtime.desk, host, port, api_token,
+                               console=runtime.console if console else None, tls=api_tls)
             runtime.add_service(server)
             if on_api is not None:
                 on_api(server)

@@ -136,7 +136,7 @@ async def serve(config: AppConfig, scenario: Scenario | None, *, instance: int =
         console_source = SimConsoleSource(vehicle, config, title)
         console_host, console_port = parse_address(console)
         console_server = ApiServer(console_source, console_host, console_port, console_token,
-                                   console=True)
+                                   console=console_source)
         console_source.start()
         console_task = loop.create_task(console_server.run(), name="sim-console")
         await console_server.started.wait()

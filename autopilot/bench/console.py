@@ -155,7 +155,7 @@ def run_bench(window_s: float, windows: int, fps: float, browser: bool,
         out["windows"] = rows
         # what the camera itself takes (exposure, readout, delivery: before the console)
         out["camera_latency_ms_p50"] = feed.stats()["capture_to_arrival_ms_p50"]
-        server.console.runtime.request_stop("benchmark done")
+        server.console.host.flight.request_stop("benchmark done")
         await flight
         idle = [r["cpu_share"] for r in rows if not r["watching"]]
         busy = [r["cpu_share"] for r in rows if r["watching"]]

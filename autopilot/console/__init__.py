@@ -53,7 +53,7 @@ from drivers.slots import Broadcast
 from drivers.threads import lower_this_thread
 
 if TYPE_CHECKING:
-    from autopilot.runtime import Runtime
+    from autopilot.runtime.ports import ConsolePort
 
 log = logging.getLogger(__name__)
 
@@ -96,15 +96,15 @@ def _draw_and_encode(image, camera_record, records, quality: int, overlay: bool
 class CameraFeed:
     """One camera's live MJPEG: encodes while anyone watches; viewers take the newest."""
 
-    def __init__(self, runtime: Runtime, camera: str, fps: float, quality: int,
+    def __init__(self, host: ConsolePort, camera: str, fps: float, quality: int,
                  pool: ThreadPoolExecutor, overlay: bool = True) -> None:
-        self.runtime = runtime
+        self.host = host
         self.camera = camera
         self.fps = fps
         self.quality = quality
         self.overlay = overlay
         self._pool = pool
-        self._record = ch.camera_info_record(runtime.vehicle.cameras[camera])
+        self._record = ch.camera_info_record(host.vehicle.cameras[camera])
         self._task: asyncio.Task | None = None
         self.frames = Broadcast[JpegFrame](on_first=self._start, on_last=self._stop)
         self.encoded = 0
@@ -120,7 +120,7 @@ class CameraFeed:
     def _start(self) -> None:
         if self._task is None or self._task.done():
             try:
-                self._task = self.runtime.spawn(self._produce(), f"console-video-{self.camera}")
+                self._task = self.host.spawn(self._produce(), f"console-video-{self.camera}")
             except RuntimeError as exc:  # the run has not started or has ended: no video
                 log.info("console video of %s not started: %s", self.camera, exc)
 
@@ -135,11 +135,8 @@ class CameraFeed:
         are those in that very image; bare, the frame as it came."""
         if not self.overlay:
             return raw
-        wait = getattr(self.runtime, "processed_frame", None)
-        if wait is None:
-            return raw
         rate = self._record.get("rate_hz") or 30.0
-        processed = await wait(self.camera, raw.seq, 1.0 / rate)
+        processed = await self.host.processed_frame(self.camera, raw.seq, 1.0 / rate)
         return processed.frame if processed is not None else raw
 
     async def _produce(self) -> None:
@@ -147,11 +144,11 @@ class CameraFeed:
         sampler = FrameSampler(self.fps, self._record.get("rate_hz") or 30.0)
         failures = 0
         try:
-            async with contextlib.aclosing(self.runtime.vehicle.frames(self.camera)) as frames:
+            async with contextlib.aclosing(self.host.vehicle.frames(self.camera)) as frames:
                 async for raw in frames:
                     if not sampler.take(time.monotonic()):
                         continue
-                    arrival = (self.runtime.clock.now() - raw.time_s) * 1e3
+                    arrival = (self.host.clock.now() - raw.time_s) * 1e3
                     self.arrival_ms = [*self.arrival_ms[-299:], arrival]
                     try:
                         await self._encode(loop, raw)
@@ -169,15 +166,15 @@ class CameraFeed:
 
     async def _encode(self, loop, raw) -> None:
         frame = await self._source(raw)
-        records = self.runtime.overlay_records(self.camera, frame)
+        records = self.host.overlay_records(self.camera, frame)
         records["time_s"] = frame.time_s
-        records["manual"] = self.runtime.manual
+        records["manual"] = self.host.manual
         jpeg, cpu = await loop.run_in_executor(self._pool, _draw_and_encode, frame.image,
                                                self._record, records, self.quality,
                                                self.overlay)
         self.encoded += 1
         self.cpu_s += cpu
-        age = (self.runtime.clock.now() - frame.time_s) * 1e3
+        age = (self.host.clock.now() - frame.time_s) * 1e3
         self.age_ms = [*self.age_ms[-299:], age]
         self.frames.publish(JpegFrame(frame.seq, frame.time_s, jpeg, age))
 
@@ -214,11 +211,11 @@ class CameraFeed:
 
 
 class Console:
-    """The console's server side, for one runtime (see the module's docstring)."""
+    """The console's server side, for one flight (see the module's docstring)."""
 
-    def __init__(self, runtime: Runtime) -> None:
-        self.runtime = runtime
-        self.settings = runtime.config.console
+    def __init__(self, host: ConsolePort) -> None:
+        self.host = host
+        self.settings = host.config.console
         self._pool = ThreadPoolExecutor(1, thread_name_prefix="console-video",
                                         initializer=lower_this_thread)
         self._feeds: dict[tuple[str, bool], CameraFeed] = {}
@@ -226,7 +223,7 @@ class Console:
     def feed(self, camera: str, overlay: bool = True) -> CameraFeed:
         key = (camera, overlay)
         if key not in self._feeds:
-            self._feeds[key] = CameraFeed(self.runtime, camera, self.settings.video_fps,
+            self._feeds[key] = CameraFeed(self.host, camera, self.settings.video_fps,
                                           self.settings.jpeg_quality, self._pool, overlay)
         return self._feeds[key]
 
@@ -238,15 +235,15 @@ class Console:
         from autopilot.goals import goal_kinds
 
         keys = self.settings.keys.model_dump()
-        about = self.runtime.console_about()
+        about = self.host.console_about()
         return {"type": "hello", "keys": keys, "axes": list(AXES), "actions": list(ACTIONS),
-                "cameras": list(self.runtime.vehicle.cameras),
+                "cameras": list(self.host.vehicle.cameras),
                 "video_fps": self.settings.video_fps,
                 "key_renew_s": min(0.1, self.settings.key_timeout_s / 3),
                 "goal_kinds": list(goal_kinds()) if about["takes_goals"] else [], **about}
 
     def state(self) -> dict:
-        rt = self.runtime
+        rt = self.host
         board = rt.values.snapshot()
         now = time.monotonic()
         return {"type": "state", "status": rt.api_status(),
@@ -267,12 +264,12 @@ class Console:
                     or len(held) > len(AXES):
                 return {"type": "error", "error": f"keys: \"held\" must be a list of axes "
                         f"({', '.join(AXES)})"}
-            self.runtime.console_keys(held, source)
+            self.host.console_keys(held, source)
             return None
         if kind == "action":
             action = message.get("action")
             try:
-                text = self.runtime.console_action(str(action),
+                text = self.host.console_action(str(action),
                                                    confirm=message.get("confirm") is True)
             except ValueError as exc:
                 return {"type": "answer", "action": action, "ok": False, "text": str(exc)}
@@ -282,7 +279,7 @@ class Console:
     async def serve_socket(self, ws) -> None:
         """One page's socket: push hello, state, path and events; take keys and actions.
         When it closes (the tab, the network), its held keys are let go at once."""
-        rt = self.runtime
+        rt = self.host
         source = object()  # this page: its keys are its own
         history = list(rt.events.recent)  # (taken before subscribing: none twice)
         events = rt.events.subscribe(name="console-socket", length=512)

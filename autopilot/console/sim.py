@@ -45,7 +45,6 @@ class SimConsoleSource:
         self._tasks: list[asyncio.Task] = []
         self._state: VehicleState | None = None
         self.planned_path: tuple[int, list] = (0, [])
-        self.latest_processed: dict = {}  # (no pipelines here)
 
     # -- lifecycle -------------------------------------------------------------------------
 
@@ -120,6 +119,9 @@ class SimConsoleSource:
                "goal_id": None, "time_s": self.clock.now(), "progress": None,
                "waiting_for_goals": False, "control": "external", "photos": 0}
         return {**out, **vehicle_status(s)}
+
+    async def processed_frame(self, camera: str, seq: int, timeout_s: float) -> None:
+        return None  # (no pipelines here: the frames as they come)
 
     def overlay_records(self, camera: str, frame) -> dict:
         return {"det": None, "pose": pose_record(self._state), "est": None, "setpoint": None,

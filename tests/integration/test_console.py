@@ -31,7 +31,7 @@ def _fly_console(plan, out, script):
     iterated: list = []
 
     def on_api(server):
-        rt = server.console.runtime
+        rt = server.console.host
         rt.events.on("status", lambda e: hooked.append(e.hook))
 
         async def follow_commands():

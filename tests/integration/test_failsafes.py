@@ -216,16 +216,19 @@ def test_a_stall_the_vehicle_waited_for_does_not_fail_the_step():
     slowed with a starved CPU: its clock stood still with the loop)."""
     from types import SimpleNamespace
 
-    from autopilot.runtime import Runtime
+    from autopilot.mission import load_mission
+    from autopilot.runtime.failsafes import Failsafes
 
     def runtime(clock_now, last_tick):
         failed, events = [], []
-        rt = SimpleNamespace(
-            clock=SimpleNamespace(lockstep=False, now=lambda: clock_now),
-            config=SimpleNamespace(runtime=SimpleNamespace(setpoint_expiry_s=0.3)),
-            _tick_clock_s=last_tick, _state=SimpleNamespace(in_air=True),
-            _event=lambda t, kind, text: events.append(text), _fail_step=failed.append)
-        Runtime._on_loop_stall(rt, 0.8)
+        config = load_mission("follow_ball").config  # (setpoints expire after 0.3 s)
+        flight = SimpleNamespace(clock=SimpleNamespace(lockstep=False, now=lambda: clock_now),
+                                 config=config, in_air=True)
+        recorder = SimpleNamespace(event=lambda t, kind, text: events.append(text))
+        failsafes = Failsafes(flight, recorder, telemetry=None, fence=None)
+        failsafes.last_tick_s = last_tick  # (the control loop's newest tick)
+        failsafes.fail_step = failed.append
+        failsafes.on_loop_stall(0.8)
         return failed, events
 
     failed, events = runtime(10.05, 10.0)  # the vehicle's clock: 0.05 s through a 0.8 s stall
@@ -239,18 +242,19 @@ def test_a_stall_the_vehicle_waited_for_does_not_fail_the_step():
 def test_a_stalled_event_loop_in_real_time_ends_in_the_fallback(monkeypatch, tmp_path):
     """Real time: the loop blocks for 1.5 s while following; setpoints stop, the vehicle's
     offboard failsafe holds it; back, the autopilot does not resume the step: fallback, land."""
-    from autopilot.runtime import Runtime
+    from autopilot.runtime.control import ControlLoop
 
-    original = Runtime._next_tick
+    original = ControlLoop.next_tick
+    stalled = []
 
     async def stalling(self, period):
-        if self._step == "follow_ball" and self.clock.now() > 10.0 and \
-                not getattr(self, "_stalled", False):
-            self._stalled = True
+        if self.flight.cursor.step == "follow_ball" and self.flight.clock.now() > 10.0 and \
+                not stalled:
+            stalled.append(True)
             time.sleep(1.5)  # noqa: ASYNC251 - a blocking call on the event loop (on purpose)
         return await original(self, period)
 
-    monkeypatch.setattr(Runtime, "_next_tick", stalling)
+    monkeypatch.setattr(ControlLoop, "next_tick", stalling)
     summary, orphans = _fly([], tmp_path, realtime=True)
     # back from the stall the step does not resume: the stall's own failsafe stops it (the
     # telemetry queued meanwhile arrives at once, so the vehicle is not silent past its

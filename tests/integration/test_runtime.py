@@ -14,6 +14,7 @@ from autopilot.behaviors.flight import SafeStop
 from autopilot.flightlog import records as ch
 from autopilot.mission import load_mission
 from autopilot.runtime import Runtime, detection_charge
+from autopilot.runtime.control import ControlLoop
 from drivers.base import FlightMode
 
 from .simtools import fly_short
@@ -128,7 +129,7 @@ def test_stale_telemetry_during_the_return_home_does_not_stop_it(monkeypatch, tm
     """The battery reserve sent the vehicle home (its own RTL); then its telemetry stops. A hold
     would stop the return and leave it hovering blind: the runtime stops its setpoints and lets
     the vehicle's return go on to the landing."""
-    import autopilot.runtime as rt
+    import autopilot.runtime.failsafes as rt
 
     class ShortReturn(rt.ReturnHome):  # blind, the return cannot see its end: 60 s, not 600
         def __init__(self) -> None:
@@ -137,7 +138,7 @@ def test_stale_telemetry_during_the_return_home_does_not_stop_it(monkeypatch, tm
     monkeypatch.setattr(rt, "ReturnHome", ShortReturn)
 
     async def stop_telemetry_on_the_way_home(runtime, probe, _task):
-        while not runtime._executor.in_fallback:
+        while not runtime.flight.executor.in_fallback:
             await runtime.clock.sleep(0.1)
         await runtime.clock.sleep(1.0)
         probe.seen["stopped_s"] = runtime.clock.now()
@@ -169,7 +170,7 @@ def test_stale_telemetry_during_the_return_home_does_not_stop_it(monkeypatch, tm
 def test_ctrl_c_in_flight_lands_and_disarms(monkeypatch, tmp_path):
     async def interrupt(runtime, probe, _task):
         await runtime.clock.sleep_until(15.0)  # following by then
-        probe.seen["step"] = runtime._step
+        probe.seen["step"] = runtime.flight.cursor.step
         os.kill(os.getpid(), signal.SIGINT)
 
     probe = _Probe(monkeypatch, interrupt)
@@ -195,23 +196,25 @@ def test_stalled_control_stops_setpoints_and_the_vehicle_fails_safe(monkeypatch)
     runtime_cfg = load_mission("follow_ball").config
     expiry = runtime_cfg.runtime.setpoint_expiry_s
     loss = runtime_cfg.sim.flight_stack.commander.offboard_loss_timeout_s
-    original_tick = Runtime._next_tick
+    original_tick = ControlLoop.next_tick
+    stalled: dict[str, float] = {}
 
     async def stalling_tick(self, period):
-        if self._step == "follow_ball" and self.clock.now() > 12.0:
-            self._stalled_at = getattr(self, "_stalled_at", self.clock.now())
+        clock = self.flight.clock
+        if self.flight.cursor.step == "follow_ball" and clock.now() > 12.0:
+            stalled.setdefault("at", clock.now())
             await asyncio.Event().wait()  # the control task hangs
         return await original_tick(self, period)
 
-    monkeypatch.setattr(Runtime, "_next_tick", stalling_tick)
+    monkeypatch.setattr(ControlLoop, "next_tick", stalling_tick)
 
     async def watch(runtime, probe, task):
         while True:
             await runtime.clock.sleep(0.02)
-            s = runtime._state
-            if hasattr(runtime, "_stalled_at") and s.mode is FlightMode.HOLD and s.failsafe:
-                probe.seen["hold_s"] = s.time_s - runtime._stalled_at
-                probe.seen["last_send_s"] = runtime._last_send_s - runtime._stalled_at
+            s = runtime.flight.state
+            if "at" in stalled and s.mode is FlightMode.HOLD and s.failsafe:
+                probe.seen["hold_s"] = s.time_s - stalled["at"]
+                probe.seen["last_send_s"] = runtime.setpoints.last_send_s - stalled["at"]
                 task.cancel()  # end the run (the control task will never finish)
                 return
 
@@ -234,10 +237,10 @@ def test_stale_telemetry_stops_setpoints_holds_and_lands(monkeypatch, tmp_path):
 
     async def stop_telemetry(runtime, probe, _task):
         await runtime.clock.sleep_until(12.0)  # following by then
-        probe.seen["step"] = runtime._step
+        probe.seen["step"] = runtime.flight.cursor.step
         # blind, the safe stop cannot see the landing end: it gives up after its timeout
         # (60 s); 15 s here is plenty for the 2 m down, and keeps the test short
-        runtime._executor.fallback = functools.partial(SafeStop, timeout_s=15.0)
+        runtime.flight.executor.fallback = functools.partial(SafeStop, timeout_s=15.0)
         await runtime.vehicle.inject_failure("telemetry")
         probe.seen["stopped_s"] = runtime.clock.now()
 

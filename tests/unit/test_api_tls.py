@@ -27,7 +27,8 @@ def _runtime():
 
 def _serve(tls, script):
     async def main():
-        server = ApiServer(_runtime(), "127.0.0.1", 0, TOKEN, console=True, tls=tls)
+        desk = _runtime()  # (the console's routes: their pages and their sign-in only)
+        server = ApiServer(desk, "127.0.0.1", 0, TOKEN, console=desk, tls=tls)
         task = asyncio.ensure_future(server.run())
         await server.started.wait()
         try:

@@ -242,11 +242,10 @@ _UNGUARDED = """
 import sys
 sys.path.insert(0, {root!r})
 print("top level ran", flush=True)
-from types import SimpleNamespace
-from autopilot.runtime import Runtime, _warm_planner
-holder = SimpleNamespace(_planner=None)
-print("planned", Runtime._plan_off_loop(holder, _warm_planner).result(timeout=120), flush=True)
-holder._planner.shutdown()
+from autopilot.runtime.planner import PlanningWorker, warm_planner
+worker = PlanningWorker()
+print("planned", worker.submit(warm_planner).result(timeout=120), flush=True)
+worker.close()
 """
 
 
