@@ -578,6 +578,29 @@ class AppConfig(ConfigModel):
     console: ConsoleConfig = ConsoleConfig()
     failsafe: FailsafeConfig = FailsafeConfig()
     sim: SimConfig  # its cameras are vehicle.cameras
+    #: how the plugins' target kinds are found (:mod:`autopilot.targets`), by kind: each
+    #: section validated by its kind's settings model, whose defaults apply when it is absent
+    targets: dict[str, Any] = Field(default_factory=dict)
+
+    @model_validator(mode="after")
+    def _target_settings(self) -> AppConfig:
+        from autopilot.plugins import load_plugins
+        from autopilot.suggest import did_you_mean
+        from autopilot.targets import TARGET_KINDS, validate_section
+
+        load_plugins()
+        for key in self.targets:
+            if key not in TARGET_KINDS:
+                known = [k for k, t in TARGET_KINDS.items() if t.settings is not None]
+                raise PydanticCustomError(
+                    "unknown_key", "unknown target kind" + (did_you_mean(key, known) or (
+                        f" (known: {', '.join(known)})" if known else " (none is installed)")),
+                    {"key_path": ("targets", key)})
+        for name, kind in TARGET_KINDS.items():
+            if kind.settings is not None:
+                self.targets[name] = validate_section(kind, kind.settings,
+                                                      self.targets.get(name), ("targets", name))
+        return self
 
     @model_validator(mode="before")
     @classmethod

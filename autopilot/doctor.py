@@ -29,6 +29,7 @@ from pathlib import Path
 
 from autopilot.mission import MissionPlan
 from drivers.base import VehicleError
+from drivers.capabilities import LinkTimeSync, MavlinkIdentity, VideoInput
 
 #: telemetry the autopilot flies on: position samples per second (PASS at or above, FAIL below
 #: the second figure)
@@ -81,7 +82,8 @@ async def run_doctor(plan: MissionPlan, *, connect: str | None = None,
     try:
         await _link_checks(vehicle, url, duration_s, add, signing=bool(
             signing_key or link.signing_key))
-        for name, setup in getattr(vehicle, "camera_setups", {}).items():
+        setups = vehicle.camera_setups if isinstance(vehicle, VideoInput) else {}
+        for name, setup in setups.items():
             await _camera_checks(vehicle, name, setup.url, duration_s, setup.calibration, add)
     finally:
         await vehicle.close()
@@ -91,9 +93,10 @@ async def run_doctor(plan: MissionPlan, *, connect: str | None = None,
 async def _link_checks(vehicle, url: str, duration_s: float, add, *, signing: bool) -> None:
     from drivers.base import FlightMode
 
-    autopilot = {12: "PX4", 3: "ArduPilot"}.get(getattr(vehicle, "autopilot", None) or 12,
+    known = isinstance(vehicle, MavlinkIdentity)
+    autopilot = {12: "PX4", 3: "ArduPilot"}.get(vehicle.autopilot if known else None,
                                                 "MAVLink")
-    target = getattr(vehicle, "_target", None)
+    target = vehicle.target_ids if known else None
     ids = f"system {target[0]} component {target[1]}" if target else "ids unknown"
     add("link", "PASS", f"{autopilot} vehicle, {ids}, on {url}")
     samples, attitudes = [], set()
@@ -111,7 +114,7 @@ async def _link_checks(vehicle, url: str, duration_s: float, add, *, signing: bo
     status = "PASS" if rate >= lo_pass else "WARN" if rate >= lo_fail else "FAIL"
     add("telemetry", status, f"position {rate:.0f} Hz, attitude updates "
         f"{len(attitudes) / duration_s:.0f} Hz (the autopilot wants ≥ {lo_pass:g} Hz)")
-    rtt = getattr(vehicle, "time_sync_round_trip_s", math.inf)
+    rtt = vehicle.time_sync_round_trip_s if isinstance(vehicle, LinkTimeSync) else math.inf
     good, bad = TIMESYNC_RTT_S
     if math.isfinite(rtt):
         status = "PASS" if rtt <= good else "WARN" if rtt <= bad else "FAIL"
@@ -149,7 +152,7 @@ async def _camera_checks(vehicle, name: str, url: str, duration_s: float,
                 async for frame in stream:
                     frames.append((frame, vehicle.clock.now()))
     if not frames:
-        source = getattr(vehicle, "video_sources", {}).get(name)
+        source = vehicle.video_sources.get(name) if isinstance(vehicle, VideoInput) else None
         error = getattr(source, "error", None)
         add(f"camera {name}", "FAIL", f"no frame from {url} in {duration_s:g} s"
             + (f" ({error})" if error else ""))
@@ -166,7 +169,7 @@ async def _camera_checks(vehicle, name: str, url: str, duration_s: float,
         f"vehicle.cameras.{name} (not this camera's, no lens distortion): calibrate it "
         f"(autopilot calibrate) and pass --calibration {name}=FILE")
     delays = sorted(arrived - frame.time_s for frame, arrived in frames)
-    source = getattr(vehicle, "video_sources", {}).get(name)
+    source = vehicle.video_sources.get(name) if isinstance(vehicle, VideoInput) else None
     timing = getattr(source, "timing", None)
     mode = str(getattr(timing, "mode", "arrival"))
     detail = f"capture times from {mode}; capture → arrival p50 " \

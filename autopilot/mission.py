@@ -28,7 +28,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from pydantic import Field, ValidationError, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic_core import PydanticCustomError
 
 from autopilot.behaviors.base import (
     Behavior,
@@ -184,6 +185,12 @@ class UwbScenario(ConfigModel):
 
 
 class Scenario(ConfigModel):
+    """The simulated world. Beside the shipped targets' sections (ball, marker, image, pad,
+    rover), a section for each target kind a plugin registered (:mod:`autopilot.targets`),
+    validated by that kind's scenario model."""
+
+    model_config = ConfigDict(extra="allow", frozen=True, allow_inf_nan=False)
+
     seed: Annotated[int, Field(ge=0)] = 0
     ball: BallScenario | None = BallScenario()  # null: no ball
     distractors: Annotated[int, Field(ge=0, le=30)] = 0  # orange-ish objects near the ball
@@ -199,6 +206,29 @@ class Scenario(ConfigModel):
     wind: WindScenario = WindScenario()
     #: injected faults, each a window after the first arming (drivers/sim/faults.py)
     faults: list[Fault] = Field(default_factory=list)
+
+    @model_validator(mode="after")
+    def _target_sections(self) -> Scenario:
+        from autopilot.plugins import load_plugins
+        from autopilot.suggest import did_you_mean
+        from autopilot.targets import TARGET_KINDS, validate_section
+
+        load_plugins()
+        extra = self.__pydantic_extra__ or {}
+        for key, value in list(extra.items()):
+            kind = TARGET_KINDS.get(key)
+            if kind is None:
+                known = [*type(self).model_fields, *(k for k, t in TARGET_KINDS.items()
+                                                      if t.scenario is not None)]
+                raise PydanticCustomError("unknown_key", "unknown key" + did_you_mean(
+                    key, known).replace("{", "(").replace("}", ")"),
+                    {"key_path": ("scenario", key)})
+            extra[key] = validate_section(kind, kind.scenario, value, ("scenario", key))
+        return self
+
+    def targets(self) -> dict[str, BaseModel]:
+        """The plugins' target sections this scenario has (validated), by kind."""
+        return dict(self.__pydantic_extra__ or {})
 
     @model_validator(mode="after")
     def _faults_apply(self) -> Scenario:
@@ -509,7 +539,7 @@ class MissionExecutor:
     def accepts_goals(self) -> bool:
         """A goal may start now: a step that takes goals is running, and no goal is."""
         return (not self._in_fallback and self._waiting is None and self._current is not None
-                and getattr(self._current, "accepts_goals", False))
+                and self._current.accepts_goals)
 
     @property
     def goal_running(self) -> bool:

@@ -33,6 +33,7 @@ from autopilot.flightlog.log import FlightLog
 from autopilot.photos import CameraExif, CameraPose, write_geotagged_jpeg
 from autopilot.planning.footprint import ground_footprint
 from drivers.base import Frame, Vehicle, VehicleState
+from drivers.capabilities import OnDemandCameras
 from drivers.geometry import euler_from_quat
 from drivers.threads import lower_this_thread
 
@@ -62,7 +63,7 @@ class PhotoLane:
         self._writes: list = []
         #: a camera rendered on demand (the simulator's) is kept running only while a photo
         #: is near; a video stream (its decoder needs every frame) for as long as the step runs
-        self._on_demand = bool(getattr(vehicle, "renders_on_demand", False))
+        self._on_demand = isinstance(vehicle, OnDemandCameras) and vehicle.renders_on_demand
         # the clock's epoch on UTC: photo times in EXIF are wall-clock times
         self._utc_offset_s = time.time() - vehicle.clock.now()
 

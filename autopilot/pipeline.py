@@ -24,7 +24,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
@@ -70,6 +70,22 @@ class Pipeline(Protocol):
     def hint_from_record(self, record: dict) -> object | None:
         """The hint a logged per-frame record carries (for replay)."""
 
+
+
+@runtime_checkable
+class SensorFed(Protocol):
+    """A pipeline that also takes the vehicle's extra sensor streams (UWB ranges, the rover's
+    reports: :data:`drivers.capabilities.SENSOR_STREAMS`), as they arrive."""
+
+    def add_sensor(self, sample: object) -> None: ...
+
+
+@runtime_checkable
+class KeepsRecords(Protocol):
+    """A pipeline that keeps records of its own for the flight log (``/relative/estimates``),
+    taken after each input."""
+
+    def take_records(self) -> list[dict]: ...
 
 @dataclass(frozen=True, slots=True)
 class PipelineSpec:

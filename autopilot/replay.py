@@ -37,7 +37,7 @@ from autopilot.config import (
 )
 from autopilot.flightlog import records as ch
 from autopilot.flightlog.log import read_images, read_log_checked
-from autopilot.pipeline import Pipeline, PipelineSpec, make_pipeline
+from autopilot.pipeline import KeepsRecords, Pipeline, PipelineSpec, SensorFed, make_pipeline
 from autopilot.resources import default_config_path
 from autopilot.steps import STEP_KINDS
 from autopilot.steps.metrics import mission_metrics, plan_steps
@@ -191,9 +191,7 @@ def _replay_pipeline(path: Path, records, pipeline: Pipeline, spec: PipelineSpec
     # them, merged in arrival order
     inputs = [(s.get("received_s", s["time_s"]), 0, ch.vehicle_state_from_record(s))
               for s in records.get(ch.VEHICLE_STATE, [])]
-    add_sensor = getattr(pipeline, "add_sensor", None)
-    take = getattr(pipeline, "take_records", None)
-    if add_sensor is not None:
+    if isinstance(pipeline, SensorFed):
         inputs += [(r.get("received_s", r["time_s"]), 1, ch.uwb_ranges_from_record(r))
                    for r in records.get(ch.UWB_RANGES, [])]
         inputs += [(r.get("received_s", r["time_s"]), 1, ch.rover_state_from_record(r))
@@ -211,9 +209,9 @@ def _replay_pipeline(path: Path, records, pipeline: Pipeline, spec: PipelineSpec
             if kind == 0:
                 pipeline.add_state(sample)
             else:
-                add_sensor(sample)
-            if take is not None:
-                out.relative += take()
+                pipeline.add_sensor(sample)
+            if isinstance(pipeline, KeepsRecords):
+                out.relative += pipeline.take_records()
             next_state += 1
 
     def control_until(time_s: float) -> None:
@@ -245,8 +243,8 @@ def _replay_pipeline(path: Path, records, pipeline: Pipeline, spec: PipelineSpec
             estimate = pipeline.estimate(image.time_s, camera, detection)
             if estimate is not None:
                 out.estimates.append(estimate)
-            if take is not None:
-                out.relative += take()
+            if isinstance(pipeline, KeepsRecords):
+                out.relative += pipeline.take_records()
     if not spec.camera:  # a pipeline without a camera: its inputs and control ticks alone
         for tick in ticks:
             telemetry_until(tick["time_s"])

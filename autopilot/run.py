@@ -28,6 +28,7 @@ from autopilot.process import StealMeter, release_freed_memory
 from autopilot.runtime import Runtime
 from autopilot.steps.metrics import mission_metrics
 from drivers.base import CameraUnavailable, Vehicle
+from drivers.capabilities import LinkTimeSync, SimulatorTruth, VideoInput
 from drivers.threads import set_background_nice
 
 
@@ -155,7 +156,8 @@ async def first_frame(vehicle: Vehicle, camera: str, timeout_s: float, where: st
         try:
             await vehicle.clock.wait_for(anext(frames), timeout_s)
         except (TimeoutError, StopAsyncIteration):
-            source = getattr(vehicle, "video_sources", {}).get(camera)
+            source = vehicle.video_sources.get(camera) if isinstance(vehicle, VideoInput) \
+                else None
             error = getattr(source, "error", None)
             detail = f" (last error: {error})" if error is not None else ""
             raise CameraUnavailable(
@@ -248,7 +250,7 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
     try:
         await vehicle.connect(plan.config.link.connect_timeout_s if plan.config.driver != "sim"
                               else 10.0)
-        setups = getattr(vehicle, "camera_setups", {})
+        setups = vehicle.camera_setups if isinstance(vehicle, VideoInput) else {}
         for camera, setup in setups.items():  # the cameras the mission needs must be
             await first_frame(vehicle, camera,  # streaming before anything takes off
                               plan.config.link.connect_timeout_s, setup.url)
@@ -269,7 +271,7 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
                          "at /docs)" if console else
                          f"goal API on {scheme}://{host}:{port}/api (documented at /docs)")
         mapping = asyncio.create_task(_log_time_mapping(vehicle, log), name="time-mapping") \
-            if hasattr(vehicle, "vehicle_to_local_s") else None
+            if isinstance(vehicle, LinkTimeSync) else None
         try:
             status = await runtime.run()
         finally:
@@ -287,9 +289,9 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
         if handle_signals:
             for sig in signals:
                 loop.remove_signal_handler(sig)
-        if hasattr(vehicle, "vehicle_to_local_s"):  # MAVLink: for scoring against the sim
+        if isinstance(vehicle, LinkTimeSync):  # MAVLink: for scoring against the sim
             _write_time_mapping(vehicle, log)
-        sim_time = getattr(vehicle, "sim_time_s", None)
+        sim_time = vehicle.sim_time_s if isinstance(vehicle, SimulatorTruth) else None
         wall_time = time.perf_counter() - wall_start
         await vehicle.close()
         log.close()
@@ -337,7 +339,7 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
         "warnings": warnings,
         "log": "flight.mcap" if out_dir is not None else None,
     }
-    sources = getattr(vehicle, "video_sources", {})
+    sources = vehicle.video_sources if isinstance(vehicle, VideoInput) else {}
     if sources:  # how each network camera's capture times were known, and what arrived
         summary["video"] = {name: {"timing": source.timing.as_dict(),
                                    "stats": dataclasses.asdict(source.stats)}

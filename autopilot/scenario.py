@@ -17,6 +17,7 @@ import numpy as np
 from autopilot.config import RoverConfig
 from autopilot.mission import BallScenario, Scenario
 from autopilot.perception.colors import COLORS, ORANGEISH_RGBA
+from autopilot.targets import target_kind
 from drivers.sim.config import SimConfig
 from drivers.sim.scenario import (
     FeatureGround,
@@ -76,6 +77,10 @@ def build_world(scenario: Scenario | None, sim: SimConfig, rover: RoverConfig | 
             raise ValueError("scenario.rover needs the configuration's rover section")
         sim, built = rover_world(scenario, sim, rover)
         objects += built
+    for name, section in scenario.targets().items():  # the plugins' target kinds
+        kind = target_kind(name)
+        if kind.build is not None:
+            objects += kind.build(section, sim, scenario.seed)
     return sim, objects
 
 

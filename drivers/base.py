@@ -453,12 +453,6 @@ class Vehicle(abc.ABC):
         land there."""
         raise CommandDenied("return to launch", "this vehicle has no return mode")
 
-    async def precision_land(self) -> None:
-        """Switch to PX4's precision landing (AUTO.PRECLAND): it lands on the target that
-        :meth:`send_landing_target` reports (searching for it, then falling back to a normal
-        landing, as its PLD_* parameters say)."""
-        raise CommandDenied("precision land", "this vehicle has no precision landing mode")
-
     @property
     def home_ned_m(self) -> np.ndarray | None:
         """Home (where the vehicle armed, or was told home is) in the local frame; None while
@@ -471,24 +465,12 @@ class Vehicle(abc.ABC):
         known (a MAVLink vehicle tells it with GPS_GLOBAL_ORIGIN or HOME_POSITION)."""
         return None
 
-    async def send_landing_target(self, target: LandingTarget) -> None:
-        """Report the landing target's position (MAVLink LANDING_TARGET, MAV_FRAME_LOCAL_NED:
-        what PX4's precision landing flies to). Fire and forget; stream it while it is seen."""
-        raise CommandDenied("landing target", "this vehicle takes no landing target")
-
     @property
     def sensors(self) -> frozenset[str]:
-        """The extra sensor streams this vehicle offers: ``uwb`` (:meth:`uwb_ranges`),
-        ``rover`` (:meth:`rover_states`)."""
+        """The extra sensor streams this vehicle delivers now, by name: ``uwb``
+        (:class:`~drivers.capabilities.UwbRanging`), ``rover``
+        (:class:`~drivers.capabilities.RoverLink`); none by default."""
         return frozenset()
-
-    def uwb_ranges(self, buffer: int = 8) -> AsyncIterator[UwbRanges]:
-        """A new subscription to UWB ranges (buffered: every reading counts)."""
-        raise SensorUnavailable("this vehicle has no UWB ranging")
-
-    def rover_states(self, buffer: int = 8) -> AsyncIterator[RoverState]:
-        """A new subscription to the rover's reported state (buffered)."""
-        raise SensorUnavailable("no rover is heard on this vehicle's link")
 
     @abc.abstractmethod
     def telemetry(self, buffer: int = 1) -> AsyncIterator[VehicleState]:

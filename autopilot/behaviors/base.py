@@ -5,7 +5,7 @@ from __future__ import annotations
 import abc
 import enum
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import ClassVar, Protocol, runtime_checkable
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict
@@ -132,6 +132,8 @@ class Behavior(abc.ABC):
     then ``update`` at every control tick until the status is not RUNNING."""
 
     name: ClassVar[str]
+    #: a step that waits for goals while it runs (standby: the goal API's goals run from it)
+    accepts_goals: ClassVar[bool] = False
 
     @abc.abstractmethod
     def activate(self, inputs: BehaviorInputs) -> BehaviorOutput:
@@ -145,3 +147,11 @@ class Behavior(abc.ABC):
     def request_failed(self, request: VehicleRequest, reason: str) -> BehaviorOutput:
         """A request was refused or could not be carried out. Default: the step fails."""
         return BehaviorOutput(Status.FAILED, reason=f"{request.kind.value}: {reason}")
+
+
+@runtime_checkable
+class FollowModes(Protocol):
+    """A behaviour that follows a target in more than one way (the console's F switches)."""
+
+    def toggle_follow_mode(self) -> str:
+        """Switch to the next way of following; returns its name."""

@@ -23,6 +23,7 @@ import numpy as np
 from autopilot.flightlog import records as ch
 from autopilot.flightlog.log import ChannelInfo, channel_counts, read_log_checked
 from autopilot.report import data
+from autopilot.report.panels import ALWAYS, PANELS, NoData, panels_in_order, register_panel
 
 _COLOURS = ["#e8eef7", "#f7efe3", "#e9f5e9", "#f5e8f0", "#eeeeee"]
 
@@ -50,7 +51,7 @@ def render(records, complete: bool, summary: dict | None, title: str = "flight",
         try:
             image = _figure(lambda fig, draw=draw, target=target:
                             draw(fig, records, phases, target))
-        except _NoData as exc:
+        except NoData as exc:
             sections.append(f"<h2>{html.escape(name)}</h2><p class='none'>{exc}</p>")
             continue
         sections.append(f"<h2>{html.escape(name)}</h2><img alt='{html.escape(name)}' "
@@ -109,10 +110,6 @@ def _channels_table(channels: Sequence[ChannelInfo]) -> str:
             f"<th>schema</th><th>encoding</th><th>messages</th></tr>{cells}</table>")
 
 
-class _NoData(Exception):
-    pass
-
-
 def _figure(draw: Callable) -> str:
     import matplotlib.pyplot as plt
 
@@ -138,7 +135,7 @@ def _shade(ax, phases) -> None:
 def _trajectories(fig, records, phases, target) -> None:
     tr = data.trajectories(records, target)
     if not len(tr["vehicle"]) and not len(tr["vehicle_truth"]):
-        raise _NoData("no vehicle positions in this log")
+        raise NoData("no vehicle positions in this log")
     top, side = fig.subplots(1, 2)
     for key, label, style in (("vehicle_truth", "vehicle (truth)", "-"),
                               ("vehicle", "vehicle (telemetry)", "--"),
@@ -157,7 +154,7 @@ def _trajectories(fig, records, phases, target) -> None:
 def _standoff(fig, records, phases, target) -> None:
     s = data.standoff_error(records, target)
     if not len(s["error_m"]) and not len(s["estimated_error_m"]):
-        raise _NoData("no target in this log")
+        raise NoData("no target in this log")
     ax = fig.subplots()
     if len(s["error_m"]):
         ax.plot(s["t"], s["error_m"], label="true distance − standoff", lw=1)
@@ -193,7 +190,7 @@ def _within(t: np.ndarray, spans: Sequence[tuple[float, float]]) -> np.ndarray:
 def _over_target(fig, records, phases, target) -> None:
     o = data.over_target(records, target)
     if not len(o["t"]):
-        raise _NoData("no ground truth of the target in this log")
+        raise NoData("no ground truth of the target in this log")
     top, err = fig.subplots(1, 2, gridspec_kw={"width_ratios": [1, 2], "wspace": 0.45})
     # top-down, the target's centre at the origin: the part of the flight within 2 m of it
     near = np.hypot(o["offset_ne"][:, 0], o["offset_ne"][:, 1]) < 2.0
@@ -227,7 +224,7 @@ def _over_target(fig, records, phases, target) -> None:
 def _detections(fig, records, phases, target) -> None:
     d = data.detection_timeline(records, target)
     if not len(d["t"]):
-        raise _NoData("no frames were processed")
+        raise NoData("no frames were processed")
     ax = fig.subplots()
     detected, in_view = d["detected"], d["in_view"]
     if d["has_truth"]:
@@ -248,7 +245,7 @@ def _detections(fig, records, phases, target) -> None:
 def _estimate(fig, records, phases, target) -> None:
     e = data.estimate_vs_truth(records, target)
     if not len(e["t"]):
-        raise _NoData("no target estimates in this log")
+        raise NoData("no target estimates in this log")
     axes = fig.subplots(1, 3)
     for i, (ax, axis) in enumerate(zip(axes, "NED", strict=True)):
         ax.fill_between(e["t"], e["estimate"][:, i] - 2 * e["std"][:, i],
@@ -264,7 +261,7 @@ def _estimate(fig, records, phases, target) -> None:
 def _velocity(fig, records, phases, target) -> None:
     v = data.velocity_tracking(records)
     if not len(v["actual_t"]):
-        raise _NoData("no telemetry in this log")
+        raise NoData("no telemetry in this log")
     axes = fig.subplots(1, 3)
     for i, (ax, axis) in enumerate(zip(axes, "NED", strict=True)):
         ax.plot(v["actual_t"], v["actual"][:, i], lw=1, label="actual")
@@ -278,7 +275,7 @@ def _velocity(fig, records, phases, target) -> None:
 def _latency(fig, records, phases, target) -> None:
     lat = data.latencies_ms(records)
     if not len(lat):
-        raise _NoData("no setpoint was computed from a frame")
+        raise NoData("no setpoint was computed from a frame")
     ax = fig.subplots()
     values, counts = np.unique(np.round(lat, 2), return_counts=True)
     if len(values) <= 40 and len(lat) >= 2 * len(values):  # (lockstep: the steps apart)
@@ -308,7 +305,7 @@ def _path(fig, records, phases, target) -> None:
 
     plans = records.get(ch.PLANNED_PATH, [])
     if not plans:
-        raise _NoData("no planned path in this log")
+        raise NoData("no planned path in this log")
     truth = records.get(ch.GROUND_TRUTH, [])
     top, err = fig.subplots(1, 2, gridspec_kw={"width_ratios": [1, 1.4]})
     cams = {c["name"]: c for c in records.get(ch.CAMERA_INFO, [])}
@@ -367,7 +364,7 @@ def _status(fig, records, phases, target) -> None:
     """The mission status code over time (seed 004's codes; autopilot.status)."""
     rows = records.get(ch.MISSION_STATUS, [])
     if not rows:
-        raise _NoData("no mission status in this log")
+        raise NoData("no mission status in this log")
     ax = fig.subplots()
     t = [r["time_s"] for r in rows]
     codes = [r["code"] for r in rows]
@@ -394,7 +391,7 @@ def _rover(fig, records, phases, target) -> None:
 
     tr = relative_tracks(records)
     if tr is None:
-        raise _NoData("no rover in this log")
+        raise NoData("no rover in this log")
     fig.set_size_inches(10, 7.5)
     (top, side), (err, avail) = fig.subplots(2, 2)
     length, width = tr["deck_size_m"]
@@ -444,20 +441,18 @@ def _rover(fig, records, phases, target) -> None:
     fig.tight_layout()
 
 
-#: panel name (as step kinds list them in their ``report``) → title, drawing, per target?
-PLOTS = {
-    "trajectory": ("Trajectories", _trajectories, False),
-    "standoff": ("Standoff error", _standoff, True),
-    "over_target": ("Over the target on the ground", _over_target, True),
-    "detections": ("Detections", _detections, True),
-    "estimate": ("Target estimate the controller flew on, against truth", _estimate, True),
-    "velocity": ("Commanded and actual velocity", _velocity, False),
-    "latency": ("Latency", _latency, False),
-    "path": ("Planned path and flown track", _path, False),
-    "status": ("Mission status", _status, False),
-    "rover": ("Landing on the rover", _rover, False),
-}
-ALWAYS = ("trajectory", "velocity", "status")
+for _name, _title, _draw, _per_target in (
+        ("trajectory", "Trajectories", _trajectories, False),
+        ("standoff", "Standoff error", _standoff, True),
+        ("over_target", "Over the target on the ground", _over_target, True),
+        ("detections", "Detections", _detections, True),
+        ("estimate", "Target estimate the controller flew on, against truth", _estimate, True),
+        ("velocity", "Commanded and actual velocity", _velocity, False),
+        ("latency", "Latency", _latency, False),
+        ("path", "Planned path and flown track", _path, False),
+        ("status", "Mission status", _status, False),
+        ("rover", "Landing on the rover", _rover, False)):
+    register_panel(_name, _title, _draw, per_target=_per_target, shipped=True)
 
 
 def _panels(records, targets: list) -> list[tuple[str, Callable, object]]:
@@ -473,18 +468,18 @@ def _panels(records, targets: list) -> list[tuple[str, Callable, object]]:
             kind = STEP_KINDS.get(step["name"])
             wanted.update(kind.report if kind is not None else ())
     else:
-        wanted.update(PLOTS)
+        wanted.update(PANELS)
     first = targets[0] if targets else None
     out = []
-    for key, (title, draw, per_target) in PLOTS.items():
-        if key not in wanted:
+    for panel in panels_in_order():
+        if panel.name not in wanted:
             continue
-        if not per_target:
-            out.append((title, draw, first))
+        if not panel.per_target:
+            out.append((panel.title, panel.draw, first))
             continue
         for target in targets or [None]:
             suffix = f" ({target.pipeline})" if target is not None and len(targets) > 1 else ""
-            out.append((title + suffix, draw, target))
+            out.append((panel.title + suffix, panel.draw, target))
     return out
 
 

@@ -13,7 +13,8 @@ from autopilot.flightlog import records as ch
 from autopilot.hooks import Event
 from autopilot.runtime.flight import Flight, Intent
 from autopilot.runtime.recorder import MissionRecorder
-from drivers.base import FlightMode, LandingTarget, Setpoint
+from drivers.base import CommandDenied, FlightMode, LandingTarget, Setpoint
+from drivers.capabilities import PrecisionLanding
 
 
 class SetpointStream:
@@ -121,6 +122,9 @@ class VehicleCommands:
     async def _command(self, request: VehicleRequest) -> None:
         f = self.flight
         v = f.vehicle
+        if request.kind in (RequestKind.LANDING_TARGET, RequestKind.PRECISION_LAND) and \
+                not isinstance(v, PrecisionLanding):
+            raise CommandDenied(request.kind.value, "this vehicle has no precision landing")
         if request.kind is RequestKind.LANDING_TARGET:  # a stream, as setpoints: not an event
             await v.send_landing_target(LandingTarget(request.time_s, request.position_ned_m))
             return

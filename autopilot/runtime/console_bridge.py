@@ -11,7 +11,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from autopilot.behaviors.base import BehaviorInputs, RequestKind, VehicleRequest
+from autopilot.behaviors.base import BehaviorInputs, FollowModes, RequestKind, VehicleRequest
 from autopilot.behaviors.manual import ACTIONS, HeldKeys, ManualFlight, ManualSettings
 from autopilot.console.view import pose_record, vehicle_map
 from autopilot.mission import MissionOutput
@@ -163,12 +163,12 @@ class ConsoleBridge:
             if action == "autopilot":
                 self._toggle_manual(s, now)
             elif action == "follow_mode":
-                toggle = getattr(f.executor.current, "toggle_follow_mode", None)
-                if toggle is None:
+                behavior = f.executor.current
+                if not isinstance(behavior, FollowModes):
                     self.recorder.console(now, "follow_mode", "F: the running step does not "
                                           "follow a target")
                 else:
-                    mode = toggle()
+                    mode = behavior.toggle_follow_mode()
                     self.recorder.console(now, "follow_mode", f"following by {mode}",
                                           {"mode": mode})
             elif action == "land":

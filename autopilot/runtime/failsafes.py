@@ -221,9 +221,8 @@ class Failsafes:
         if s.mode in (FlightMode.LAND, FlightMode.PRECLAND) or \
                 s.landed_state is LandedState.LANDING or f.cursor.phase in LANDING_PHASES:
             return None  # already on the cheapest way down: a landing is not interrupted
-        battery = getattr(s, "battery", None)
         call = self.battery_reserve.check(
-            inputs.now_s, getattr(battery, "remaining_fraction", None), s.position_ned_m,
+            inputs.now_s, s.battery.remaining_fraction, s.position_ned_m,
             f.vehicle.home_ned_m, s.in_air)
         if call is None:
             return None

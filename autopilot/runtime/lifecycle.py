@@ -29,6 +29,7 @@ from autopilot.status import MissionStatus
 from autopilot.steps import step_kind
 from autopilot.watchdog import LoopWatchdog
 from drivers.base import Vehicle
+from drivers.capabilities import SimulatorTruth, StatusTexts
 
 
 class Runtime:
@@ -134,9 +135,8 @@ class Runtime:
         """Fly the mission; returns ``completed``, ``failed`` or ``aborted``."""
         f = self.flight
         self.recorder.log_plan()
-        true_cameras = getattr(self.vehicle, "true_cameras", None)  # the simulator: scoring
-        if callable(true_cameras):
-            self.recorder.log_truth_cameras(true_cameras())
+        if isinstance(self.vehicle, SimulatorTruth):  # the simulator: for scoring
+            self.recorder.log_truth_cameras(self.vehicle.true_cameras())
         cameras = self.vehicle.cameras
         f.executor = MissionExecutor([build_behavior(step, self.config, cameras, self._offload)
                                       for step in self.plan.steps])
@@ -185,13 +185,12 @@ class Runtime:
         nothing here reaches the autopilot's decisions), and the vehicle's status messages
         (the simulator's, or STATUSTEXT over MAVLink: the log and the console's events)."""
         found = []
-        truth = getattr(self.vehicle, "ground_truth", None)
-        if callable(truth):
-            found.append(tasks.create_task(self.recorder.record_truth(truth),
+        v = self.vehicle
+        if isinstance(v, SimulatorTruth):
+            found.append(tasks.create_task(self.recorder.record_truth(v.ground_truth),
                                            name="ground-truth"))
-        events = getattr(self.vehicle, "events", None)
-        if callable(events):
-            found.append(tasks.create_task(self.recorder.record_status_texts(events),
+        if isinstance(v, StatusTexts):
+            found.append(tasks.create_task(self.recorder.record_status_texts(v.events),
                                            name="status-text"))
         return found
 

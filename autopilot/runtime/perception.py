@@ -17,12 +17,16 @@ import numpy as np
 from autopilot.behaviors.base import Percept
 from autopilot.config import AppConfig
 from autopilot.flightlog import records as ch
-from autopilot.pipeline import Pipeline, PipelineSpec, make_pipeline
+from autopilot.pipeline import KeepsRecords, Pipeline, PipelineSpec, SensorFed, make_pipeline
 from autopilot.runtime.flight import Flight, Lane, ProcessedFrame, Track
 from drivers.base import Frame, VehicleState
+from drivers.capabilities import SENSOR_STREAMS
 from drivers.threads import lower_this_thread
 
 log = logging.getLogger(__name__)
+
+#: where the flight log keeps each extra sensor stream
+SENSOR_TOPICS = {"uwb": ch.UWB_RANGES, "rover": ch.ROVER_STATES}
 
 
 def detection_charge(config: AppConfig, kinds: Sequence[str]
@@ -242,15 +246,18 @@ class PerceptionLanes:
     def sensor_tasks(self, tasks: asyncio.TaskGroup) -> list[asyncio.Task]:
         """The vehicle's extra sensor streams (UWB, the rover's reports) while any pipeline
         takes them: logged, and handed to those pipelines as they arrive."""
-        if self._sensors_started or not any(callable(getattr(p, "add_sensor", None))
+        if self._sensors_started or not any(isinstance(p, SensorFed)
                                             for p in self.pipelines.values()):
             return []
         self._sensors_started = True
         vehicle = self.flight.vehicle
-        streams = {"uwb": (vehicle.uwb_ranges, ch.UWB_RANGES),
-                   "rover": (vehicle.rover_states, ch.ROVER_STATES)}
-        return [tasks.create_task(self._sensor(*streams[name]), name=f"sensor-{name}")
-                for name in sorted(vehicle.sensors) if name in streams]
+        found = []
+        for name in sorted(vehicle.sensors):
+            capability, stream = SENSOR_STREAMS.get(name, (None, None))
+            if capability is not None and isinstance(vehicle, capability):
+                found.append(tasks.create_task(self._sensor(stream(vehicle), SENSOR_TOPICS[name]),
+                                               name=f"sensor-{name}"))
+        return found
 
     async def _sensor(self, subscribe, topic: str) -> None:
         f = self.flight
@@ -260,14 +267,12 @@ class PerceptionLanes:
                 record["received_s"] = f.clock.now()
                 f.log.write(topic, sample.time_s, record)
                 for pipeline in self.pipelines.values():
-                    add = getattr(pipeline, "add_sensor", None)
-                    if add is not None:
-                        add(sample)
+                    if isinstance(pipeline, SensorFed):
+                        pipeline.add_sensor(sample)
                         self.log_relative(pipeline)
 
     def log_relative(self, pipeline: Pipeline) -> None:
-        take = getattr(pipeline, "take_records", None)
-        if take is None:
+        if not isinstance(pipeline, KeepsRecords):
             return
-        for record in take():
+        for record in pipeline.take_records():
             self.flight.log.write(ch.RELATIVE_ESTIMATES, record["time_s"], record)

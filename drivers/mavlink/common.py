@@ -19,6 +19,7 @@ from drivers.base import (
     Health,
     LandedState,
     RoverState,
+    SensorUnavailable,
     Vehicle,
     VehicleError,
     VehicleState,
@@ -78,6 +79,11 @@ class MavlinkVehicle(Vehicle):
         self.rover_latency_s = 0.1
         self._rovers: Broadcast[RoverState] = Broadcast()
         self._texts: Broadcast[tuple[float, str]] = Broadcast()
+        #: how each network camera was set up (URL, calibration, latency), by name
+        self.camera_setups: dict[str, object] = {}
+        #: the vehicle locked onto: its (system, component) and MAV_AUTOPILOT (None: not yet)
+        self._target: tuple[int, int] | None = None
+        self.autopilot: int | None = None
         self._text_parts: dict[int, list[str]] = {}
 
     @property
@@ -113,7 +119,7 @@ class MavlinkVehicle(Vehicle):
 
     def rover_states(self, buffer: int = 8) -> AsyncIterator[RoverState]:
         if self.rover_system_id is None:
-            return super().rover_states(buffer)
+            raise SensorUnavailable("no rover is heard on this vehicle's link")
         return self._rovers.subscribe(buffer)
 
     def _on_rover(self, msg) -> None:
@@ -191,6 +197,11 @@ class MavlinkVehicle(Vehicle):
     @property
     def cameras(self) -> Mapping[str, CameraInfo]:
         return {name: source.info for name, source in self._video.items()}
+
+    @property
+    def target_ids(self) -> tuple[int, int] | None:
+        """The (system, component) of the autopilot this driver locked onto (None: none yet)."""
+        return self._target
 
     @property
     def video_sources(self) -> Mapping[str, object]:

@@ -271,6 +271,7 @@ class MavsdkDriver(MavlinkVehicle):
         if kind == "HEARTBEAT" and self._target is None and src[1] == _AUTOPILOT_COMPONENT and \
                 msg.autopilot != _MAV_AUTOPILOT_INVALID and msg.type not in _GCS_OR_COMPANION:
             self._target = src
+            self.autopilot = msg.autopilot
             self._link.lock(address)
             log.info("vehicle: autopilot %s at system %d component %d", msg.autopilot, *src)
         if self._target is None or src[0] != self._target[0]:

@@ -53,6 +53,7 @@ from drivers.base import (
     Frame,
     LandingTarget,
     RoverState,
+    SensorUnavailable,
     Setpoint,
     UwbRanges,
     Vehicle,
@@ -235,12 +236,12 @@ class SimDriver(Vehicle):
 
     def uwb_ranges(self, buffer: int = 8) -> AsyncIterator[UwbRanges]:
         if "uwb" not in self.sensors:
-            return super().uwb_ranges(buffer)
+            raise SensorUnavailable("this vehicle has no UWB ranging")
         return self._uwb.subscribe(buffer)
 
     def rover_states(self, buffer: int = 8) -> AsyncIterator[RoverState]:
         if "rover" not in self.sensors:
-            return super().rover_states(buffer)
+            raise SensorUnavailable("no rover is in the simulated world")
         return self._rover.subscribe(buffer)
 
     def frames(self, camera: str) -> AsyncIterator[Frame]:

@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
-from autopilot.report.html import ALWAYS, PLOTS, write_report
+from autopilot.report.html import write_report
+from autopilot.report.panels import ALWAYS, panels_in_order
 from autopilot.steps import STEP_KINDS
 
 CHROMIUM = os.environ.get("CHROMIUM") or next(
@@ -51,10 +52,10 @@ def test_every_plot_is_visible_in_headless_chromium(logged_flight, tmp_path):
     found = re.search(r'data-plots="([^"]*)"', dom)
     assert found, "the page did not finish loading"
     plots = json.loads(html.unescape(found.group(1)))
-    # the panels follow_ball's steps ask for (and those every report has), in PLOTS' order
+    # the panels follow_ball's steps ask for (and those every report has), in the panels' order
     wanted = set(ALWAYS) | set(STEP_KINDS["follow_ball"].report)
-    assert [p["alt"] for p in plots] == [title for key, (title, _, _) in PLOTS.items()
-                                         if key in wanted]
+    assert [p["alt"] for p in plots] == [panel.title for panel in panels_in_order()
+                                         if panel.name in wanted]
     for plot in plots:
         assert plot["complete"], plot
         assert plot["width"] > 300, plot

@@ -1,0 +1,79 @@
+"""The registry of target kinds: what a mission's steps look for in the world, beside the step
+kinds (:mod:`autopilot.steps`) that fly to it.
+
+A target kind brings, in one place: its scenario section (``scenario.<name>``: where it is in
+the simulated world and how it moves, a pydantic model) and the world builder that turns that
+section into simulator bodies; its configuration section (``targets.<name>``: how it is
+found, a pydantic model whose defaults apply when the configuration does not say); and the
+perception pipelines that find it (registered by kind in :mod:`autopilot.pipeline`, so replay
+rebuilds them from a log). Report panels are registered beside them
+(:func:`autopilot.report.panels.register_panel`).
+
+Kinds from other packages arrive through the ``autopilot.targets`` entry point group
+(:mod:`autopilot.plugins`), as step kinds do through ``autopilot.steps``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+from pydantic import BaseModel
+
+if TYPE_CHECKING:
+    from drivers.sim.config import SimConfig
+    from drivers.sim.scenario import ScenarioObject
+
+
+@dataclass(frozen=True)
+class TargetKind:
+    name: str
+    #: its ``scenario.<name>`` section (None: it is not simulated)
+    scenario: type[BaseModel] | None = None
+    #: the simulator bodies of a scenario's section: (the section, the simulator's
+    #: configuration, the scenario's seed) → scenario objects (:mod:`drivers.sim.scenario`)
+    build: Callable[[BaseModel, SimConfig, int], Sequence[ScenarioObject]] | None = None
+    #: its ``targets.<name>`` configuration section (None: it has none)
+    settings: type[BaseModel] | None = None
+    description: str = ""
+
+
+TARGET_KINDS: dict[str, TargetKind] = {}
+
+
+def register_target(kind: TargetKind) -> TargetKind:
+    if kind.name in TARGET_KINDS:
+        if TARGET_KINDS[kind.name] is kind:
+            return kind
+        raise ValueError(f"target kind {kind.name!r} is registered twice")
+    TARGET_KINDS[kind.name] = kind
+    return kind
+
+
+def target_kind(name: str) -> TargetKind:
+    try:
+        return TARGET_KINDS[name]
+    except KeyError:
+        raise KeyError(f"no target kind {name!r} (known: {', '.join(sorted(TARGET_KINDS))})"
+                       ) from None
+
+
+def validate_section(kind: TargetKind, model: type[BaseModel] | None, value: Any,
+                     key_path: tuple) -> BaseModel:
+    """``value`` as ``model``; a pydantic error naming ``key_path`` + the key inside it (the
+    configuration loader places it on its file's line)."""
+    from pydantic import ValidationError
+    from pydantic_core import PydanticCustomError
+
+    if model is None:
+        raise PydanticCustomError("target", f"the {kind.name} target takes no section here",
+                                  {"key_path": key_path})
+    try:
+        return model.model_validate({} if value is None else value)
+    except ValidationError as exc:
+        err = exc.errors(include_url=False)[0]
+        loc = tuple(err["loc"])
+        message = "unknown key" if err["type"] == "extra_forbidden" else err["msg"]
+        raise PydanticCustomError("target", message.replace("{", "(").replace("}", ")"),
+                                  {"key_path": (*key_path, *loc)}) from None
