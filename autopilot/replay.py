@@ -42,15 +42,6 @@ from autopilot.resources import default_config_path
 from autopilot.steps import STEP_KINDS
 from autopilot.steps.metrics import mission_metrics, plan_steps
 
-#: The follow metrics a replay recomputes (the others describe the flight itself).
-DETECTION_KEYS = ("detection_rate", "frames_in_view", "frames_processed",
-                  "false_detection_rate", "max_lost_s")
-#: Per metrics group, the detection figures a replay recomputes: the flight's path and its
-#: errors are the flight's (a replay does not fly), what the detector saw in its frames is not.
-REPLAY_KEYS = {"follow": DETECTION_KEYS,
-               "hover": ("detection_rate", "frames_in_view", "found_after_s"),
-               "landing": ("frames", "detected_frames", "found_after_s")}
-
 
 class ReplayError(InputError):
     pass
@@ -132,15 +123,17 @@ def replay(run_dir: Path, overrides: Sequence[str] = ()) -> dict:
 
 
 def _replay_groups(metrics: dict) -> dict:
-    """The groups a replay can tell about: detection figures and the estimation."""
+    """The groups a replay can tell about: what each step kind's replay recomputes (its
+    detection figures, its filter's; :attr:`~autopilot.steps.registry.StepKind.replay`),
+    then the estimation."""
     groups: dict = {}
-    for group, keys in REPLAY_KEYS.items():
-        found = metrics.get(group) or {}
-        if found or group == "follow":
-            groups[group] = {k: found.get(k) for k in keys} if found else {}
+    for kind in STEP_KINDS.values():
+        for group, keys in kind.replay.items():
+            found = metrics.get(group)
+            if group in groups or not found:
+                continue
+            groups[group] = dict(found) if keys is None else {k: found.get(k) for k in keys}
     groups["estimation"] = metrics.get("estimation") or {}
-    if metrics.get("relative"):  # the relative-state filter of a landing on a rover
-        groups["relative"] = metrics["relative"]
     return groups
 
 

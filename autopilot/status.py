@@ -2,54 +2,98 @@
 kinds). One code says what the vehicle is doing for the mission at any moment: logged on
 ``/mission/status``, shown in the progress line, the report and the goal API.
 
-=====  ==============================  =====  ==============================
-code   meaning                         code   meaning
-=====  ==============================  =====  ==============================
-0      idle (on the ground)            11     area coverage completed
-1      takeoff in progress             12     abort (the safe stop: hold, land)
-2      takeoff completed               13     following a ball
-3      hover (holding, waiting)        14     ball following completed
-4      go-to in progress               15     following a marker
-5      go-to completed                 16     marker following completed
-6      images (orbit) in progress      17     hovering over an image
-7      images (orbit) completed        18     image hover completed
-8      landing in progress             19     precision landing on a pad
-9      landing completed               20     precision landing completed
-10     area coverage in progress
-=====  ==============================  =====  ==============================
+The codes are registered, not listed in one place: the mission-wide ones here (0 idle, 3
+hover, 12 abort, and the flight steps' takeoff, go-to, orbit, landing and coverage codes), a
+step kind's own in its module (:func:`register_status`), a plugin's in its package. A step kind
+names the two it reports (:attr:`autopilot.steps.registry.StepKind.status`: while it runs, once
+it has succeeded).
 """
 
 from __future__ import annotations
 
-import enum
+from dataclasses import dataclass
+from typing import ClassVar
 
 
-class MissionStatus(enum.IntEnum):
-    IDLE = 0
-    TAKEOFF_IN_PROGRESS = 1
-    TAKEOFF_COMPLETED = 2
-    HOVER = 3
-    GOTO_IN_PROGRESS = 4
-    GOTO_COMPLETED = 5
-    IMAGES_IN_PROGRESS = 6
-    IMAGES_COMPLETED = 7
-    LANDING_IN_PROGRESS = 8
-    LANDING_COMPLETED = 9
-    COVERAGE_IN_PROGRESS = 10
-    COVERAGE_COMPLETED = 11
-    ABORT = 12
-    FOLLOW_BALL_IN_PROGRESS = 13
-    FOLLOW_BALL_COMPLETED = 14
-    FOLLOW_MARKER_IN_PROGRESS = 15
-    FOLLOW_MARKER_COMPLETED = 16
-    HOVER_IMAGE_IN_PROGRESS = 17
-    HOVER_IMAGE_COMPLETED = 18
-    LAND_PAD_IN_PROGRESS = 19
-    LAND_PAD_COMPLETED = 20
+@dataclass(frozen=True, slots=True)
+class _Info:
+    label: str
+    #: a code that stays when the vehicle is on the ground with nothing running (a landing
+    #: completed is still that, not "idle")
+    stays_landed: bool
+
+
+class MissionStatus(int):
+    """A registered status code: an ``int`` with its ``label`` (one instance per code, so
+    ``is`` compares as ``==``). ``MissionStatus(13)`` is the code registered as 13 (ValueError
+    for a code nobody registered)."""
+
+    __slots__ = ()
+    _registered: ClassVar[dict[int, MissionStatus]] = {}
+    _info: ClassVar[dict[int, _Info]] = {}
+
+    IDLE: ClassVar[MissionStatus]
+    TAKEOFF_IN_PROGRESS: ClassVar[MissionStatus]
+    TAKEOFF_COMPLETED: ClassVar[MissionStatus]
+    HOVER: ClassVar[MissionStatus]
+    LANDING_IN_PROGRESS: ClassVar[MissionStatus]
+    LANDING_COMPLETED: ClassVar[MissionStatus]
+    ABORT: ClassVar[MissionStatus]
+
+    def __new__(cls, code: int) -> MissionStatus:
+        try:
+            return cls._registered[int(code)]
+        except KeyError:
+            raise ValueError(f"no mission status code {int(code)} is registered (known: "
+                             f"{', '.join(map(str, sorted(cls._registered)))})") from None
+
+    @property
+    def value(self) -> int:
+        return int(self)
 
     @property
     def label(self) -> str:
-        return self.name.lower().replace("_", " ")
+        return self._info[int(self)].label
+
+    @property
+    def stays_landed(self) -> bool:
+        return self._info[int(self)].stays_landed
+
+    def __repr__(self) -> str:
+        return f"MissionStatus({int(self)}: {self.label})"
+
+
+def register_status(code: int, label: str, *, stays_landed: bool = False) -> MissionStatus:
+    """Register a status code (once; the same label again returns it)."""
+    known = MissionStatus._info.get(code)
+    if known is not None:
+        if known.label != label:
+            raise ValueError(f"status code {code} is registered as {known.label!r}")
+        return MissionStatus._registered[code]
+    instance = int.__new__(MissionStatus, code)
+    MissionStatus._info[code] = _Info(label, stays_landed)
+    MissionStatus._registered[code] = instance
+    return instance
+
+
+def status_codes() -> dict[int, str]:
+    """Every registered code and its label."""
+    return {code: MissionStatus._info[code].label for code in sorted(MissionStatus._registered)}
+
+
+MissionStatus.IDLE = register_status(0, "idle")
+MissionStatus.TAKEOFF_IN_PROGRESS = register_status(1, "takeoff in progress")
+MissionStatus.TAKEOFF_COMPLETED = register_status(2, "takeoff completed")
+MissionStatus.HOVER = register_status(3, "hover")
+register_status(4, "goto in progress")
+register_status(5, "goto completed")
+register_status(6, "images in progress")
+register_status(7, "images completed")
+MissionStatus.LANDING_IN_PROGRESS = register_status(8, "landing in progress")
+MissionStatus.LANDING_COMPLETED = register_status(9, "landing completed", stays_landed=True)
+register_status(10, "coverage in progress")
+register_status(11, "coverage completed")
+MissionStatus.ABORT = register_status(12, "abort", stays_landed=True)
 
 
 class StatusTracker:
@@ -84,7 +128,6 @@ class StatusTracker:
         stays so)."""
         if in_air:
             self.code = MissionStatus.HOVER
-        elif self.code not in (MissionStatus.LANDING_COMPLETED, MissionStatus.LAND_PAD_COMPLETED,
-                               MissionStatus.ABORT):
+        elif not self.code.stays_landed:
             self.code = MissionStatus.IDLE
         return self.code

@@ -23,9 +23,14 @@ import numpy as np
 from autopilot.flightlog import records as ch
 from autopilot.flightlog.log import ChannelInfo, channel_counts, read_log_checked
 from autopilot.report import data
-from autopilot.report.panels import ALWAYS, PANELS, NoData, panels_in_order, register_panel
-
-_COLOURS = ["#e8eef7", "#f7efe3", "#e9f5e9", "#f5e8f0", "#eeeeee"]
+from autopilot.report.panels import (
+    ALWAYS,
+    PANELS,
+    NoData,
+    panels_in_order,
+    register_panel,
+    shade_steps,
+)
 
 
 def write_report(run_dir: Path) -> Path:
@@ -123,15 +128,6 @@ def _figure(draw: Callable) -> str:
     return base64.b64encode(buf.getvalue()).decode()
 
 
-def _shade(ax, phases) -> None:
-    """Each step shaded, its name above the plot: staggered over three rows so that short
-    neighbouring steps' names do not print over each other."""
-    for i, (a, b, step) in enumerate(phases):
-        ax.axvspan(a, b, color=_COLOURS[i % len(_COLOURS)], zorder=0)
-        ax.text(a, 1.02 + 0.07 * (i % 3), f" {step}", transform=ax.get_xaxis_transform(),
-                va="bottom", fontsize=7, color="#555", clip_on=False)
-
-
 def _trajectories(fig, records, phases, target) -> None:
     tr = data.trajectories(records, target)
     if not len(tr["vehicle"]) and not len(tr["vehicle_truth"]):
@@ -147,7 +143,7 @@ def _trajectories(fig, records, phases, target) -> None:
             side.plot(tr[f"{key}_t"], -p[:, 2], style, label=label, lw=1)
     top.set(xlabel="east (m)", ylabel="north (m)", title="top-down", aspect="equal")
     side.set(xlabel="time (s)", ylabel="altitude (m)", title="side")
-    _shade(side, phases)
+    shade_steps(side, phases)
     top.legend(fontsize=8)
 
 
@@ -176,7 +172,7 @@ def _standoff(fig, records, phases, target) -> None:
         note = "scaled to the following (off-scale outside it)"
     else:
         note = None
-    _shade(ax, phases)
+    shade_steps(ax, phases)
     ax.legend(fontsize=8, title=note, title_fontsize=7)
 
 
@@ -217,7 +213,7 @@ def _over_target(fig, records, phases, target) -> None:
     err.set_yscale("log")
     err.set(xlabel="time (s)", ylabel="m (log scale)", ylim=(0.003, 5.0),
             title="horizontal offset from the target's centre")
-    _shade(err, phases)
+    shade_steps(err, phases)
     err.legend(fontsize=8)
 
 
@@ -239,7 +235,7 @@ def _detections(fig, records, phases, target) -> None:
                      colors=["tab:green", "tab:red"], linelengths=0.8)
         ax.set(yticks=[0, 1], yticklabels=["not detected", "detected"])
     ax.set(xlabel="time (s)")
-    _shade(ax, phases)
+    shade_steps(ax, phases)
 
 
 def _estimate(fig, records, phases, target) -> None:
@@ -254,7 +250,7 @@ def _estimate(fig, records, phases, target) -> None:
         if np.isfinite(e["truth"][:, i]).any():
             ax.plot(e["t"], e["truth"][:, i], "k", lw=0.8, label="truth")
         ax.set(title=axis, xlabel="time (s)", ylabel="m" if i == 0 else None)
-        _shade(ax, phases)
+        shade_steps(ax, phases)
     axes[0].legend(fontsize=8)
 
 
@@ -268,7 +264,7 @@ def _velocity(fig, records, phases, target) -> None:
         if len(v["command_t"]):
             ax.plot(v["command_t"], v["command"][:, i], lw=0.8, label="commanded")
         ax.set(title=f"v{axis.lower()}", xlabel="time (s)", ylabel="m/s" if i == 0 else None)
-        _shade(ax, phases)
+        shade_steps(ax, phases)
     axes[0].legend(fontsize=8)
 
 
@@ -356,7 +352,7 @@ def _path(fig, records, phases, target) -> None:
     top.legend(fontsize=7)
     err.set(xlabel="time (s)", ylabel="cross-track error (cm)",
             title="distance from the planned path (truth)")
-    _shade(err, phases)
+    shade_steps(err, phases)
     err.legend(fontsize=7)
 
 
@@ -378,70 +374,10 @@ def _status(fig, records, phases, target) -> None:
            yticks=sorted(names))
     ax.text(1.01, 1.0, "\n".join(f"{code}: {name}" for code, name in sorted(names.items())),
             transform=ax.transAxes, va="top", fontsize=7, color="#333")
-    _shade(ax, phases)
+    shade_steps(ax, phases)
 
 
-def _rover(fig, records, phases, target) -> None:
-    """Landing on the rover: the drone relative to the deck (truth, and the estimate the
-    controller flew on) from above and from the side in the rover's axes; the relative
-    estimate's error per source at each update, with its 2σ; when each source updated."""
-    import numpy as np
-
-    from autopilot.steps.land_on_rover import relative_tracks
-
-    tr = relative_tracks(records)
-    if tr is None:
-        raise NoData("no rover in this log")
-    fig.set_size_inches(10, 7.5)
-    (top, side), (err, avail) = fig.subplots(2, 2)
-    length, width = tr["deck_size_m"]
-    top.add_patch(__import__("matplotlib.patches", fromlist=["Rectangle"]).Rectangle(
-        (-width / 2, -length / 2), width, length, fill=False, color="#888", lw=1))
-    top.plot(tr["truth"][:, 1], tr["truth"][:, 0], "-", lw=1, label="truth")
-    if len(tr["flown"]):
-        top.plot(tr["flown"][:, 1], tr["flown"][:, 0], ":", lw=1, label="estimate flown on")
-    top.set(xlabel="across the rover (m, right +)", ylabel="along the rover (m, front +)",
-            title="relative track from above (deck outlined)", aspect="equal")
-    near = np.abs(tr["truth"][:, 2]) < 4.0
-    if near.any():
-        span = max(1.0, float(np.abs(tr["truth"][near, :2]).max()) * 1.1)
-        top.set(xlim=(-span, span), ylim=(-span, span))
-    top.legend(fontsize=7)
-    side.axhspan(-0.02, 0.0, color="#888")
-    side.plot(tr["truth"][:, 0], tr["truth"][:, 2], "-", lw=1, label="truth")
-    if len(tr["flown"]):
-        side.plot(tr["flown"][:, 0], tr["flown"][:, 2], ":", lw=1, label="estimate flown on")
-    side.set(xlabel="along the rover (m)", ylabel="height above the deck (m)",
-             title="from the side")
-    side.legend(fontsize=7)
-    colours = {"uwb": "#1f77b4", "tag": "#d62728", "range": "#2ca02c", "rover": "#9467bd"}
-    for source, rows in tr["updates"].items():
-        if len(rows["t"]):
-            err.plot(rows["t"], rows["error_m"] * 100.0, ".", ms=2, color=colours[source],
-                     label=f"after {source}")
-    if len(tr["sigma_t"]):
-        err.plot(tr["sigma_t"], tr["two_sigma_m"] * 100.0, "-", lw=0.8, color="#555",
-                 label="2σ (horizontal)")
-    err.set(xlabel="time (s)", ylabel="horizontal error (cm)", yscale="log",
-            title="relative estimate against truth, per source")
-    err.legend(fontsize=6, ncol=2)
-    _shade(err, phases)
-    for row, source in enumerate(("uwb", "tag", "range", "rover")):
-        rows = tr["updates"][source]
-        if len(rows["t"]):
-            avail.plot(rows["t"], np.full(len(rows["t"]), row), "|", ms=8,
-                       color=colours[source])
-        rej = tr["rejected"][source]
-        if len(rej):
-            avail.plot(rej, np.full(len(rej), row - 0.3), "|", ms=4, color="#999")
-    avail.set(yticks=range(4), yticklabels=["UWB", "tag", "rangefinder", "rover report"],
-              xlabel="time (s)", title="sensor updates (grey: rejected by the gate)",
-              ylim=(-0.8, 3.5))
-    _shade(avail, phases)
-    fig.tight_layout()
-
-
-for _name, _title, _draw, _per_target in (
+for _order, (_name, _title, _draw, _per_target) in enumerate((
         ("trajectory", "Trajectories", _trajectories, False),
         ("standoff", "Standoff error", _standoff, True),
         ("over_target", "Over the target on the ground", _over_target, True),
@@ -450,9 +386,8 @@ for _name, _title, _draw, _per_target in (
         ("velocity", "Commanded and actual velocity", _velocity, False),
         ("latency", "Latency", _latency, False),
         ("path", "Planned path and flown track", _path, False),
-        ("status", "Mission status", _status, False),
-        ("rover", "Landing on the rover", _rover, False)):
-    register_panel(_name, _title, _draw, per_target=_per_target, shipped=True)
+        ("status", "Mission status", _status, False))):
+    register_panel(_name, _title, _draw, per_target=_per_target, order=_order)
 
 
 def _panels(records, targets: list) -> list[tuple[str, Callable, object]]:

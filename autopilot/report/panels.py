@@ -25,7 +25,9 @@ class Panel:
     title: str
     draw: Callable[..., None]
     per_target: bool = False  # drawn once per followed target
-    shipped: bool = False  # the autopilot's own (shown before the plugins')
+    #: where it goes in the report (lower first; the autopilot's own are numbered below 100,
+    #: a panel that does not say goes after them)
+    order: int = 100
 
 
 #: the panels, in the order the report shows them
@@ -35,13 +37,26 @@ ALWAYS = ("trajectory", "velocity", "status")
 
 
 def register_panel(name: str, title: str, draw: Callable[..., None], *,
-                   per_target: bool = False, shipped: bool = False) -> Panel:
+                   per_target: bool = False, order: int = 100) -> Panel:
     if name in PANELS:
         raise ValueError(f"report panel {name!r} is registered twice")
-    PANELS[name] = panel = Panel(name, title, draw, per_target, shipped)
+    PANELS[name] = panel = Panel(name, title, draw, per_target, order)
     return panel
 
 
 def panels_in_order() -> list[Panel]:
-    """The autopilot's own panels, then the plugins', each in the order registered."""
-    return sorted(PANELS.values(), key=lambda panel: not panel.shipped)
+    """The panels by their ``order`` (then as registered)."""
+    return sorted(PANELS.values(), key=lambda panel: panel.order)
+
+
+#: the steps' shades, in turn
+STEP_COLOURS = ["#e8eef7", "#f7efe3", "#e9f5e9", "#f5e8f0", "#eeeeee"]
+
+
+def shade_steps(ax, phases) -> None:
+    """Each step shaded, its name above the plot: staggered over three rows so that short
+    neighbouring steps' names do not print over each other."""
+    for i, (a, b, step) in enumerate(phases):
+        ax.axvspan(a, b, color=STEP_COLOURS[i % len(STEP_COLOURS)], zorder=0)
+        ax.text(a, 1.02 + 0.07 * (i % 3), f" {step}", transform=ax.get_xaxis_transform(),
+                va="bottom", fontsize=7, color="#555", clip_on=False)

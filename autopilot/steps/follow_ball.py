@@ -14,8 +14,10 @@ from autopilot.config import AppConfig, ConfigError, Problem
 from autopilot.control.follow import FollowSettings
 from autopilot.flightlog.metrics import follow_step_metrics
 from autopilot.perception.ball_pipeline import ball_spec
+from autopilot.status import register_status
 from autopilot.steps.registry import (
     ESTIMATE_FIGURES,
+    FOLLOW_REPLAY_KEYS,
     Figure,
     StepContext,
     StepKind,
@@ -70,6 +72,10 @@ def _plan_info(params: FollowBallParams, config: AppConfig) -> dict:
     return {"standoff_m": params.standoff_m or config.control.follow.standoff_m}
 
 
+#: its status codes (autopilot.status)
+IN_PROGRESS = register_status(13, "follow ball in progress")
+COMPLETED = register_status(14, "follow ball completed")
+
 register(StepKind(
     "follow_ball", FollowBallParams, _behavior,
     pipelines=lambda params, config: (ball_spec(config),),
@@ -82,4 +88,5 @@ register(StepKind(
     report=("trajectory", "standoff", "detections", "estimate", "velocity", "latency"),
     plan_info=_plan_info,
     description="follow a coloured ball with a camera for duration_s",
-    status=(13, 14)))
+    replay={"follow": FOLLOW_REPLAY_KEYS},
+    status=(int(IN_PROGRESS), int(COMPLETED))))

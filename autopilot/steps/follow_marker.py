@@ -10,9 +10,11 @@ from __future__ import annotations
 from autopilot.behaviors.follow_marker import FollowMarker, FollowMarkerParams
 from autopilot.flightlog.metrics import follow_step_metrics
 from autopilot.perception.marker_pipeline import marker_spec
+from autopilot.status import register_status
 from autopilot.steps.follow_ball import camera_of, follow_settings, lost_settings
 from autopilot.steps.registry import (
     ESTIMATE_FIGURES,
+    FOLLOW_REPLAY_KEYS,
     Figure,
     StepContext,
     StepKind,
@@ -27,6 +29,10 @@ def _behavior(params: FollowMarkerParams, ctx: StepContext) -> FollowMarker:
                         lost_settings(config), camera)
 
 
+#: its status codes (autopilot.status)
+IN_PROGRESS = register_status(15, "follow marker in progress")
+COMPLETED = register_status(16, "follow marker completed")
+
 register(StepKind(
     "follow_marker", FollowMarkerParams, _behavior,
     pipelines=lambda params, config: (marker_spec(config),),
@@ -39,4 +45,5 @@ register(StepKind(
     report=("trajectory", "standoff", "detections", "estimate", "velocity", "latency"),
     plan_info=lambda params, config: {"standoff_m": params.standoff_m},
     description="follow a fiducial marker (ArUco/AprilTag) at standoff_m for duration_s",
-    status=(15, 16)))
+    replay={"follow": FOLLOW_REPLAY_KEYS},
+    status=(int(IN_PROGRESS), int(COMPLETED))))

@@ -33,6 +33,7 @@ from autopilot.flightlog.metrics import (
 )
 from autopilot.flightlog.truth import truth_table
 from autopilot.perception.image_pipeline import image_spec
+from autopilot.status import register_status
 from autopilot.steps.land_pad import search_footprint_per_m
 from autopilot.steps.registry import (
     ESTIMATE_FIGURES,
@@ -138,6 +139,10 @@ def hover_metrics(log: Mapping[str, Sequence[Mapping]], intervals: list[tuple[fl
     return {"hover": hover, "estimation": estimation_metrics(log, intervals, target)}
 
 
+#: its status codes (autopilot.status)
+IN_PROGRESS = register_status(17, "hover image in progress")
+COMPLETED = register_status(18, "hover image completed")
+
 register(StepKind(
     "hover_image", HoverImageParams, _behavior,
     pipelines=lambda params, config: (image_spec(config, params.image, params.size_m),),
@@ -151,4 +156,5 @@ register(StepKind(
               Figure("hover", "found_after_s", "first found after", "s")), ESTIMATE_FIGURES),
     report=("trajectory", "over_target", "detections", "estimate", "latency"),
     description="hover over a known image on the ground (down camera) for duration_s",
-    status=(17, 18)))
+    replay={"hover": ("detection_rate", "frames_in_view", "found_after_s")},
+    status=(int(IN_PROGRESS), int(COMPLETED))))

@@ -40,8 +40,9 @@ from autopilot.flightlog import records as ch
 from autopilot.flightlog.metrics import Estimates, phase_entries
 from autopilot.flightlog.truth import extend_floats, truth_table
 from autopilot.perception.deck_pipeline import ROVER_BODY, deck_spec
+from autopilot.report.panels import NoData, register_panel, shade_steps
 from autopilot.steps.follow_ball import camera_of
-from autopilot.steps.registry import Figure, StepContext, StepKind, register
+from autopilot.steps.registry import LANDING_REPLAY_KEYS, Figure, StepContext, StepKind, register
 from drivers.geometry import yaw_from_quat as _yaw_of
 
 #: resting: within this of the height the vehicle finally rests at over the deck
@@ -275,6 +276,64 @@ def relative_tracks(log: Mapping[str, Sequence[Mapping]], body: str = ROVER_BODY
     return out
 
 
+def draw_rover_panel(fig, records, phases, target) -> None:
+    """Landing on the rover: the drone relative to the deck (truth, and the estimate the
+    controller flew on) from above and from the side in the rover's axes; the relative
+    estimate's error per source at each update, with its 2σ; when each source updated."""
+    tr = relative_tracks(records)
+    if tr is None:
+        raise NoData("no rover in this log")
+    fig.set_size_inches(10, 7.5)
+    (top, side), (err, avail) = fig.subplots(2, 2)
+    length, width = tr["deck_size_m"]
+    top.add_patch(__import__("matplotlib.patches", fromlist=["Rectangle"]).Rectangle(
+        (-width / 2, -length / 2), width, length, fill=False, color="#888", lw=1))
+    top.plot(tr["truth"][:, 1], tr["truth"][:, 0], "-", lw=1, label="truth")
+    if len(tr["flown"]):
+        top.plot(tr["flown"][:, 1], tr["flown"][:, 0], ":", lw=1, label="estimate flown on")
+    top.set(xlabel="across the rover (m, right +)", ylabel="along the rover (m, front +)",
+            title="relative track from above (deck outlined)", aspect="equal")
+    near = np.abs(tr["truth"][:, 2]) < 4.0
+    if near.any():
+        span = max(1.0, float(np.abs(tr["truth"][near, :2]).max()) * 1.1)
+        top.set(xlim=(-span, span), ylim=(-span, span))
+    top.legend(fontsize=7)
+    side.axhspan(-0.02, 0.0, color="#888")
+    side.plot(tr["truth"][:, 0], tr["truth"][:, 2], "-", lw=1, label="truth")
+    if len(tr["flown"]):
+        side.plot(tr["flown"][:, 0], tr["flown"][:, 2], ":", lw=1, label="estimate flown on")
+    side.set(xlabel="along the rover (m)", ylabel="height above the deck (m)",
+             title="from the side")
+    side.legend(fontsize=7)
+    colours = {"uwb": "#1f77b4", "tag": "#d62728", "range": "#2ca02c", "rover": "#9467bd"}
+    for source, rows in tr["updates"].items():
+        if len(rows["t"]):
+            err.plot(rows["t"], rows["error_m"] * 100.0, ".", ms=2, color=colours[source],
+                     label=f"after {source}")
+    if len(tr["sigma_t"]):
+        err.plot(tr["sigma_t"], tr["two_sigma_m"] * 100.0, "-", lw=0.8, color="#555",
+                 label="2σ (horizontal)")
+    err.set(xlabel="time (s)", ylabel="horizontal error (cm)", yscale="log",
+            title="relative estimate against truth, per source")
+    err.legend(fontsize=6, ncol=2)
+    shade_steps(err, phases)
+    for row, source in enumerate(("uwb", "tag", "range", "rover")):
+        rows = tr["updates"][source]
+        if len(rows["t"]):
+            avail.plot(rows["t"], np.full(len(rows["t"]), row), "|", ms=8,
+                       color=colours[source])
+        rej = tr["rejected"][source]
+        if len(rej):
+            avail.plot(rej, np.full(len(rej), row - 0.3), "|", ms=4, color="#999")
+    avail.set(yticks=range(4), yticklabels=["UWB", "tag", "rangefinder", "rover report"],
+              xlabel="time (s)", title="sensor updates (grey: rejected by the gate)",
+              ylim=(-0.8, 3.5))
+    shade_steps(avail, phases)
+    fig.tight_layout()
+
+
+register_panel("rover", "Landing on the rover", draw_rover_panel, order=9)
+
 register(StepKind(
     "land_on_rover", LandOnRoverParams, _behavior, pipelines=_spec, metrics=landing_metrics,
     summary=((Figure("landing", "on_deck", "on the deck"),
@@ -291,4 +350,5 @@ register(StepKind(
     report=("trajectory", "rover", "latency"), check=_check,
     description="land on a moving rover's deck: UWB, its tag and its reports fused "
                 "(seed 004)",
+    replay={"landing": LANDING_REPLAY_KEYS, "relative": None},
     status=(8, 9)))

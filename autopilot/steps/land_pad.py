@@ -24,9 +24,11 @@ from autopilot.flightlog.metrics import FollowedTarget, estimation_metrics, phas
 from autopilot.flightlog.truth import truth_table
 from autopilot.perception.pad_pipeline import pad_spec
 from autopilot.planning.footprint import footprint_width_per_m
+from autopilot.status import register_status
 from autopilot.steps.follow_ball import camera_of
 from autopilot.steps.registry import (
     ESTIMATE_FIGURES,
+    LANDING_REPLAY_KEYS,
     Figure,
     StepContext,
     StepKind,
@@ -147,6 +149,10 @@ def landing_metrics(log: Mapping[str, Sequence[Mapping]], intervals: list[tuple[
     return {"landing": landing, "estimation": estimation_metrics(log, intervals, target)}
 
 
+#: its status codes (autopilot.status)
+IN_PROGRESS = register_status(19, "land pad in progress")
+COMPLETED = register_status(20, "land pad completed", stays_landed=True)
+
 register(StepKind(
     "land_pad", LandPadParams, _behavior, pipelines=_spec, metrics=landing_metrics,
     summary=((Figure("landing", "on_pad", "on the pad"),
@@ -156,4 +162,5 @@ register(StepKind(
               Figure("landing", "retries", "retries")), ESTIMATE_FIGURES),
     report=("trajectory", "over_target", "detections", "estimate", "latency"),
     description="search for a landing pad with the down camera, descend onto it, disarm",
-    status=(19, 20)))
+    replay={"landing": LANDING_REPLAY_KEYS},
+    status=(int(IN_PROGRESS), int(COMPLETED))))

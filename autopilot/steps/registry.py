@@ -12,11 +12,12 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import Future
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from autopilot.behaviors.base import Behavior, BehaviorInputs, Params
 from autopilot.config import AppConfig
 from autopilot.pipeline import PipelineSpec
+from autopilot.status import MissionStatus
 from drivers.base import CameraInfo
 
 #: (start, end) times of the intervals a step ran in
@@ -82,6 +83,12 @@ class Figure:
         return f"{self.label} {value}{unit}{after}"
 
 
+#: the follow metrics a replay recomputes (the others describe the flight itself)
+FOLLOW_REPLAY_KEYS = ("detection_rate", "frames_in_view", "frames_processed",
+                      "false_detection_rate", "max_lost_s")
+#: a landing's detection figures a replay recomputes
+LANDING_REPLAY_KEYS = ("frames", "detected_frames", "found_after_s")
+
 #: what the terminal shows of the estimate a step flew on (a followed or landed-on target)
 ESTIMATE_FIGURES = (
     Figure("estimation", "rms_relative_position_error_m", "estimate flown on: relative error RMS",
@@ -112,8 +119,9 @@ class StepKind:
     #: what the step needs of the configuration, beyond its own parameters (raises ValueError
     #: naming what is wrong; checked when the mission loads, before anything flies)
     check: Callable[[Params, AppConfig], None] = _no_check
-    #: its mission status codes (autopilot.status): while it runs, once it has succeeded;
-    #: None: what the vehicle is doing says (3 hover in the air, 0 idle on the ground)
+    #: its mission status codes (registered with autopilot.status.register_status): while it
+    #: runs, once it has succeeded; None: what the vehicle is doing says (3 hover in the air,
+    #: 0 idle on the ground)
     status: tuple[int, int] | None = (3, 3)
     #: the camera it takes photos with (its frames are kept while it runs), or None
     photo_camera: Callable[[Params, AppConfig], str | None] = _no_camera
@@ -126,6 +134,10 @@ class StepKind:
     summary: tuple[tuple[Figure, ...], ...] = ()
     #: what may not go as its author expects though it can fly (shown before the flight)
     warnings: Callable[[Params, AppConfig], tuple[str, ...]] = _no_warnings
+    #: what ``autopilot replay`` recomputes of its metrics: per metrics group, the keys (what
+    #: the detector saw in its frames; the flight's path and errors stay the flight's), or
+    #: None for the whole group
+    replay: Mapping[str, tuple[str, ...] | None] = field(default_factory=dict)
 
 
 STEP_KINDS: dict[str, StepKind] = {}
@@ -134,6 +146,8 @@ STEP_KINDS: dict[str, StepKind] = {}
 def register(kind: StepKind) -> StepKind:
     if kind.name in STEP_KINDS:
         raise ValueError(f"step kind {kind.name!r} is registered twice")
+    for code in kind.status or ():
+        MissionStatus(code)  # raises unless registered (autopilot.status.register_status)
     STEP_KINDS[kind.name] = kind
     return kind
 

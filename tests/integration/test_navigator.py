@@ -1,7 +1,7 @@
 """The simulated vehicle's navigator and failsafes in closed loop, on the lockstep clock:
 missions (takeoff, waypoints, speed, hold times, jumps, pause and resume), return to launch,
 the geofence, parameters and camera triggering, as PX4 flies them (see the research notes in
-drivers/sim/flight/navigator.py). Cameras are disabled: photos are counted, not rendered."""
+drivers/sim/flight/navigator/). Cameras are disabled: photos are counted, not rendered."""
 
 from __future__ import annotations
 

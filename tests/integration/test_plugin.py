@@ -62,6 +62,12 @@ def test_the_plugin_flies_its_own_mission_with_its_own_target_and_step(site, tmp
     assert beacon["rms_hover_error_m"] < 0.4, beacon
     assert beacon["final_hover_error_m"] < 0.4, beacon
     assert beacon["detection_rate"] > 0.3, beacon
+    # its status codes, registered by the plugin, reported while it ran and once it succeeded
+    from autopilot.flightlog import records as ch
+    from autopilot.flightlog.log import read_log
+
+    codes = [r["code"] for r in read_log(out / "flight.mcap")[ch.MISSION_STATUS]]
+    assert {40, 41} <= set(codes), codes
     report = (out / "report.html").read_text()
     assert "<h2>Over the beacon</h2>" in report  # its report panel, drawn
     assert report.index("<h2>Trajectories</h2>") < report.index("<h2>Over the beacon</h2>")

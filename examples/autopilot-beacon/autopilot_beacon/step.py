@@ -26,6 +26,7 @@ from autopilot.behaviors.base import (
 )
 from autopilot.flightlog import records as ch
 from autopilot.report.panels import NoData, register_panel
+from autopilot.status import register_status
 from autopilot.steps.registry import Figure, StepKind
 from autopilot_beacon.pipeline import beacon_spec
 from drivers.base import Setpoint
@@ -152,12 +153,16 @@ def draw_panel(fig, records, phases, target) -> None:
 
 
 register_panel("beacon", "Over the beacon", draw_panel)
+#: its mission status codes (the autopilot's own end at 20)
+SEARCHING_OR_HOVERING = register_status(40, "hover beacon in progress")
+HOVERED = register_status(41, "hover beacon completed")
 
 STEP = StepKind(
     "hover_beacon", HoverBeaconParams,
     lambda params, ctx: HoverBeacon(params),
     pipelines=lambda params, config: (beacon_spec(config, params.size_m),),
     metrics=metrics, report=("beacon", "detections"),
+    status=(int(SEARCHING_OR_HOVERING), int(HOVERED)),
     description="find a beacon on the ground with the down camera and hover over it "
                 "(an example plugin's step kind)",
     summary=((Figure("beacon", "rms_hover_error_m", "over the beacon: error RMS", "m"),
