@@ -21,14 +21,11 @@ from typing import Any
 from pydantic import ValidationError
 
 from autopilot.behaviors.base import BehaviorInputs
-from autopilot.behaviors.trajectory import LimitError
+from autopilot.behaviors.trajectory_plan import LimitError
 from autopilot.config import AppConfig
 from autopilot.mission import Step
 from autopilot.status import MissionStatus
 from autopilot.steps import STEP_KINDS
-
-#: step kinds that cannot be goals (they are what waits for goals)
-NOT_GOALS = frozenset({"standby"})
 
 
 class GoalError(Exception):
@@ -48,7 +45,8 @@ class GoalError(Exception):
 
 
 def goal_kinds() -> list[str]:
-    return [name for name in STEP_KINDS if name not in NOT_GOALS]
+    """The step kinds the goal API takes (all but those that wait for goals)."""
+    return [name for name, kind in STEP_KINDS.items() if not kind.waits_for_goals]
 
 
 def _short(value: Any, limit: int = 60) -> str:
@@ -69,7 +67,7 @@ def validate_goal(body: Any, config: AppConfig, site: BehaviorInputs | None = No
                         [{"key": "", "error": f"expected an object with one key, got "
                                               f"{type(body).__name__}"}])
     (name, params), = body.items()
-    if name not in STEP_KINDS or name in NOT_GOALS:
+    if name not in goal_kinds():
         raise GoalError(422, f"unknown goal kind {name!r}",
                         [{"key": name, "error": f"known: {', '.join(goal_kinds())}"}])
     if params is None:

@@ -14,7 +14,8 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
-from autopilot.api import ApiServer, parse_address
+from autopilot.api import parse_address
+from autopilot.api_server import ApiServer
 from autopilot.cameras import camera_setups, parse_camera_options
 from autopilot.config import ConfigError, Problem
 from autopilot.flightlog import records as ch

@@ -130,7 +130,8 @@ async def serve(config: AppConfig, scenario: Scenario | None, *, instance: int =
             log(f"{name} camera calibration → {calibration}")
     console_source = console_server = console_task = None
     if console is not None:
-        from autopilot.api import ApiServer, parse_address
+        from autopilot.api import parse_address
+        from autopilot.api_server import ApiServer
         from autopilot.console.sim import SimConsoleSource
 
         console_source = SimConsoleSource(vehicle, config, title)

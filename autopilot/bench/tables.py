@@ -20,7 +20,7 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
-from autopilot.bench import down, follow, landing, load, offboard
+from autopilot.bench import down, follow, landing, load_figures, offboard
 
 
 def _preformatted(bench: str, format_table: Callable[[dict], str],
@@ -52,7 +52,7 @@ FORMATTERS: dict[str, Callable[[dict], list[str]]] = {
         "PID, and ours without the tag, in the same trials; a trial that did not land on the "
         "deck counts in the success rate and as infinite in the error percentiles"),
     "load": _preformatted(
-        "load", load.format_table,
+        "load", load_figures.format_table,
         "Real-time follow_ball on a busy CPU: `autopilot sim` on a core of its own, the "
         "autopilot over MAVSDK (H.264 video in, a console viewer) sharing the other with N busy "
         "processes, each in a session of its own (Linux's autogroups give each the "

@@ -26,7 +26,8 @@ class Client:
     """Calls to a run's goal API at ``args.api`` with ``args.api_token_file``'s token."""
 
     def __init__(self, args: argparse.Namespace) -> None:
-        from autopilot.api import ApiSetupError, parse_address, read_token
+        from autopilot.api import ApiSetupError, parse_address
+        from autopilot.api_server import read_token
 
         try:
             host, port = parse_address(args.api)

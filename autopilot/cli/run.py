@@ -135,7 +135,8 @@ def check_network_exposure(option: str, url: str, key: str | None, insecure: boo
 def listen_token(option: str, address: str, token_file: str | None) -> str | None:
     """A served address (the goal API's, a console's) checked before anything starts: it
     parses, can be listened on, and has a token if other machines can reach it. Its token."""
-    from autopilot.api import ApiSetupError, check_listen, is_loopback, parse_address, read_token
+    from autopilot.api import ApiSetupError, check_listen, is_loopback, parse_address
+    from autopilot.api_server import read_token
 
     try:
         host, port = parse_address(address)
@@ -151,11 +152,8 @@ def listen_token(option: str, address: str, token_file: str | None) -> str | Non
 
 def check_api(args: argparse.Namespace) -> str | None:
     """The goal API's and console's options checked before anything flies; the token."""
-    from autopilot.api import (
-        ApiSetupError,
-        check_tls,
-        parse_address,
-    )
+    from autopilot.api import ApiSetupError, parse_address
+    from autopilot.api_server import check_tls
 
     if args.console:
         try:

@@ -40,7 +40,7 @@ import numpy as np
 from filterpy.common import Q_discrete_white_noise
 from filterpy.kalman import KalmanFilter
 
-from autopilot.estimation.relative import DeckGeometry, RelativeEstimate
+from autopilot.estimation.relative_types import DeckGeometry, RelativeEstimate
 
 N = 13
 P_D, V_D, P_R, V_R, PSI = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12), 12

@@ -21,10 +21,10 @@ import numpy as np
 
 from autopilot.config import AppConfig
 from autopilot.estimation.pose_history import PoseHistory
-from autopilot.estimation.relative import (
+from autopilot.estimation.relative import RelativeFilter
+from autopilot.estimation.relative_types import (
     DeckGeometry,
     RelativeEstimate,
-    RelativeFilter,
     RelativeSettings,
     tag_measurement,
 )

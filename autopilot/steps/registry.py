@@ -138,6 +138,9 @@ class StepKind:
     #: the detector saw in its frames; the flight's path and errors stay the flight's), or
     #: None for the whole group
     replay: Mapping[str, tuple[str, ...] | None] = field(default_factory=dict)
+    #: a step that waits for the goal API's goals (standby): not a goal itself; the goals'
+    #: default photo camera is kept ready while it runs
+    waits_for_goals: bool = False
 
 
 STEP_KINDS: dict[str, StepKind] = {}

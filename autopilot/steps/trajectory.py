@@ -30,13 +30,11 @@ from shapely.geometry import Polygon
 from shapely.ops import unary_union
 
 from autopilot.behaviors.base import BehaviorInputs
-from autopilot.behaviors.trajectory import (
-    Goto,
+from autopilot.behaviors.trajectory import Goto, Orbit, Survey
+from autopilot.behaviors.trajectory_plan import (
     GotoParams,
-    Orbit,
     OrbitParams,
     PlanBounds,
-    Survey,
     SurveyParams,
     TrajectorySettings,
     check_reach,

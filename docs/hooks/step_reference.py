@@ -37,7 +37,6 @@ def on_page_markdown(markdown: str, page, config, files) -> str:  # MkDocs passe
 
 
 def render() -> str:
-    from autopilot.goals import NOT_GOALS
     from autopilot.status import MissionStatus
     from autopilot.steps import STEP_KINDS
 
@@ -56,7 +55,7 @@ def render() -> str:
                      f"{running.value} ({running.label}) while it runs, {done.value} "
                      f"({done.label}) once it has succeeded")
             out.append(f"Mission status: {codes}. ")
-        out.append("Not accepted as a goal. " if name in NOT_GOALS else
+        out.append("Not accepted as a goal. " if kind.waits_for_goals else
                    "Also a goal of the goal API. ")
         out.append(f"Parameters: `{model.__module__}.{model.__qualname__}`.\n")
         fields = model.model_fields

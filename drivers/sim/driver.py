@@ -62,7 +62,8 @@ from drivers.base import (
 )
 from drivers.clock import Clock, LockstepClock, PacedClock
 from drivers.mission import MissionItem, MissionType
-from drivers.sim.camera import RenderingUnavailable, lower_thread_priority
+from drivers.sim.camera import lower_thread_priority
+from drivers.sim.camera_effects import RenderingUnavailable
 from drivers.sim.config import SimConfig
 from drivers.sim.flight.flight_stack import CommandRejected
 from drivers.sim.flight.navigator import MissionStatus, NavEvent

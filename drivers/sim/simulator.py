@@ -33,13 +33,8 @@ import numpy as np
 
 from drivers.base import CameraInfo, ConnectionLost, Frame, Health, Setpoint, VehicleState
 from drivers.geo import GlobalOrigin
-from drivers.sim.camera import (
-    CameraEffects,
-    CameraRig,
-    CaptureModel,
-    SimCamera,
-    VehicleMotion,
-)
+from drivers.sim.camera import CameraRig, SimCamera
+from drivers.sim.camera_effects import CameraEffects, CaptureModel, VehicleMotion
 from drivers.sim.config import SimConfig
 from drivers.sim.faults import (
     FaultSchedule,

@@ -14,7 +14,7 @@ import pytest
 from drivers import camera_model
 from drivers.base import Setpoint
 from drivers.geometry import quat_from_euler, quat_to_matrix
-from drivers.sim.camera import VehicleMotion, blur_kernel, image_motion_px_s
+from drivers.sim.camera_effects import VehicleMotion, blur_kernel, image_motion_px_s
 from drivers.sim.scenario import Geom, MocapBody, Static
 from drivers.sim.simulator import Simulator
 

@@ -14,7 +14,8 @@ import urllib.request
 import numpy as np
 import pytest
 
-from autopilot.api import ApiServer, ApiSetupError
+from autopilot.api import ApiSetupError
+from autopilot.api_server import ApiServer
 from autopilot.flightlog import records as ch
 from autopilot.flightlog.log import read_log
 from autopilot.goals import GoalManager

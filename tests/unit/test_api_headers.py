@@ -10,7 +10,7 @@ import urllib.error
 import urllib.request
 from types import SimpleNamespace
 
-from autopilot.api import ApiServer
+from autopilot.api_server import ApiServer
 
 
 def _call(port: int, path: str, host: str | None = None) -> tuple[int, dict, object]:

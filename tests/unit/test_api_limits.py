@@ -13,7 +13,7 @@ from types import SimpleNamespace
 import pytest
 from websockets.sync.client import connect
 
-from autopilot.api import ApiServer, ConnectionLimits
+from autopilot.api_server import ApiServer, ConnectionLimits
 
 pytestmark = pytest.mark.serial  # the API's timeouts on the wall clock
 

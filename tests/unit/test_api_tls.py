@@ -13,7 +13,8 @@ from types import SimpleNamespace
 
 import pytest
 
-from autopilot.api import ApiServer, ApiSetupError, check_tls
+from autopilot.api import ApiSetupError
+from autopilot.api_server import ApiServer, check_tls
 from autopilot.mission import load_mission
 
 trustme = pytest.importorskip("trustme")

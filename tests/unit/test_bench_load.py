@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from autopilot import cli, process
-from autopilot.bench import load
+from autopilot.bench import load, load_figures
 from autopilot.flightlog import records as ch
 
 pytestmark = pytest.mark.serial  # busy processes, the wall clock
@@ -48,11 +48,11 @@ def test_frames_the_decoder_never_got_to_count_as_shed():
     # 30 fps for 10 s (301 frames captured), but the starved decoder decoded only every
     # third: its own numbering has no gap, the capture times do
     rows = [{"time_s": 0.1 * k, "seq": k} for k in range(101)]
-    assert load.perception_shed(rows) == (0, 101)
-    assert load.perception_shed(rows, 30.0) == (200, 301)
+    assert load_figures.perception_shed(rows) == (0, 101)
+    assert load_figures.perception_shed(rows, 30.0) == (200, 301)
     # decoded but not seen: the sequence's gaps, whatever the rate says
     rows = [{"time_s": k / 30.0, "seq": k} for k in range(0, 300, 2)]
-    assert load.perception_shed(rows, 30.0) == (149, 299)
+    assert load_figures.perception_shed(rows, 30.0) == (149, 299)
 
 
 def test_figures_of_one_load():
@@ -60,7 +60,7 @@ def test_figures_of_one_load():
     seqs = [s for s in range(100, 200) if s % 10 != 5]  # 10 of the 100 delivered never seen
     viewer = {"frames": 140, "first_seq": 0, "last_seq": 599, "first_arrival_s": 5.0,
               "last_arrival_s": 15.0, "error": None}
-    row = load.row_from(2, _summary(), _records(ticks, seqs), viewer, SIM_LINES, 15.0)
+    row = load_figures.row_from(2, _summary(), _records(ticks, seqs), viewer, SIM_LINES, 15.0)
     assert row["completed"]
     assert row["why"] is None
     assert row["tick_ms_p50"] == pytest.approx(30.0)
@@ -79,13 +79,13 @@ def test_console_due_never_exceeds_what_the_camera_delivered():
     # a vehicle behind real time delivered 50 frames in 10 s: 50 due at most, not 151
     viewer = {"frames": 50, "first_seq": 0, "last_seq": 49, "first_arrival_s": 0.0,
               "last_arrival_s": 10.0}
-    assert load.console_shed(viewer, 15.0) == (0, 50)
-    assert load.console_shed({"frames": 0, "first_seq": None}, 15.0) is None
+    assert load_figures.console_shed(viewer, 15.0) == (0, 50)
+    assert load_figures.console_shed({"frames": 0, "first_seq": None}, 15.0) is None
 
 
 def test_an_abort_is_a_non_completion_with_its_reason():
     reason = "telemetry stale: position 0.61 s old (limit 0.5 s)"
-    row = load.row_from(6, _summary("aborted", reason, rms=None), _records([0.0], []), None,
+    row = load_figures.row_from(6, _summary("aborted", reason, rms=None), _records([0.0], []), None,
                         [], 15.0)
     assert not row["completed"]
     assert row["why"] == f"aborted: {reason}"
@@ -94,22 +94,22 @@ def test_an_abort_is_a_non_completion_with_its_reason():
     assert row["console_shed_share"] is None
     assert row["vehicle_real_time_factor"] is None
     # no events (it never armed): the truth log's figure stands in; the lines' win otherwise
-    assert load.row_from(6, None, None, None, [], 15.0, truth_real_time_factor=0.3)[
+    assert load_figures.row_from(6, None, None, None, [], 15.0, truth_real_time_factor=0.3)[
         "vehicle_real_time_factor"] == 0.3
-    assert load.row_from(6, None, None, None, SIM_LINES, 15.0, truth_real_time_factor=0.3)[
+    assert load_figures.row_from(6, None, None, None, SIM_LINES, 15.0, truth_real_time_factor=0.3)[
         "vehicle_real_time_factor"] == pytest.approx(30.0 / 35.0)
-    crashed = load.row_from(6, None, None, None, [], 15.0,
+    crashed = load_figures.row_from(6, None, None, None, [], 15.0,
                             failure="the autopilot exited with code 1: Traceback")
     assert not crashed["completed"]
     assert crashed["why"].startswith("the autopilot exited")
 
 
 def test_vehicle_real_time_factor_from_the_simulators_lines():
-    assert load.vehicle_real_time_factor(["no events"]) is None
-    assert load.vehicle_real_time_factor(SIM_LINES[:2]) is None  # one point only
+    assert load_figures.vehicle_real_time_factor(["no events"]) is None
+    assert load_figures.vehicle_real_time_factor(SIM_LINES[:2]) is None  # one point only
     # across midnight
     lines = ["[    1.00 s | 23:59:55.000] armed", "[   11.00 s | 00:00:15.000] landed"]
-    assert load.vehicle_real_time_factor(lines) == pytest.approx(0.5)
+    assert load_figures.vehicle_real_time_factor(lines) == pytest.approx(0.5)
 
 
 def _row(hogs, completed, shed, tick_p99, why=None):
@@ -123,7 +123,7 @@ def _row(hogs, completed, shed, tick_p99, why=None):
 def _result(rows, rate=20.0):
     return {"mission": "follow_ball", "follow_s": 20.0, "driver": "mavsdk", "vehicle_core": 0,
             "autopilot_core": 1, "viewer_fps": 15.0, "control_rate_hz": rate, "rows": rows,
-            **load.conclusions(rows, rate)}
+            **load_figures.conclusions(rows, rate)}
 
 
 def test_the_curve_and_its_table():
@@ -134,7 +134,7 @@ def test_the_curve_and_its_table():
     assert result["perception_sheds_from"] == 2
     assert result["control_rate_held_to"] == 4  # p99 ≤ 75 ms (1.5 periods at 20 Hz) up to 4
     assert json.loads(json.dumps(result)) == result
-    table = load.format_table(result)
+    table = load_figures.format_table(result)
     lines = table.splitlines()
     assert "core 0" in lines[0]
     assert "core 1" in lines[0]
@@ -153,7 +153,7 @@ def test_the_curve_and_its_table():
 def test_the_table_says_when_nothing_was_measured_or_the_vehicle_fell_behind():
     row = {**_row(0, False, None, None, why="the vehicle did not start: EGL"),
            "tick_ms_p50": None, "vehicle_real_time_factor": 0.4}
-    table = load.format_table(_result([row]))
+    table = load_figures.format_table(_result([row]))
     assert "no load completed" in table
     assert "perception not measured" in table
     assert "at no load" in table

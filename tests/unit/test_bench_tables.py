@@ -232,7 +232,7 @@ def test_offboard_compares_trackers_against_the_navigation_when_it_has_it():
 
 
 def test_the_load_curve_is_a_table_of_its_own_with_its_command():
-    from autopilot.bench import load
+    from autopilot.bench import load_figures
 
     def row(hogs, completed, p99, shed):
         return {"hogs": hogs, "completed": completed, "why": None if completed else "lost",
@@ -247,10 +247,10 @@ def test_the_load_curve_is_a_table_of_its_own_with_its_command():
     result = {"bench": "load", "mission": "follow_ball", "hogs": [0, 2, 4], "follow_s": 20.0,
               "driver": "mavsdk", "overrides": [], "vehicle_core": 0, "autopilot_core": 1,
               "viewer_fps": 15.0, "control_rate_hz": 20.0, "rows": rows,
-              **load.conclusions(rows, 20.0), "out": None}
+              **load_figures.conclusions(rows, 20.0), "out": None}
     page = tables.render([result])
     assert "### `load`" in page
-    assert load.format_table(result) in page
+    assert load_figures.format_table(result) in page
     assert "`autopilot bench load --hogs 0,2,4 --follow-s 20 --driver mavsdk --json`" in page
 
 

@@ -131,9 +131,9 @@ def kind_overlay(tmp_path, monkeypatch):
     overlay = tmp_path / "ideal.yaml"
     overlay.write_text("sim:\n  rangefinder: {noise_m: 0.0001}\n"
                        "  estimator: {grade: rtk}\n")
-    import autopilot.config as config_module
+    import autopilot.config.loader as config_loader
 
-    monkeypatch.setattr(config_module, "profile_path",
+    monkeypatch.setattr(config_loader, "profile_path",
                         lambda name: overlay if name == "ideal" else None)
     return overlay
 

@@ -12,9 +12,10 @@ import pytest
 import yaml
 from pydantic import BaseModel, ValidationError
 
-from autopilot.config import ConfigError, default_config_path, load_config
+from autopilot.config import ConfigError, load_config
 from autopilot.goals import goal_kinds
 from autopilot.mission import load_mission
+from autopilot.resources import default_config_path
 from autopilot.steps.registry import STEP_KINDS
 
 BAD = (math.nan, math.inf, -math.inf)

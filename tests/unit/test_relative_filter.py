@@ -8,12 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from autopilot.estimation.relative import (
-    DeckGeometry,
-    RelativeFilter,
-    RelativeSettings,
-    tag_measurement,
-)
+from autopilot.estimation.relative import RelativeFilter
+from autopilot.estimation.relative_types import DeckGeometry, RelativeSettings, tag_measurement
 
 ANCHORS = ((0.5, 0.4, -0.47), (0.5, -0.4, -0.47), (-0.5, 0.4, -0.47), (-0.55, -0.45, -1.0))
 GEOMETRY = DeckGeometry((1.0, 0.8), 0.45, ANCHORS, (0.0, 0.0, -0.06))

@@ -11,7 +11,7 @@ import pytest
 from filterpy.kalman import KalmanFilter
 
 from autopilot.config import load_config
-from autopilot.estimation.relative import DeckGeometry
+from autopilot.estimation.relative_types import DeckGeometry
 from autopilot.estimation.seed004 import ORDER, Seed004Filter, Seed004Settings
 
 ANCHORS = ((0.5, 0.4, -0.47), (0.5, -0.4, -0.47), (-0.5, 0.4, -0.47), (-0.55, -0.45, -1.0))

@@ -11,7 +11,7 @@ import pytest
 from autopilot.config import load_config
 from autopilot.runtime import detection_charge
 from drivers.clock import LockstepClock
-from drivers.sim.camera import CaptureModel
+from drivers.sim.camera_effects import CaptureModel
 from drivers.sim.model import camera_info, mount_error, reported_camera_info, true_camera_info
 
 

@@ -7,7 +7,7 @@ from autopilot.behaviors.base import Behavior, BehaviorInputs, BehaviorOutput, P
 from autopilot.config import ConfigError
 from autopilot.mission import build_behavior, load_mission
 from autopilot.pipeline import pipeline_kinds
-from autopilot.steps import STEP_KINDS, StepContext, StepKind, register, registry, step_kind
+from autopilot.steps import STEP_KINDS, StepContext, StepKind, register, step_kind
 from tests.factories import front_camera, vehicle_state
 
 
@@ -52,10 +52,10 @@ def test_a_new_step_kind_is_one_registration(tmp_path, monkeypatch):
         def update(self, inputs: BehaviorInputs) -> BehaviorOutput:
             return BehaviorOutput(Status.SUCCEEDED)
 
-    monkeypatch.setattr(registry, "STEP_KINDS", dict(STEP_KINDS))
-    import autopilot.mission as mission
-
-    monkeypatch.setattr(mission, "STEP_KINDS", registry.STEP_KINDS)
+    # registered for this test only (the registry is one dict, read wherever kinds are used):
+    # monkeypatch takes "spin" out again afterwards
+    monkeypatch.setitem(STEP_KINDS, "spin", None)
+    del STEP_KINDS["spin"]
     register(StepKind("spin", SpinParams, lambda params, ctx: Spin(params),
                       description="turn on the spot"))
     with pytest.raises(ValueError, match="registered twice"):

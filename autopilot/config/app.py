@@ -1,0 +1,87 @@
+"""The whole of ``config.yaml``: :class:`AppConfig`."""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+from pydantic import (
+    Field,
+    model_validator,
+)
+from pydantic_core import PydanticCustomError
+
+from autopilot.config.base import (
+    ConfigModel,
+)
+from autopilot.config.sections import (
+    ConsoleConfig,
+    ControlConfig,
+    EstimationConfig,
+    FailsafeConfig,
+    LinkConfig,
+    LogConfig,
+    PerceptionConfig,
+    PhotoConfig,
+    RoverConfig,
+    RuntimeConfig,
+    VehicleSetup,
+)
+from drivers.sim.config import SimConfig
+
+
+class AppConfig(ConfigModel):
+    """The whole of ``config.yaml``."""
+
+    driver: Literal["sim", "mavsdk", "pymavlink"]
+    link: LinkConfig
+    vehicle: VehicleSetup
+    runtime: RuntimeConfig
+    perception: PerceptionConfig
+    estimation: EstimationConfig
+    control: ControlConfig
+    photos: PhotoConfig
+    rover: RoverConfig
+    log: LogConfig
+    console: ConsoleConfig = ConsoleConfig()
+    failsafe: FailsafeConfig = FailsafeConfig()
+    sim: SimConfig  # its cameras are vehicle.cameras
+    #: how the plugins' target kinds are found (:mod:`autopilot.targets`), by kind: each
+    #: section validated by its kind's settings model, whose defaults apply when it is absent
+    targets: dict[str, Any] = Field(default_factory=dict)
+
+    @model_validator(mode="after")
+    def _target_settings(self) -> AppConfig:
+        from autopilot.plugins import load_plugins
+        from autopilot.suggest import did_you_mean
+        from autopilot.targets import TARGET_KINDS, validate_section
+
+        load_plugins()
+        for key in self.targets:
+            if key not in TARGET_KINDS:
+                known = [k for k, t in TARGET_KINDS.items() if t.settings is not None]
+                raise PydanticCustomError(
+                    "unknown_key", "unknown target kind" + (did_you_mean(key, known) or (
+                        f" (known: {', '.join(known)})" if known else " (none is installed)")),
+                    {"key_path": ("targets", key)})
+        for name, kind in TARGET_KINDS.items():
+            if kind.settings is not None:
+                self.targets[name] = validate_section(kind, kind.settings,
+                                                      self.targets.get(name), ("targets", name))
+        return self
+
+    @model_validator(mode="before")
+    @classmethod
+    def _cameras_moved(cls, data: Any) -> Any:
+        sim = data.get("sim") if isinstance(data, dict) else None
+        if isinstance(sim, dict) and sim.get("cameras"):
+            raise PydanticCustomError(
+                "moved", "moved to vehicle.cameras (one section for the simulator and MAVLink "
+                "drivers alike)", {"key_path": ("sim", "cameras")})
+        return data
+
+    @model_validator(mode="after")
+    def _simulator_cameras(self) -> AppConfig:
+        # the simulator renders the vehicle's cameras (validated here, once)
+        object.__setattr__(self, "sim", self.sim.model_copy(
+            update={"cameras": dict(self.vehicle.cameras)}))
+        return self
