@@ -186,16 +186,19 @@ def run(args: argparse.Namespace) -> int:
     from autopilot.logs import setup_logging
     from autopilot.mission import load_mission
     from autopilot.run import default_out_dir, fly
+    from autopilot.steps import step_kind
 
     overrides = [*args.overrides, *([f"driver={args.driver}"] if args.driver else [])]
     plan = load_mission(args.mission, overrides, args.config)
-    waits = [i for i, step in enumerate(plan.steps)
-             if step.name == "standby" and step.params.timeout_s is None]
+    waits = [(i, step.name) for i, step in enumerate(plan.steps)
+             if step_kind(step.name).waits_for_goals and step_kind(step.name).endless(
+                 step.params)]
     token = check_api(args)
     if waits and not args.api:
-        raise InputError(f"{plan.source}: step {waits[0]} (standby) waits for goals from the "
+        index, name = waits[0]
+        raise InputError(f"{plan.source}: step {index} ({name}) waits for goals from the "
                          "goal API: run with --api HOST:PORT (e.g. --api 127.0.0.1:8080), or "
-                         "give the standby a timeout_s")
+                         f"give the {name} step an end of its own (its timeout_s)")
     if args.faults and plan.config.driver != "sim":
         raise InputError(f"--fault acts on the simulated vehicle, not on a vehicle flown through "
                          f"--driver {plan.config.driver}: give it to 'autopilot sim --fault ...' "

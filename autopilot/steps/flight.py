@@ -15,4 +15,5 @@ register(StepKind("land", LandParams, lambda params, ctx: Land(params),
 
 register(StepKind("standby", StandbyParams, lambda params, ctx: Standby(params),
                   description="hover (or wait on the ground) for goals from the goal API; "
-                  "done once landed", status=None, waits_for_goals=True))
+                  "done once landed", status=None, waits_for_goals=True,
+                  endless=lambda params: params.timeout_s is None))

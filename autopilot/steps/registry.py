@@ -141,6 +141,9 @@ class StepKind:
     #: a step that waits for the goal API's goals (standby): not a goal itself; the goals'
     #: default photo camera is kept ready while it runs
     waits_for_goals: bool = False
+    #: whether a step with these parameters has no end of its own (it waits until told: a
+    #: mission with such a step that waits for goals needs the goal API)
+    endless: Callable[[Params], bool] = lambda params: False
 
 
 STEP_KINDS: dict[str, StepKind] = {}
