@@ -48,6 +48,11 @@ def detection_topic(pipeline: str) -> str:
     return f"/perception/{pipeline}"
 
 
+def sensor_topic(stream: str) -> str:
+    """The channel of one of the vehicle's extra sensor streams (``vehicle.sensors``)."""
+    return f"/sensors/{stream}"
+
+
 def detection_topics(records) -> list[str]:
     """The perception pipelines' channels in a log's records."""
     return sorted(t for t in records if t.startswith("/perception/"))

@@ -25,8 +25,6 @@ from drivers.threads import lower_this_thread
 
 log = logging.getLogger(__name__)
 
-#: where the flight log keeps each extra sensor stream
-SENSOR_TOPICS = {"uwb": ch.UWB_RANGES, "rover": ch.ROVER_STATES}
 
 
 def detection_charge(config: AppConfig, kinds: Sequence[str]
@@ -255,7 +253,8 @@ class PerceptionLanes:
         for name in sorted(vehicle.sensors):
             capability, stream = SENSOR_STREAMS.get(name, (None, None))
             if capability is not None and isinstance(vehicle, capability):
-                found.append(tasks.create_task(self._sensor(stream(vehicle), SENSOR_TOPICS[name]),
+                found.append(tasks.create_task(self._sensor(stream(vehicle),
+                                                            ch.sensor_topic(name)),
                                                name=f"sensor-{name}"))
         return found
 

@@ -33,7 +33,6 @@ import math
 import struct
 import time
 from collections.abc import AsyncIterator, Callable, Coroutine
-from dataclasses import dataclass, field
 from typing import ClassVar
 
 from pymavlink.dialects.v20 import common as mavlink
@@ -42,15 +41,20 @@ from drivers.base import CommandDenied, LandingTarget, VehicleError, VehicleStat
 from drivers.mavlink import px4
 from drivers.mavlink.common import cancel_all
 from drivers.mavlink.face_commands import CommandHandler, ModeNotAvailable
+from drivers.mavlink.face_link import (
+    COMPONENT_ID,
+    FaceLink,
+    FaceRequests,
+    FaceStats,
+    FaceStreams,
+)
 from drivers.mavlink.face_mission import MissionServer
 from drivers.mavlink.face_params import ParamServer
 from drivers.mavlink.face_telemetry import DEFAULT_RATES_HZ, TelemetryEncoder, base_mode
-from drivers.mavlink.link import pack
-from drivers.mavlink.signing import Signing, authenticated, refresh
+from drivers.mavlink.signing import Signing
 
 log = logging.getLogger(__name__)
 
-COMPONENT_ID = 1  # MAV_COMP_ID_AUTOPILOT1: MAVSDK finds an autopilot only there
 #: compids PX4 takes mission and parameter messages for besides its own (0: broadcast,
 #: 190: MAV_COMP_ID_MISSIONPLANNER)
 _OUR_COMPONENTS = (0, COMPONENT_ID, 190)
@@ -64,121 +68,6 @@ TEMPORARILY_REJECTED = px4.MAV_RESULT_TEMPORARILY_REJECTED
 
 _HEARTBEAT = mavlink.MAVLINK_MSG_ID_HEARTBEAT
 _MAV_TYPE_GCS = mavlink.MAV_TYPE_GCS
-
-
-@dataclass
-class FaceStats:
-    received: int = 0
-    bad_data: int = 0
-    bad_signature: int = 0
-    ignored: int = 0
-    commands: int = 0
-    setpoints: int = 0
-    rejected_setpoints: int = 0
-    landing_targets: int = 0
-    link_dropped: int = 0  # lost to a link_loss fault
-
-
-class _Link(asyncio.DatagramProtocol):
-    """One UDP port of the vehicle: sends to ``peer`` (the last sender, or the default)."""
-
-    def __init__(self, name: str, face: MavlinkFace, default_peer: tuple[str, int]) -> None:
-        self.name = name
-        self.face = face
-        self.peer = default_peer
-        self.heard_from: tuple[str, int] | None = None
-        self.transport: asyncio.DatagramTransport | None = None
-        self.mav = mavlink.MAVLink(None, srcSystem=face.system_id, srcComponent=COMPONENT_ID)
-        self._rx = mavlink.MAVLink(None, srcSystem=face.system_id, srcComponent=COMPONENT_ID)
-        self._rx.robust_parsing = True
-        #: the scenario's rover, a second system on the same port (as a router relays it)
-        self.rover_mav = mavlink.MAVLink(None, srcSystem=face.rover_system_id,
-                                         srcComponent=COMPONENT_ID)
-        if face.signing is not None:
-            face.signing.apply(self.mav, self._rx, face.signed_streams)
-            face.signing.apply(self.rover_mav, mavlink.MAVLink(None))
-
-    def connection_made(self, transport) -> None:
-        self.transport = transport
-
-    def datagram_received(self, data: bytes, addr) -> None:
-        fault = self.face.link_fault()
-        if fault is not None:  # the simulator's link_loss fault, on the way in
-            self.face.impaired(fault, lambda: self._parse(data, addr))
-            return
-        self._parse(data, addr)
-
-    def _parse(self, data: bytes, addr) -> None:
-        try:
-            messages = self._rx.parse_buffer(data) or []
-        except Exception as exc:  # pymavlink raises on some corrupt (or badly signed) frames
-            if "signature" in str(exc).lower():
-                self.face.stats.bad_signature += 1
-            else:
-                self.face.stats.bad_data += 1
-            log.debug("%s: unparsable datagram from %s: %s", self.name, addr, exc)
-            return
-        good = [m for m in messages
-                if m.get_type() != "BAD_DATA" and authenticated(m, self.face.signing)]
-        if good:  # only a sender that spoke valid (and, with signing, signed) MAVLink is answered
-            self.peer = self.heard_from = addr
-        for msg in messages:
-            self.face._receive(self, msg)
-
-    def error_received(self, exc: Exception) -> None:  # e.g. ICMP port unreachable
-        log.debug("%s: %s", self.name, exc)
-
-    def send(self, msg, mav=None) -> None:
-        """``msg`` from the vehicle (or from the system ``mav`` speaks for: the rover)."""
-        if self.transport is None or self.transport.is_closing():
-            return
-        mav = mav or self.mav
-        refresh(mav)
-        data, peer = pack(mav, msg), self.peer
-        fault = self.face.link_fault()
-        if fault is not None:  # the simulator's link_loss fault, on the way out
-            self.face.impaired(fault, lambda: self._sendto(data, peer))
-            return
-        self.transport.sendto(data, peer)
-
-    def _sendto(self, data: bytes, peer) -> None:
-        if self.transport is not None and not self.transport.is_closing():
-            self.transport.sendto(data, peer)
-
-
-@dataclass
-class _Streams:
-    rates_hz: dict[int, float] = field(default_factory=lambda: dict(DEFAULT_RATES_HZ))
-    next_s: dict[int, float] = field(default_factory=dict)
-
-    def due(self, msg_id: int, now_s: float) -> bool:
-        rate = self.rates_hz.get(msg_id, 0.0)
-        if rate <= 0.0:
-            return False
-        due_s = self.next_s.get(msg_id, 0.0)
-        if now_s + 1e-6 < due_s:
-            return False
-        period = 1.0 / rate
-        # stay on the grid, but never try to catch up on missed sends
-        self.next_s[msg_id] = max(due_s + period, now_s + 0.5 * period)
-        return True
-
-
-class _Requests:
-    """What a command may ask of the link it came on (message intervals, a message now)."""
-
-    def __init__(self, face: MavlinkFace, link: _Link) -> None:
-        self.face, self.link = face, link
-
-    def set_interval(self, msg_id: int, interval_us: float) -> int:
-        return self.face._set_interval(self.link, msg_id, interval_us)
-
-    def send_now(self, msg_id: int) -> bool:
-        msg = self.face._message(msg_id, self.link.mav)
-        if msg is None:
-            return False
-        self.link.send(msg)
-        return True
 
 
 class MavlinkFace:
@@ -210,8 +99,8 @@ class MavlinkFace:
         peer = peer_host or ("127.0.0.1" if host in ("0.0.0.0", "") else host)
         self.ports = {"offboard": (14580 + instance, (peer, 14540 + instance)),
                       "gcs": (18570 + instance, (peer, gcs_port))}
-        self.links: dict[str, _Link] = {}
-        self._streams = {name: _Streams() for name in self.ports}
+        self.links: dict[str, FaceLink] = {}
+        self._streams = {name: FaceStreams() for name in self.ports}
         self._events = events
         self._tasks: list[asyncio.Task] = []
         self._state: VehicleState | None = None
@@ -272,7 +161,7 @@ class MavlinkFace:
         with contextlib.suppress(Exception):  # a simulated vehicle: link_loss acts here only
             self.vehicle.simulator.link_faults_in_face = True
         for name, (port, peer) in self.ports.items():
-            link = _Link(name, self, peer)
+            link = FaceLink(name, self, peer)
             try:
                 await loop.create_datagram_endpoint(lambda link=link: link,
                                                     local_addr=(self.host, port))
@@ -313,14 +202,14 @@ class MavlinkFace:
         return max(0, int(t * 1000.0)) & 0xFFFFFFFF
 
     @staticmethod
-    def _send(link: _Link, msg) -> None:
+    def _send(link: FaceLink, msg) -> None:
         link.send(msg)
 
     def _send_all(self, make) -> None:
         for link in self.links.values():
             link.send(make(link.mav))
 
-    def _say(self, link: _Link | None, text: str, severity: int = 6) -> None:
+    def _say(self, link: FaceLink | None, text: str, severity: int = 6) -> None:
         """STATUSTEXT on ``link`` (all links if None); longer texts in 50-byte chunks with an
         id, as MAVLink 2 allows (the last chunk ends short, or with an empty one)."""
         data = _statustext(text)
@@ -431,7 +320,7 @@ class MavlinkFace:
                 elif event.kind == "finished":
                     self._send_all(self.telemetry.mission_current)
 
-    def _repeat_reached(self, link: _Link) -> None:
+    def _repeat_reached(self, link: FaceLink) -> None:
         for entry in self._reached:
             if entry[1] > 0:
                 link.send(link.mav.mission_item_reached_encode(entry[0]))
@@ -453,7 +342,7 @@ class MavlinkFace:
     # Incoming
     # ------------------------------------------------------------------------------------
 
-    def _receive(self, link: _Link, msg) -> None:
+    def _receive(self, link: FaceLink, msg) -> None:
         self.stats.received += 1
         kind = msg.get_type()
         if kind == "BAD_DATA":
@@ -478,11 +367,11 @@ class MavlinkFace:
             self.stats.ignored += 1
             log.warning("ignoring %s from %s", kind, link.peer, exc_info=True)
 
-    def _on_heartbeat(self, link: _Link, msg) -> None:
+    def _on_heartbeat(self, link: FaceLink, msg) -> None:
         if msg.type == _MAV_TYPE_GCS:
             self._spawn(self.vehicle.gcs_heartbeat())
 
-    def _on_command(self, link: _Link, msg) -> None:
+    def _on_command(self, link: FaceLink, msg) -> None:
         self.stats.commands += 1
         frame = None
         if msg.get_type() == "COMMAND_INT":
@@ -494,11 +383,11 @@ class MavlinkFace:
                       msg.param7)
         self._spawn(self._command(link, msg, params, frame))
 
-    async def _command(self, link: _Link, msg, params: tuple[float, ...],
+    async def _command(self, link: FaceLink, msg, params: tuple[float, ...],
                        frame: int | None) -> None:
         command = msg.command
         try:
-            result = await self.commands.execute(command, params, frame, _Requests(self, link))
+            result = await self.commands.execute(command, params, frame, FaceRequests(self, link))
         except ModeNotAvailable as exc:
             log.info("command %d: %s", command, exc.reason)
             self._say(link, exc.reason, 4)
@@ -516,7 +405,7 @@ class MavlinkFace:
         link.send(link.mav.command_ack_encode(command, result, 0, 0, msg.get_srcSystem(),
                                               msg.get_srcComponent()))
 
-    def _on_set_mode(self, link: _Link, msg) -> None:
+    def _on_set_mode(self, link: FaceLink, msg) -> None:
         """SET_MODE (the message older clients send instead of DO_SET_MODE)."""
         main, sub = (msg.custom_mode >> 16) & 0xFF, (msg.custom_mode >> 24) & 0xFF
 
@@ -528,7 +417,7 @@ class MavlinkFace:
 
         self._spawn(change())
 
-    def _set_interval(self, link: _Link, msg_id: int, interval_us: float) -> int:
+    def _set_interval(self, link: FaceLink, msg_id: int, interval_us: float) -> int:
         streams = self._streams[link.name]
         if msg_id == _HEARTBEAT:
             return ACCEPTED  # fixed at 1 Hz, as PX4
@@ -543,7 +432,7 @@ class MavlinkFace:
         streams.next_s.pop(msg_id, None)
         return ACCEPTED
 
-    def _on_setpoint(self, link: _Link, msg) -> None:
+    def _on_setpoint(self, link: FaceLink, msg) -> None:
         try:
             if msg.get_type() == "SET_POSITION_TARGET_GLOBAL_INT":
                 setpoint = self._global_setpoint(msg)
@@ -575,7 +464,7 @@ class MavlinkFace:
                                          (msg.vx, msg.vy, msg.vz), msg.yaw, msg.yaw_rate,
                     (msg.afx, msg.afy, msg.afz))
 
-    def _on_landing_target(self, link: _Link, msg) -> None:
+    def _on_landing_target(self, link: FaceLink, msg) -> None:
         """LANDING_TARGET, as PX4's receiver takes it: a position in MAV_FRAME_LOCAL_NED is the
         target for precision landing (stamped on arrival); another frame is refused with a
         critical status text; angles only (IR-LOCK style, no ``position_valid``) need PX4's
@@ -590,13 +479,13 @@ class MavlinkFace:
         else:
             self.stats.ignored += 1
 
-    def _on_timesync(self, link: _Link, msg) -> None:
+    def _on_timesync(self, link: FaceLink, msg) -> None:
         """MAVLink time synchronisation: answer a request (tc1 = 0) with our boot time."""
         if msg.tc1 == 0:
             now_ns = int(self.vehicle.clock.now() * 1e9)
             link.send(link.mav.timesync_encode(now_ns, msg.ts1))
 
-    _handlers: ClassVar[dict[str, Callable[[MavlinkFace, _Link, object], None]]] = {
+    _handlers: ClassVar[dict[str, Callable[[MavlinkFace, FaceLink, object], None]]] = {
         "COMMAND_LONG": _on_command,
         "COMMAND_INT": _on_command,
         "SET_MODE": _on_set_mode,

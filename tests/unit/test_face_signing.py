@@ -9,7 +9,7 @@ from types import SimpleNamespace
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from drivers.mavlink.face import FaceStats, _Link
+from drivers.mavlink.face_link import FaceLink, FaceStats
 from drivers.mavlink.signing import Signing, refresh
 
 KEY = Signing(bytes(range(32)))
@@ -42,7 +42,7 @@ def _frame(mav: mavlink.MAVLink, msg) -> bytes:
 
 def test_an_unsigned_radio_status_is_read_but_does_not_move_the_reply_address():
     face, received = _face()
-    link = _Link("gcs", face, default_peer=GCS)
+    link = FaceLink("gcs", face, default_peer=GCS)
     gcs = _signed_sender()
     link._parse(_frame(gcs, gcs.heartbeat_encode(6, 8, 0, 0, 4)), GCS)
     assert link.peer == GCS
@@ -61,7 +61,7 @@ def test_an_unsigned_radio_status_is_read_but_does_not_move_the_reply_address():
 
 def test_without_a_key_any_valid_sender_is_answered():
     face, _ = _face(signing=None)
-    link = _Link("gcs", face, default_peer=GCS)
+    link = FaceLink("gcs", face, default_peer=GCS)
     radio = mavlink.MAVLink(None, srcSystem=51, srcComponent=68)
     link._parse(radio.radio_status_encode(200, 180, 90, 40, 30, 0, 0).pack(radio), ATTACKER)
     assert link.peer == ATTACKER
@@ -69,8 +69,8 @@ def test_without_a_key_any_valid_sender_is_answered():
 
 def test_a_signed_frame_replayed_to_another_port_is_refused():
     face, received = _face()
-    offboard = _Link("offboard", face, default_peer=("127.0.0.1", 14540))
-    gcs = _Link("gcs", face, default_peer=GCS)
+    offboard = FaceLink("offboard", face, default_peer=("127.0.0.1", 14540))
+    gcs = FaceLink("gcs", face, default_peer=GCS)
     companion = _signed_sender(system_id=1, component_id=191)
     arm = _frame(companion, companion.command_long_encode(1, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0))
     offboard._parse(arm, ("127.0.0.1", 14540))
