@@ -59,6 +59,36 @@ def target_kind(name: str) -> TargetKind:
                        ) from None
 
 
+def validate_sections(sections: dict, model_of: Callable[[TargetKind], type[BaseModel] | None],
+                      prefix: str, *, unknown: str, also_known: Sequence[str] = (),
+                      list_known: bool = False, fill_defaults: bool = False) -> None:
+    """Validate in place the plugins' target sections in ``sections`` (``scenario.<name>``,
+    ``targets.<name>``: each by its kind's ``model_of`` model). A name no kind registered is
+    refused (``unknown`` and a "did you mean", or with ``list_known`` the known names); with
+    ``fill_defaults`` every kind with such a model has its section afterwards (the model's
+    defaults when it was absent)."""
+    from pydantic_core import PydanticCustomError
+
+    from autopilot.plugins import load_plugins
+    from autopilot.suggest import did_you_mean
+
+    load_plugins()
+    known = [*also_known, *(k for k, t in TARGET_KINDS.items() if model_of(t) is not None)]
+    for key, value in list(sections.items()):  # in the order written: the first problem
+        kind = TARGET_KINDS.get(key)
+        if kind is None:
+            hint = did_you_mean(key, known)
+            if not hint and list_known:
+                hint = f" (known: {', '.join(known)})" if known else " (none is installed)"
+            raise PydanticCustomError("unknown_key", (unknown + hint).replace("{", "(").replace(
+                "}", ")"), {"key_path": (prefix, key)})
+        sections[key] = validate_section(kind, model_of(kind), value, (prefix, key))
+    if fill_defaults:
+        for name, kind in TARGET_KINDS.items():
+            if name not in sections and model_of(kind) is not None:
+                sections[name] = validate_section(kind, model_of(kind), None, (prefix, name))
+
+
 def validate_section(kind: TargetKind, model: type[BaseModel] | None, value: Any,
                      key_path: tuple) -> BaseModel:
     """``value`` as ``model``; a pydantic error naming ``key_path`` + the key inside it (the

@@ -191,8 +191,7 @@ def run(args: argparse.Namespace) -> int:
     overrides = [*args.overrides, *([f"driver={args.driver}"] if args.driver else [])]
     plan = load_mission(args.mission, overrides, args.config)
     waits = [(i, step.name) for i, step in enumerate(plan.steps)
-             if step_kind(step.name).waits_for_goals and step_kind(step.name).endless(
-                 step.params)]
+             if (kind := step_kind(step.name)).waits_for_goals and kind.endless(step.params)]
     token = check_api(args)
     if waits and not args.api:
         index, name = waits[0]

@@ -51,22 +51,10 @@ class AppConfig(ConfigModel):
 
     @model_validator(mode="after")
     def _target_settings(self) -> AppConfig:
-        from autopilot.plugins import load_plugins
-        from autopilot.suggest import did_you_mean
-        from autopilot.targets import TARGET_KINDS, validate_section
+        from autopilot.targets import validate_sections
 
-        load_plugins()
-        for key in self.targets:
-            if key not in TARGET_KINDS:
-                known = [k for k, t in TARGET_KINDS.items() if t.settings is not None]
-                raise PydanticCustomError(
-                    "unknown_key", "unknown target kind" + (did_you_mean(key, known) or (
-                        f" (known: {', '.join(known)})" if known else " (none is installed)")),
-                    {"key_path": ("targets", key)})
-        for name, kind in TARGET_KINDS.items():
-            if kind.settings is not None:
-                self.targets[name] = validate_section(kind, kind.settings,
-                                                      self.targets.get(name), ("targets", name))
+        validate_sections(self.targets, lambda kind: kind.settings, "targets",
+                          unknown="unknown target kind", list_known=True, fill_defaults=True)
         return self
 
     @model_validator(mode="before")

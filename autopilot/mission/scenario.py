@@ -7,7 +7,6 @@ from __future__ import annotations
 from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
-from pydantic_core import PydanticCustomError
 
 from autopilot.config import (
     ColorName,
@@ -15,7 +14,6 @@ from autopilot.config import (
     NonNegative,
 )
 from autopilot.perception.colors import COLORS
-from autopilot.suggest import did_you_mean
 from drivers.sim.faults import Fault
 
 
@@ -156,20 +154,10 @@ class Scenario(ConfigModel):
 
     @model_validator(mode="after")
     def _target_sections(self) -> Scenario:
-        from autopilot.plugins import load_plugins
-        from autopilot.targets import TARGET_KINDS, validate_section
+        from autopilot.targets import validate_sections
 
-        load_plugins()
-        extra = self.__pydantic_extra__ or {}
-        for key, value in list(extra.items()):
-            kind = TARGET_KINDS.get(key)
-            if kind is None:
-                known = [*type(self).model_fields, *(k for k, t in TARGET_KINDS.items()
-                                                      if t.scenario is not None)]
-                raise PydanticCustomError("unknown_key", "unknown key" + did_you_mean(
-                    key, known).replace("{", "(").replace("}", ")"),
-                    {"key_path": ("scenario", key)})
-            extra[key] = validate_section(kind, kind.scenario, value, ("scenario", key))
+        validate_sections(self.__pydantic_extra__ or {}, lambda kind: kind.scenario, "scenario",
+                          unknown="unknown key", also_known=list(type(self).model_fields))
         return self
 
     def targets(self) -> dict[str, BaseModel]:

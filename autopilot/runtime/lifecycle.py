@@ -69,12 +69,11 @@ class Runtime:
         self.setpoints = SetpointStream(f, fence, failsafes.fence_breached, failsafes.quiet)
         self.commands = VehicleCommands(f, recorder, self.setpoints)
         self.desk = GoalDesk(f, goals, recorder, self.perception, self.photos, self._offload,
-                             lambda: "manual" if self.console.manual else "autopilot")
+                             self._control_by)
         self.console = ConsoleBridge(f, recorder, self.desk, self.perception, self.telemetry,
                                      self.setpoints, self.commands, failsafes, self.spawn,
                                      lambda: self.control.planned_path)
-        self.readout = Readout(f, recorder, self.perception, self.photos,
-                               lambda: "manual" if self.console.manual else "autopilot")
+        self.readout = Readout(f, recorder, self.perception, self.photos, self._control_by)
         self.control = ControlLoop(f, Rooms(
             recorder, self.telemetry, self.perception, self.setpoints, self.commands, failsafes,
             self.desk, self.console, self.photos, self.readout))
@@ -124,6 +123,10 @@ class Runtime:
 
     def progress_line(self) -> str:
         return self.readout.progress_line()
+
+    def _control_by(self) -> str:
+        """Who flies: the console's keys (``manual``) or the mission (``autopilot``)."""
+        return "manual" if self.console.manual else "autopilot"
 
     @property
     def _offload(self):
