@@ -31,6 +31,7 @@ def arguments(load_bench: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from autopilot.bench import load as load_bench
+    from autopilot.bench.load_figures import format_table
 
     hogs = load_bench.parse_hogs(args.hogs)
     if not 0 < args.follow_s <= 600:
@@ -39,7 +40,7 @@ def run(args: argparse.Namespace) -> int:
     result = load_bench.run_bench(hogs, args.follow_s, args.driver, args.overrides,
                                   stderr_progress, Path(args.out) if args.out else None,
                                   cores=cores)
-    print(json.dumps(result) if args.json else load_bench.format_table(result))
+    print(json.dumps(result) if args.json else format_table(result))
     return EXIT_OK
 
 
