@@ -65,6 +65,13 @@ class ApiSetupError(ValueError):
     """The API cannot be served as asked (an address without a token, a bad address)."""
 
 
+def _goal_example() -> dict:
+    """A goal for the API's documentation: the first goal kind with example parameters."""
+    kinds = goal_kinds()
+    return next(({name: dict(STEP_KINDS[name].example)} for name in kinds
+                 if STEP_KINDS[name].example is not None), {kinds[0]: {}} if kinds else {})
+
+
 def parse_address(text: str) -> tuple[str, int]:
     """``HOST:PORT`` (or ``:PORT``, or ``PORT``: on 127.0.0.1)."""
     host, sep, port = text.rpartition(":")
@@ -300,8 +307,7 @@ def build_app(desk: GoalDeskPort, token: str | None, stream_rate_hz: float = 5.0
     @app.post("/api/goals", status_code=202, summary="Start a goal: one mission step",
               openapi_extra={"requestBody": {"required": True, "content": {
                   "application/json": {"schema": {"$ref": "#/components/schemas/Goal"},
-                                       "example": {"orbit": {"center_m": [6, 0],
-                                                             "radius_m": 3, "images": 8}}}}}},
+                                       "example": _goal_example()}}}},
               responses={409: {"description": "another goal runs, or the mission is busy"},
                          422: {"description": "invalid goal: the bad key is named"}})
     async def submit(request: Request):

@@ -180,15 +180,14 @@ def _replay_pipeline(path: Path, records, pipeline: Pipeline, spec: PipelineSpec
     flown_rows = records.get(ch.detection_topic(spec.key), [])
     out.flown = len(flown_rows)
     flown = {ch.time_key(r["time_s"]): r for r in flown_rows}
-    # telemetry, and the extra sensors (UWB, the rover's reports) for a pipeline that takes
+    # telemetry, and the extra sensor streams (ch.SENSOR_RECORDS) for a pipeline that takes
     # them, merged in arrival order
     inputs = [(s.get("received_s", s["time_s"]), 0, ch.vehicle_state_from_record(s))
               for s in records.get(ch.VEHICLE_STATE, [])]
     if isinstance(pipeline, SensorFed):
-        inputs += [(r.get("received_s", r["time_s"]), 1, ch.uwb_ranges_from_record(r))
-                   for r in records.get(ch.UWB_RANGES, [])]
-        inputs += [(r.get("received_s", r["time_s"]), 1, ch.rover_state_from_record(r))
-                   for r in records.get(ch.ROVER_STATES, [])]
+        for stream, from_record in ch.SENSOR_RECORDS.items():
+            inputs += [(r.get("received_s", r["time_s"]), 1, from_record(r))
+                       for r in records.get(ch.sensor_topic(stream), [])]
         inputs.sort(key=lambda item: (item[0], item[1]))
     arrival = [item[0] for item in inputs]
     states = inputs

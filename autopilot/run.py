@@ -65,7 +65,7 @@ def make_vehicle(plan: MissionPlan, *, realtime: bool = False, connect: str | No
         from drivers.sim.driver import SimDriver
 
         sim = with_calibrations(plan, calibration) if calibration else plan.config.sim
-        sim_config, objects = build_world(plan.mission.scenario, sim, plan.config.rover)
+        sim_config, objects = build_world(plan.mission.scenario, sim, plan.config)
         return SimDriver(sim_config, scenario=objects, lockstep=not realtime), sim_config.seed
     if driver in ("pymavlink", "mavsdk"):
         from drivers.mavlink.link import Endpoint, UrlError

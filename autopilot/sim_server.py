@@ -83,8 +83,7 @@ async def serve(config: AppConfig, scenario: Scenario | None, *, instance: int =
     that watches the vehicle (:mod:`autopilot.console.sim`; ``on_console`` gets its server)."""
     if videos is FROM_CONFIG:
         videos = video_destinations(config)
-    sim_config, objects = build_world(scenario, with_instance_id(config.sim, instance),
-                                      config.rover)
+    sim_config, objects = build_world(scenario, with_instance_id(config.sim, instance), config)
     vehicle = SimDriver(sim_config, scenario=objects, lockstep=False,
                         warn_every_s=SLOW_WARNING_EVERY_S, shed_rendering=True,
                         background=False)

@@ -3,8 +3,8 @@ kinds). One code says what the vehicle is doing for the mission at any moment: l
 ``/mission/status``, shown in the progress line, the report and the goal API.
 
 The codes are registered, not listed in one place: the mission-wide ones here (0 idle, 3
-hover, 12 abort, and the flight steps' takeoff, go-to, orbit, landing and coverage codes), a
-step kind's own in its module (:func:`register_status`), a plugin's in its package. A step kind
+hover, 12 abort, and the takeoff and landing codes every flight has), a step kind's own in its
+module (:func:`register_status`), a plugin's in its package. A step kind
 names the two it reports (:attr:`autopilot.steps.registry.StepKind.status`: while it runs, once
 it has succeeded).
 """
@@ -85,14 +85,8 @@ MissionStatus.IDLE = register_status(0, "idle")
 MissionStatus.TAKEOFF_IN_PROGRESS = register_status(1, "takeoff in progress")
 MissionStatus.TAKEOFF_COMPLETED = register_status(2, "takeoff completed")
 MissionStatus.HOVER = register_status(3, "hover")
-register_status(4, "goto in progress")
-register_status(5, "goto completed")
-register_status(6, "images in progress")
-register_status(7, "images completed")
 MissionStatus.LANDING_IN_PROGRESS = register_status(8, "landing in progress")
 MissionStatus.LANDING_COMPLETED = register_status(9, "landing completed", stays_landed=True)
-register_status(10, "coverage in progress")
-register_status(11, "coverage completed")
 MissionStatus.ABORT = register_status(12, "abort", stays_landed=True)
 
 

@@ -3,20 +3,25 @@ kinds (:mod:`autopilot.steps`) that fly to it.
 
 A target kind brings, in one place: its scenario section (``scenario.<name>``: where it is in
 the simulated world and how it moves, a pydantic model) and the world builder that turns that
-section into simulator bodies; its configuration section (``targets.<name>``: how it is
-found, a pydantic model whose defaults apply when the configuration does not say); and the
+section into simulator bodies; its configuration (how it is found: pydantic models); and the
 perception pipelines that find it (registered by kind in :mod:`autopilot.pipeline`, so replay
 rebuilds them from a log). Report panels are registered beside them
 (:func:`autopilot.report.panels.register_panel`).
 
-Kinds from other packages arrive through the ``autopilot.targets`` entry point group
-(:mod:`autopilot.plugins`), as step kinds do through ``autopilot.steps``.
+The shipped kinds (:mod:`autopilot.target_kinds`: ball, marker, image, pad, rover) are
+registered before the scenario and configuration models are made, so their sections are fields
+of those models, at the places ``config.yaml`` has always had them (``perception.<name>``,
+``estimation.<name>``, ``rover``; :attr:`TargetKind.config`). Kinds from other packages arrive
+through the ``autopilot.targets`` entry point group (:mod:`autopilot.plugins`), as step kinds do
+through ``autopilot.steps``; their sections are ``scenario.<name>`` and ``targets.<name>``
+(:attr:`TargetKind.settings`), validated by their models as the mission or configuration is
+loaded.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from pydantic import BaseModel
@@ -26,20 +31,68 @@ if TYPE_CHECKING:
     from drivers.sim.scenario import ScenarioObject
 
 
+class World:
+    """What a target kind's world builder is given, and may change: the scenario (every
+    section: a kind may read a scenario-wide key such as ``decoys``), the simulator's
+    configuration (``sim``, which a builder may replace with a changed copy), the scenario's
+    seed, and the autopilot's configuration (``config``: what the autopilot knows of the
+    target, e.g. the rover's deck; None when there is none)."""
+
+    def __init__(self, scenario: BaseModel, sim: SimConfig, config: BaseModel | None) -> None:
+        self.scenario = scenario
+        self.sim = sim
+        self.seed = int(getattr(scenario, "seed", 0))
+        self.config = config
+        self.objects: list[ScenarioObject] = []
+
+    def ground(self) -> None:
+        """Lay the textured ground (gravel and grass) down, once: a down camera's targets
+        need a ground with features around them (the first kind that asks lays it)."""
+        from drivers.sim.scenario import FeatureGround
+
+        if not any(isinstance(o, FeatureGround) for o in self.objects):
+            self.objects.append(FeatureGround(seed=self.seed + 7))
+
+
 @dataclass(frozen=True)
 class TargetKind:
     name: str
     #: its ``scenario.<name>`` section (None: it is not simulated)
     scenario: type[BaseModel] | None = None
-    #: the simulator bodies of a scenario's section: (the section, the simulator's
-    #: configuration, the scenario's seed) → scenario objects (:mod:`drivers.sim.scenario`)
-    build: Callable[[BaseModel, SimConfig, int], Sequence[ScenarioObject]] | None = None
+    #: the simulator bodies of a scenario's section: (the section, the :class:`World` being
+    #: built) → scenario objects (:mod:`drivers.sim.scenario`), added to the world in the order
+    #: the kinds were registered
+    build: Callable[[BaseModel, World], Sequence[ScenarioObject]] | None = None
     #: its ``targets.<name>`` configuration section (None: it has none)
     settings: type[BaseModel] | None = None
     description: str = ""
+    #: the scenario has this kind's section unless it says ``<name>: null``
+    present_by_default: bool = False
+    #: more scenario keys the kind reads beside its section: key → (annotation, default)
+    scenario_keys: Mapping[str, tuple[Any, Any]] = field(default_factory=dict)
+    #: checks across the scenario's sections (the whole scenario → raise ValueError)
+    check: Callable[[Any], None] | None = None
+    #: a shipped kind's configuration sections, by dotted path (``perception.ball``,
+    #: ``rover``): fields of the configuration's models, which are made once the shipped
+    #: kinds are registered (a plugin's kind has ``settings`` instead)
+    config: Mapping[str, type[BaseModel]] = field(default_factory=dict)
 
 
 TARGET_KINDS: dict[str, TargetKind] = {}
+
+
+def config_sections(parent: str) -> dict[str, type[BaseModel]]:
+    """The registered kinds' configuration sections directly under ``parent`` (``""``: the
+    top level), by key, in the order the kinds were registered."""
+    found: dict[str, type[BaseModel]] = {}
+    for kind in TARGET_KINDS.values():
+        for path, model in kind.config.items():
+            head, _, key = path.rpartition(".")
+            if head == parent:
+                if key in found:
+                    raise ValueError(f"configuration section {path!r} is claimed twice")
+                found[key] = model
+    return found
 
 
 def register_target(kind: TargetKind) -> TargetKind:

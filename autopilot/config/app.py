@@ -6,6 +6,7 @@ from typing import Any, Literal
 
 from pydantic import (
     Field,
+    create_model,
     model_validator,
 )
 from pydantic_core import PydanticCustomError
@@ -22,35 +23,18 @@ from autopilot.config.sections import (
     LogConfig,
     PerceptionConfig,
     PhotoConfig,
-    RoverConfig,
     RuntimeConfig,
     VehicleSetup,
+    kind_fields,
 )
 from drivers.sim.config import SimConfig
 
 
-class AppConfig(ConfigModel):
-    """The whole of ``config.yaml``."""
-
-    driver: Literal["sim", "mavsdk", "pymavlink"]
-    link: LinkConfig
-    vehicle: VehicleSetup
-    runtime: RuntimeConfig
-    perception: PerceptionConfig
-    estimation: EstimationConfig
-    control: ControlConfig
-    photos: PhotoConfig
-    rover: RoverConfig
-    log: LogConfig
-    console: ConsoleConfig = ConsoleConfig()
-    failsafe: FailsafeConfig = FailsafeConfig()
-    sim: SimConfig  # its cameras are vehicle.cameras
-    #: how the plugins' target kinds are found (:mod:`autopilot.targets`), by kind: each
-    #: section validated by its kind's settings model, whose defaults apply when it is absent
-    targets: dict[str, Any] = Field(default_factory=dict)
+class AppConfigRules(ConfigModel):
+    """The rules of the whole configuration (:data:`AppConfig` is this with its sections)."""
 
     @model_validator(mode="after")
-    def _target_settings(self) -> AppConfig:
+    def _target_settings(self) -> AppConfigRules:
         from autopilot.targets import validate_sections
 
         validate_sections(self.targets, lambda kind: kind.settings, "targets",
@@ -68,8 +52,32 @@ class AppConfig(ConfigModel):
         return data
 
     @model_validator(mode="after")
-    def _simulator_cameras(self) -> AppConfig:
+    def _simulator_cameras(self) -> AppConfigRules:
         # the simulator renders the vehicle's cameras (validated here, once)
         object.__setattr__(self, "sim", self.sim.model_copy(
             update={"cameras": dict(self.vehicle.cameras)}))
         return self
+
+
+#: The whole of ``config.yaml``: the sections, with the shipped target kinds' top-level ones
+#: (the ``rover``) after ``photos``.
+AppConfig = create_model(
+    "AppConfig", __base__=AppConfigRules, __module__=__name__,
+    __doc__="The whole of ``config.yaml``.",
+    driver=(Literal["sim", "mavsdk", "pymavlink"], ...),
+    link=(LinkConfig, ...),
+    vehicle=(VehicleSetup, ...),
+    runtime=(RuntimeConfig, ...),
+    perception=(PerceptionConfig, ...),
+    estimation=(EstimationConfig, ...),
+    control=(ControlConfig, ...),
+    photos=(PhotoConfig, ...),
+    **kind_fields(""),
+    log=(LogConfig, ...),
+    console=(ConsoleConfig, ConsoleConfig()),
+    failsafe=(FailsafeConfig, FailsafeConfig()),
+    sim=(SimConfig, ...),  # its cameras are vehicle.cameras
+    #: how the plugins' target kinds are found (:mod:`autopilot.targets`), by kind: each
+    #: section validated by its kind's settings model, whose defaults apply when it is absent
+    targets=(dict[str, Any], Field(default_factory=dict)),
+)

@@ -1,23 +1,24 @@
 """The configuration's sections (``runtime``, ``perception``, ``estimation``, ``control``,
-``photos``, ``link``, ``vehicle``, ``rover``, ``log``, ``console``, ``failsafe``), each a
-model whose fields carry their units and bounds."""
+``photos``, ``link``, ``vehicle``, ``log``, ``console``, ``failsafe``), each a model whose
+fields carry their units and bounds. The target kinds' own sections (how each is found and
+estimated: ``perception.<kind>``, ``estimation.<kind>``, …) are their modules'
+(:mod:`autopilot.target_kinds`), made fields of :data:`PerceptionConfig`,
+:data:`EstimationConfig` and the whole (:mod:`.app`) by :func:`kind_fields`."""
 
 from __future__ import annotations
 
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import (
     Field,
-    ValidationInfo,
+    create_model,
     field_validator,
     model_validator,
 )
 
 from autopilot.config.base import (
-    ColorName,
     ConfigModel,
     FiniteFloat,
-    HsvTriple,
     NonNegative,
     Positive,
 )
@@ -60,119 +61,6 @@ class RuntimeConfig(ConfigModel):
         return self
 
 
-class BallPerceptionConfig(ConfigModel):
-    camera: str
-    color: ColorName
-    #: Explicit HSV ranges ([[h, s, v], [h, s, v]] pairs) instead of the colour's preset.
-    hsv_ranges: list[tuple[HsvTriple, HsvTriple]] | None = None
-    diameter_m: Positive
-    open_kernel_px: Annotated[int, Field(ge=1, le=31)]
-    close_kernel_px: Annotated[int, Field(ge=1, le=31)]
-    min_radius_px: Positive
-    max_radius_px: Positive
-    min_circularity: Annotated[float, Field(ge=0, le=1)]
-    min_fill_ratio: Annotated[float, Field(ge=0, le=1)]
-    min_solidity: Annotated[float, Field(ge=0, le=1)] = 0.85  # blob area / its convex hull's
-
-
-class MarkerPerceptionConfig(ConfigModel):
-    """The followed fiducial marker (seed 002: ArUco id 36, 16 cm) and how it is found."""
-
-    camera: str
-    backend: Literal["aruco", "apriltag"]
-    #: OpenCV dictionary (DICT_ARUCO_ORIGINAL, DICT_4X4_50, DICT_APRILTAG_36h11, …) or an
-    #: AprilTag family (tag36h11, tag25h9, tag16h5)
-    dictionary: str
-    id: Annotated[int, Field(ge=0)]
-    size_m: Positive  # side of the black square
-    corner_refinement: Literal["edges", "subpix", "apriltag", "contour", "none"]
-    min_perimeter_px: Positive
-
-    @field_validator("dictionary")
-    @classmethod
-    def _known_dictionary(cls, name: str, info: ValidationInfo) -> str:
-        from drivers.markers import apriltag_family_name, aruco_dictionary_name
-
-        if info.data.get("backend") == "apriltag":
-            apriltag_family_name(name)
-        else:
-            aruco_dictionary_name(name)
-        return name
-
-
-class ImagePerceptionConfig(ConfigModel):
-    """How a known flat image (hover_image, seed 000) is found; which image, and its size, are
-    the mission step's."""
-
-    camera: str
-    features: Literal["orb", "akaze"]
-    reference_features: Annotated[int, Field(ge=100, le=20000)]
-    frame_features: Annotated[int, Field(ge=100, le=20000)]
-    reference_px: Annotated[int, Field(ge=100, le=4000)]
-    ratio: Annotated[float, Field(gt=0, lt=1)]
-    ransac_px: Positive
-    min_inliers: Annotated[int, Field(ge=6)]
-    #: frames tracked (Lucas–Kanade) between full detections; 0: a full detection every frame
-    track_frames: Annotated[int, Field(ge=0, le=100)] = 0
-    #: ours, or seed 000's pipeline as a baseline (autopilot bench hover_image)
-    detector: Literal["ours", "seed000"] = "ours"
-
-
-class PadPerceptionConfig(ConfigModel):
-    """How a landing pad (land_pad, seed 001) is found; its kind, colour and size are the
-    mission step's."""
-
-    camera: str
-    #: circle pads: explicit HSV ranges instead of the step's colour's preset
-    hsv_ranges: list[tuple[HsvTriple, HsvTriple]] | None = None
-    min_radius_px: Positive
-    max_fit_error: Annotated[float, Field(gt=0, le=0.5)]  # RMS radial residual ÷ radius
-    #: circle pads with a rangefinder height: the disc fitted on the ground may be this much
-    #: smaller or larger than its size (else it is something else of that colour)
-    size_tolerance: Annotated[float, Field(gt=0, lt=1)]
-    #: marker pads: the dictionary of its markers (their ids: the mission step's)
-    backend: Literal["aruco", "apriltag"]
-    dictionary: str
-    min_perimeter_px: Positive
-    #: ours, or seed 001's multi-scale template matching (circle pads) as a baseline
-    #: (autopilot bench land_pad)
-    detector: Literal["ours", "seed001"] = "ours"
-
-    @field_validator("dictionary")
-    @classmethod
-    def _known_dictionary(cls, name: str, info: ValidationInfo) -> str:
-        from drivers.markers import apriltag_family_name, aruco_dictionary_name
-
-        if info.data.get("backend") == "apriltag":
-            apriltag_family_name(name)
-        aruco_dictionary_name(name)
-        return name
-
-
-class PerceptionConfig(ConfigModel):
-    ball: BallPerceptionConfig
-    marker: MarkerPerceptionConfig
-    image: ImagePerceptionConfig
-    pad: PadPerceptionConfig
-
-
-class ImageEstimationConfig(ConfigModel):
-    #: an image lies still on the ground: how hard it may seem to move, and how fast at first
-    accel_noise_m_s2: Positive = 0.3
-    initial_velocity_std_m_s: Positive = 0.3
-    position_noise_px: Positive  # the image centre's bearing noise
-    size_noise_px: Positive  # noise of its apparent width (range noise)
-    heading_noise_deg: Positive  # of the direction of its top, one detection
-    #: learn the down camera's mount tilt from the image, which lies level
-    #: (:mod:`autopilot.estimation.level_mount`), after this many frames, to this σ at best
-    learn_mount: bool = True
-    mount_min_frames: Annotated[int, Field(ge=5, le=10_000)] = 30
-    mount_residual_std_deg: NonNegative = 0.1
-    #: a frame implying more tilt than this is a bad pose, not the mount (the mount's own
-    #: error is a degree or two; raise it for a camera bolted on by eye)
-    mount_max_tilt_deg: Annotated[float, Field(gt=0.0, le=30.0)] = 5.0
-
-
 class TargetEstimationConfig(ConfigModel):
     accel_noise_m_s2: Positive
     gate_chi2: Positive
@@ -203,85 +91,29 @@ class NavigationUncertaintyConfig(ConfigModel):
     yaw_std_deg: NonNegative
 
 
-class MarkerEstimationConfig(ConfigModel):
-    """Measurement noise of marker detections (the motion model is ``estimation.target``'s)."""
+def kind_fields(parent: str) -> dict[str, Any]:
+    """The shipped target kinds' configuration sections under ``parent`` as required model
+    fields (:func:`autopilot.targets.config_sections`)."""
+    import autopilot.target_kinds  # noqa: F401 (registers the shipped kinds)
+    from autopilot.targets import config_sections
 
-    pixel_noise_px: Positive  # bearing noise of the marker's centre
-    size_noise_px: Positive  # noise of its side length in the image (range noise)
-    heading_noise_deg: Positive  # direction of its face, one clear detection
-    ambiguous_heading_noise_deg: Positive  # … when the two poses fit about equally well
-    heading_accel_noise_deg_s2: Positive  # how hard the face may turn
-
-
-class PadEstimationConfig(ConfigModel):
-    accel_noise_m_s2: Positive  # how hard the pad may move (a pad on the ground: hardly)
-    initial_velocity_std_m_s: Positive = 0.5  # how fast it may be moving when first seen
-    position_noise_px: Positive  # bearing noise of the pad's centre
-    size_noise_px: Positive  # of its apparent size (range noise, without the rangefinder)
-    height_noise_m: Positive  # of the ground's height from the rangefinder
-    heading_noise_deg: Positive  # marker pads: of the direction of its top, one detection
+    return {key: (model, ...) for key, model in config_sections(parent).items()}
 
 
-class RelativeEstimationConfig(ConfigModel):
-    """The relative-state filter of land_on_rover (autopilot/estimation/relative.py): the drone
-    relative to the rover's deck, fused from UWB ranges, the deck's tag, the rangefinder, the
-    rover's own reports and the drone's velocity."""
+#: How each target is found (``perception.<kind>``): a section for each shipped target kind.
+PerceptionConfig = create_model("PerceptionConfig", __base__=ConfigModel, __module__=__name__,
+                                **kind_fields("perception"))
 
-    accel_noise_m_s2: Positive  # white acceleration beyond the modelled one (process noise)
-    jerk_noise_m_s3: Positive  # how fast the rover's acceleration may change
-    accel_time_constant_s: Positive  # how long its acceleration lasts (Gauss–Markov)
-    yaw_accel_noise_rad_s2: Positive  # how hard its turn rate may change
-    drone_velocity_noise_m_s: NonNegative  # of the drone's velocity changes (the filter's input)
-    uwb_range_noise_m: Positive  # one range (σ)
-    uwb_gate_chi2: Positive  # one range's innovation gate (1 dof)
-    tag_pixel_noise_px: Positive  # the tag centre's bearing noise
-    tag_range_noise_fraction: Positive  # the tag's range noise, a fraction of the range
-    tag_heading_noise_deg: Positive
-    rangefinder_noise_m: Positive
-    rover_velocity_noise_m_s: Positive  # the rover's reported velocity (σ, at least)
-    rover_heading_noise_deg: Positive  # its compass, each reading (σ, at least)
-    compass_bias_std_deg: Positive  # its compass's slowly wandering bias (σ)
-    course_noise_deg: NonNegative  # its course over the ground vs its heading (wheel slip)
-    #: how far apart the rover's reported position and the drone's own may be (their two GNSS
-    #: errors: a slowly wandering bias, σ per axis), and how slowly it wanders
-    rough_position_std_m: tuple[Positive, Positive, Positive]
-    bias_time_constant_s: Positive
-    gate_chi2: Positive  # 3-dof measurements (tag, rough position)
-    history_s: Annotated[float, Field(gt=0, le=5)]  # a measurement this late is still fused
-    max_extrapolation_s: Positive  # the estimate is not predicted further than this
-
-
-class Seed004EstimationConfig(ConfigModel):
-    """Seed 004's fused filter (autopilot/estimation/seed004.py), the baseline of
-    ``autopilot bench landing --strategy seed004``: its R values (each a single diagonal
-    value), its timers, and what the seed does not give (Q, R_px4, R_compass, R_range)."""
-
-    update_rate_hz: Positive
-    predict_rate_hz: Positive
-    r_uwb: Positive
-    r_tag: Positive
-    r_px4: Positive
-    r_compass: Positive
-    r_range: Positive
-    drone_accel_var: Positive
-    rover_accel_var: Positive
-    yaw_rate_var: Positive
-    initial_rover_std_m: Positive
-    initial_velocity_std_m_s: Positive
-
-
-class EstimationConfig(ConfigModel):
-    target: TargetEstimationConfig
-    marker: MarkerEstimationConfig
-    image: ImageEstimationConfig
-    pad: PadEstimationConfig
-    relative: RelativeEstimationConfig
-    seed004: Seed004EstimationConfig
-    navigation: NavigationUncertaintyConfig
+#: Estimation: the target filters' motion model (``target``), each target kind's measurement
+#: models (``estimation.<kind>``), the vehicle's own navigation errors, the cameras' mounts.
+EstimationConfig = create_model(
+    "EstimationConfig", __base__=ConfigModel, __module__=__name__,
+    target=(TargetEstimationConfig, ...), **kind_fields("estimation"),
+    navigation=(NavigationUncertaintyConfig, ...),
     #: How far the cameras may be off their nominal mount (σ per axis): a fixed rotation that
     #: every target seen through them inherits, as an attitude error that averaging frames
     #: does not remove.
-    camera_mount_std_deg: Annotated[float, Field(ge=0, le=10)]
+    camera_mount_std_deg=(Annotated[float, Field(ge=0, le=10)], ...))
 
 
 class FollowControlConfig(ConfigModel):
@@ -400,52 +232,6 @@ class VehicleSetup(ConfigModel):
     """The vehicle's cameras (``vehicle.cameras``), shared by the simulator and MAVLink drivers."""
 
     cameras: dict[str, VehicleCameraConfig]
-
-
-class DeckTagConfig(ConfigModel):
-    """The tag printed on the rover's deck: the nested marker pad (five markers of one
-    dictionary — AprilTag families included — the small one in the centre), its top towards
-    the rover's front."""
-
-    kind: Literal["markers"]
-    size_m: Annotated[float, Field(gt=0.1, le=5)]
-    ids: tuple[int, int, int, int, int]
-    dictionary: str
-
-    @model_validator(mode="after")
-    def _layout(self) -> DeckTagConfig:
-        from autopilot.perception.pad import marker_pad_layout
-
-        marker_pad_layout(self.size_m, self.ids, self.dictionary)  # raises ValueError
-        return self
-
-
-class RoverUwbConfig(ConfigModel):
-    """Where the UWB anchors are on the rover (FRD from its reference point, the ground under
-    the deck's centre) and the tag on the drone (FRD from its body origin)."""
-
-    anchors_frd_m: Annotated[list[tuple[float, float, float]], Field(min_length=1,
-                                                                       max_length=16)]
-    tag_frd_m: tuple[float, float, float]
-
-
-class RoverConfig(ConfigModel):
-    """The rover land_on_rover lands on, as the autopilot knows it (a scenario's rover is built
-    to match unless it says otherwise)."""
-
-    deck_size_m: tuple[Annotated[float, Field(gt=0.2, le=10)],
-                       Annotated[float, Field(gt=0.2, le=10)]]  # along the rover, across
-    deck_height_m: Annotated[float, Field(ge=0, le=5)]  # its top above the reference point
-    camera: str  # the camera that sees the deck's tag (pointing down)
-    tag: DeckTagConfig
-    uwb: RoverUwbConfig
-
-    @model_validator(mode="after")
-    def _fits(self) -> RoverConfig:
-        if self.tag.size_m > min(self.deck_size_m):
-            raise ValueError(f"tag.size_m ({self.tag.size_m}) is larger than the deck "
-                             f"({list(self.deck_size_m)})")
-        return self
 
 
 KeyName = Annotated[str, Field(min_length=1, max_length=12)]

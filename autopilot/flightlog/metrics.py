@@ -109,7 +109,7 @@ def _legacy_kind(text: str) -> str:
 def followed_targets(log: Mapping[str, Sequence[Mapping]]
                      ) -> list[tuple[int, Mapping, FollowedTarget]]:
     """The plan's follow steps (those with a target pipeline and a standoff): (index, step
-    record, target). A log from before per-step plan records: its single follow_ball step."""
+    record, target)."""
     plan = (log.get(ch.MISSION_PLAN) or [{}])[0]
     found = []
     for index, step in enumerate(plan.get("steps", [])):
@@ -118,11 +118,6 @@ def followed_targets(log: Mapping[str, Sequence[Mapping]]
             p = pipelines[0]
             found.append((index, step, FollowedTarget(p["name"], p["camera"], p["truth_body"],
                                                       p["size_m"], step["standoff_m"])))
-    if not found and plan.get("camera") and plan.get("standoff_m"):
-        steps = plan.get("steps", [])
-        index = next((i for i, s in enumerate(steps) if "follow_ball" in s), 0)
-        found.append((index, {"name": "follow_ball"}, FollowedTarget(
-            "ball", plan["camera"], "ball", plan["ball_diameter_m"], plan["standoff_m"])))
     return found
 
 

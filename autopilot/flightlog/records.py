@@ -8,6 +8,7 @@ and NaN alike. Times are seconds on the run's clock.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -25,7 +26,6 @@ from drivers.base import (
 CAMERA_INFO = "/camera/info"
 VEHICLE_STATE = "/vehicle/state"
 VEHICLE_STATUS = "/vehicle/status_text"
-BALL_DETECTIONS = "/perception/ball"  # the ball pipeline's (see detection_topic)
 TARGET_ESTIMATES = "/estimation/target"
 CONTROL_TARGET = "/control/target"
 SETPOINTS = "/control/setpoint"
@@ -39,8 +39,6 @@ PHOTOS = "/photos"  # photos taken by the steps (orbit, survey)
 MISSION_STATUS = "/mission/status"  # the status code (autopilot.status), on each change
 MISSION_GOALS = "/mission/goals"  # goals run (the goal API), as the plan's step records
 RELATIVE_ESTIMATES = "/estimation/relative"  # the relative-state filter (land_on_rover)
-UWB_RANGES = "/sensors/uwb"  # UWB ranges to a rover's anchors
-ROVER_STATES = "/sensors/rover"  # the rover's own reports (another MAVLink system)
 
 
 def detection_topic(pipeline: str) -> str:
@@ -51,6 +49,18 @@ def detection_topic(pipeline: str) -> str:
 def sensor_topic(stream: str) -> str:
     """The channel of one of the vehicle's extra sensor streams (``vehicle.sensors``)."""
     return f"/sensors/{stream}"
+
+
+#: how a sensor stream's records are read back (replay feeds them to the pipelines that take
+#: them): stream → record → sample, registered with the stream's schema by the code that
+#: consumes it (:func:`register_sensor`)
+SENSOR_RECORDS: dict[str, Callable[[dict], Any]] = {}
+
+
+def register_sensor(stream: str, schema: dict, from_record: Callable[[dict], Any]) -> None:
+    """A sensor stream's channel schema and reader."""
+    register_schema(sensor_topic(stream), schema)
+    SENSOR_RECORDS[stream] = from_record
 
 
 def detection_topics(records) -> list[str]:
@@ -76,13 +86,18 @@ _BOOL = {"type": "boolean"}
 _STR = {"type": "string"}
 
 
-def _vec(n: int) -> dict:
+def vector_schema(n: int) -> dict:
+    """A JSON Schema: an array of ``n`` numbers (null for NaN)."""
     return {"type": "array", "items": _NUM, "minItems": n, "maxItems": n}
 
 
-def _obj(title: str, **props: dict) -> dict:
+def record_schema(title: str, **props: dict) -> dict:
+    """A JSON Schema: a channel's record, an object of ``props``."""
     return {"$schema": "https://json-schema.org/draft/2020-12/schema", "title": title,
             "type": "object", "properties": props}
+
+
+_vec, _obj = vector_schema, record_schema  # (short, for the table below)
 
 
 SCHEMAS: dict[str, dict] = {
@@ -98,11 +113,6 @@ SCHEMAS: dict[str, dict] = {
                         landed_state=_STR, distance_to_ground_m=_NUM, battery_voltage_v=_NUM,
                         battery_remaining=_NUM, failsafe=_BOOL, received_s=_NUM),
     VEHICLE_STATUS: _obj("StatusText", time_s=_NUM, text=_STR),
-    BALL_DETECTIONS: _obj("BallDetection", time_s=_NUM, seq=_INT, camera=_STR, detected=_BOOL,
-                          u_px=_NUM, v_px=_NUM, radius_px=_NUM, range_m=_NUM,
-                          position_cam_m=_vec(3), score=_NUM, candidates=_INT,
-                          cut_by_border=_BOOL, processing_ms=_NUM, received_s=_NUM,
-                          detected_s=_NUM, hint_u_px=_NUM, hint_v_px=_NUM, hint_radius_px=_NUM),
     TARGET_ESTIMATES: _obj("TargetEstimate", time_s=_NUM, pipeline=_STR, measurement_time_s=_NUM,
                            accepted=_BOOL, reinitialised=_BOOL, mahalanobis2=_NUM,
                            measured_position_ned_m=_vec(3), position_ned_m=_vec(3),
@@ -123,12 +133,6 @@ SCHEMAS: dict[str, dict] = {
                              relative_velocity_m_s=_vec(3), position_std_m=_vec(3),
                              velocity_std_m_s=_vec(3), position_cov_m2=_vec(9),
                              heading_rad=_NUM, heading_std_rad=_NUM, bias_m=_vec(3)),
-    UWB_RANGES: _obj("UwbRanges", time_s=_NUM, anchor_ids={"type": "array", "items": _INT},
-                     ranges_m={"type": "array", "items": _NUM}, received_s=_NUM),
-    ROVER_STATES: _obj("RoverState", time_s=_NUM, position_ned_m=_vec(3),
-                       velocity_ned_m_s=_vec(3), heading_rad=_NUM, position_std_m=_NUM,
-                       velocity_std_m_s=_NUM, heading_std_rad=_NUM, system_id=_INT,
-                       received_s=_NUM),
     CONTROL_TARGET: _obj("ControlTarget", time_s=_NUM, pipeline=_STR, step=_STR,
                          step_index=_INT, present=_BOOL, position_ned_m=_vec(3),
                          velocity_ned_m_s=_vec(3), position_std_m=_vec(3), age_s=_NUM,
@@ -234,22 +238,6 @@ def ground_truth_record(gt) -> dict:
         "armed": getattr(gt, "armed", None), "mode": getattr(gt, "mode", None),
         "landed_state": getattr(gt, "landed_state", None),
     }
-
-
-def uwb_ranges_from_record(r: dict):
-    from drivers.base import UwbRanges
-
-    return UwbRanges(float(r["time_s"]), tuple(int(i) for i in r["anchor_ids"]),
-                     tuple(num(v) for v in r["ranges_m"]))
-
-
-def rover_state_from_record(r: dict):
-    from drivers.base import RoverState
-
-    return RoverState(float(r["time_s"]), vec(r["position_ned_m"]), vec(r["velocity_ned_m_s"]),
-                      num(r.get("heading_rad")), num(r.get("position_std_m")),
-                      num(r.get("velocity_std_m_s")), num(r.get("heading_std_rad")),
-                      int(r.get("system_id") or 0))
 
 
 def num(value: Any) -> float:

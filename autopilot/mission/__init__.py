@@ -33,20 +33,9 @@ from autopilot.mission.loader import (
     split_overrides,
 )
 from autopilot.mission.model import MISSION_KEYS, Mission, MissionPlan, Step
-from autopilot.mission.scenario import (
-    BallScenario,
-    DeckTagScenario,
-    ImageScenario,
-    MarkerScenario,
-    PadScenario,
-    RoverScenario,
-    Scenario,
-    UwbScenario,
-    WindScenario,
-)
+from autopilot.mission.scenario import Scenario, WindScenario
 
-__all__ = ["MISSION_KEYS", "BallScenario", "DeckTagScenario", "ImageScenario", "MarkerScenario",
-           "Mission", "MissionEvent", "MissionExecutor", "MissionOutput", "MissionPlan",
-           "PadScenario", "RoverScenario", "Scenario", "Step", "UwbScenario", "WindScenario",
+__all__ = ["MISSION_KEYS", "Mission", "MissionEvent", "MissionExecutor", "MissionOutput",
+           "MissionPlan", "Scenario", "Step", "WindScenario",
            "build_behavior", "find_mission", "is_mission_file", "load_mission",
            "shipped_missions", "split_overrides"]

@@ -23,7 +23,7 @@ class MissionEvent:
 
     ``kind``: ``step_started``, ``step_succeeded``, ``step_failed``, ``fallback_started``,
     ``fallback_ended``, ``mission_completed``, ``aborted``, ``request_refused``,
-    ``goal_cancelled``, ``standby`` (back to waiting for goals) (the mission), ``request``,
+    ``goal_cancelled``, ``waiting_for_goals`` (back to waiting) (the mission), ``request``,
     ``runtime`` and ``goal_refused`` (the runtime's own); ``step_index`` is the step's place
     in the plan, or a goal's index after the plan's steps (−1 for the fallback and the
     mission as a whole); ``text`` is for people."""
@@ -230,7 +230,7 @@ class MissionExecutor:
     def _resume(self, inputs: BehaviorInputs, events: list) -> MissionOutput:
         self._index, self._current = self._waiting
         self._waiting = None
-        events.append(self._event("standby", f"{self._current.name}: waiting for goals"))
+        events.append(self._event("waiting_for_goals", f"{self._current.name}: waiting for goals"))
         return self._handle(self._current.activate(inputs), inputs, events)
 
     def _enter_fallback(self, inputs: BehaviorInputs, events: list,

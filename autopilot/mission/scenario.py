@@ -1,54 +1,19 @@
-"""The simulated world a mission flies in (``scenario:``): the shipped targets' sections
-(ball, marker, image, pad, rover), the wind, the faults, and the plugins' target sections
-(validated by their kinds, :mod:`autopilot.targets`). Ignored on real hardware."""
+"""The simulated world a mission flies in (``scenario:``): a section for each target kind
+(:mod:`autopilot.targets`: the shipped kinds' are fields of :class:`Scenario`, a plugin's are
+validated by its kind as the mission loads), the wind, the decoys, the faults. Ignored on real
+hardware."""
 
 from __future__ import annotations
 
-from typing import Annotated, Literal
+from typing import Annotated, Any
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, create_model, model_validator
 
-from autopilot.config import (
-    ColorName,
-    ConfigModel,
-    NonNegative,
-)
+import autopilot.target_kinds  # noqa: F401 (registers the shipped kinds before the model is made)
+from autopilot.config import ConfigModel, NonNegative
 from autopilot.perception.colors import COLORS
+from autopilot.targets import TARGET_KINDS
 from drivers.sim.faults import Fault
-
-
-class BallScenario(ConfigModel):
-    path: Literal["static", "circle", "figure8", "lissajous", "random_walk"] = "circle"
-    speed_mps: Annotated[float, Field(ge=0, le=15)] = 1.0
-    diameter_m: Annotated[float, Field(gt=0.02, le=2)] = 0.2
-    color: ColorName = "orange"
-    height_m: Annotated[float, Field(gt=0.1, le=50)] = 1.5  # of the ball's centre
-    start_distance_m: Annotated[float, Field(gt=0.5, le=50)] = 2.0  # ahead of the vehicle
-    start_delay_s: NonNegative = 0.0  # the ball waits this long before moving
-    #: it gets up to speed this fast; on a random walk, its greatest acceleration
-    accel_mps2: Annotated[float, Field(gt=0, le=50)] = 2.0
-    size_m: Annotated[float, Field(gt=0.5, le=100)] = 8.0  # extent of the path
-
-
-class MarkerScenario(ConfigModel):
-    """A fiducial marker on a board (seed 002: ArUco id 36, 16 cm), moving like the ball."""
-
-    dictionary: str = "DICT_ARUCO_ORIGINAL"  # OpenCV dictionary or AprilTag family
-    id: Annotated[int, Field(ge=0)] = 36
-    size_m: Annotated[float, Field(gt=0.02, le=2)] = 0.16  # side of the black square
-    board_m: Annotated[float, Field(gt=0.02, le=3)] = 0.3  # the white board around it
-    path: Literal["static", "circle", "figure8", "lissajous", "random_walk"] = "static"
-    speed_mps: Annotated[float, Field(ge=0, le=15)] = 0.0
-    height_m: Annotated[float, Field(gt=0.1, le=50)] = 1.5  # of the marker's centre
-    start_distance_m: Annotated[float, Field(gt=0.3, le=50)] = 2.0  # ahead of the vehicle
-    start_delay_s: NonNegative = 0.0
-    #: as the ball's: getting up to speed, and a random walk's greatest acceleration
-    accel_mps2: Annotated[float, Field(gt=0, le=50)] = 2.0
-    path_size_m: Annotated[float, Field(gt=0.5, le=100)] = 6.0  # extent of the path
-    #: which way the board turns its face: to the drone, along its travel, against it (to a
-    #: follower behind it), or a fixed heading (yaw_deg; default: back towards the start)
-    facing: Literal["drone", "travel", "trail", "fixed"] = "drone"
-    yaw_deg: float | None = None
 
 
 class WindScenario(ConfigModel):
@@ -56,147 +21,73 @@ class WindScenario(ConfigModel):
     steady_ned_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
 
-class ImageScenario(ConfigModel):
-    """A printed image lying on the ground (hover_image), on gravel and grass."""
-
-    file: str = "default"  # "default": the generated target; else an image file
-    size_m: Annotated[float, Field(gt=0.05, le=50)] = 1.0  # printed width
-    north_east_m: tuple[float, float] = (0.0, 0.0)  # its centre, from the vehicle's start
-    yaw_deg: Annotated[float, Field(ge=-360, le=360)] = 0.0  # heading of its top
-
-
-class PadScenario(ConfigModel):
-    """A landing pad on the ground (land_pad): a coloured circle (``size_m`` across, on a white
-    square a quarter wider) or the nested marker pad (``size_m`` square; its markers' ``ids``:
-    the small centre one first)."""
-
-    kind: Literal["circle", "markers"] = "circle"
-    color: ColorName = "red"  # circle: red = land here (seed 001)
-    size_m: Annotated[float, Field(gt=0.1, le=10)] = 0.8
-    north_east_m: tuple[float, float] = (0.0, 0.0)  # its centre, from the vehicle's start
-    yaw_deg: Annotated[float, Field(ge=-360, le=360)] = 0.0  # heading of its top
-    dictionary: str = "DICT_4X4_50"  # markers
-    ids: tuple[int, int, int, int, int] = (0, 1, 2, 3, 4)  # markers: centre, then the four
-
-    @model_validator(mode="after")
-    def _layout(self) -> PadScenario:
-        if self.kind == "markers":
-            from autopilot.perception.pad import marker_pad_layout
-
-            marker_pad_layout(self.size_m, self.ids, self.dictionary)  # raises ValueError
-        return self
-
-
-class DeckTagScenario(ConfigModel):
-    """The tag on the rover's deck (the nested marker pad)."""
-
-    kind: Literal["markers"] = "markers"
-    size_m: Annotated[float, Field(gt=0.1, le=5)] = 0.7
-    ids: tuple[int, int, int, int, int] = (0, 1, 2, 3, 4)
-    dictionary: str = "DICT_APRILTAG_36h11"
-
-    @model_validator(mode="after")
-    def _layout(self) -> DeckTagScenario:
-        from autopilot.perception.pad import marker_pad_layout
-
-        marker_pad_layout(self.size_m, self.ids, self.dictionary)  # raises ValueError
-        return self
-
-
-class RoverScenario(ConfigModel):
-    """A rover driving a path (land_on_rover), its deck carrying the tag. Deck, tag and UWB
-    anchors default to the configuration's ``rover`` section (what the autopilot knows)."""
-
-    path: Literal["straight", "circle", "random_turns", "stop_and_go", "static"] = "straight"
-    speed_mps: Annotated[float, Field(ge=0, le=5)] = 1.5
-    start_north_east_m: tuple[float, float] = (6.0, 3.0)  # from the vehicle's start
-    heading_deg: Annotated[float, Field(ge=-360, le=360)] = 0.0  # where it drives first
-    size_m: Annotated[float, Field(gt=2, le=500)] = 24.0  # circle diameter; widest random turn
-    accel_mps2: Annotated[float, Field(gt=0, le=5)] = 1.0  # pulling away and braking
-    deck_size_m: tuple[Annotated[float, Field(gt=0.2, le=10)],
-                       Annotated[float, Field(gt=0.2, le=10)]] | None = None
-    deck_height_m: Annotated[float, Field(ge=0, le=5)] | None = None
-    tag: DeckTagScenario | None = None
-
-
-class UwbScenario(ConfigModel):
-    """The rover's UWB anchors (default: the configuration's ``rover.uwb.anchors_frd_m``) and
-    the ranging's quality (default: ``sim.uwb``)."""
-
-    anchors: list[tuple[float, float, float]] | None = None
-    range_noise_m: Annotated[float, Field(ge=0, le=5)] | None = None
-    dropout: Annotated[float, Field(ge=0, le=1)] | None = None
-    nlos_fraction: Annotated[float, Field(ge=0, le=1)] | None = None
-
-
-class Scenario(ConfigModel):
-    """The simulated world. Beside the shipped targets' sections (ball, marker, image, pad,
-    rover), a section for each target kind a plugin registered (:mod:`autopilot.targets`),
-    validated by that kind's scenario model."""
+class ScenarioRules(ConfigModel):
+    """The rules every scenario keeps, whatever kinds are registered (:class:`Scenario` is this
+    with a field for each shipped kind's section)."""
 
     model_config = ConfigDict(extra="allow", frozen=True, allow_inf_nan=False)
 
-    seed: Annotated[int, Field(ge=0)] = 0
-    ball: BallScenario | None = BallScenario()  # null: no ball
-    distractors: Annotated[int, Field(ge=0, le=30)] = 0  # orange-ish objects near the ball
-    marker: MarkerScenario | None = None
-    image: ImageScenario | None = None
-    pad: PadScenario | None = None
-    rover: RoverScenario | None = None
-    uwb: UwbScenario = UwbScenario()
-    #: decoy markers beside the marker's path: how many (ids drawn from its dictionary), or
-    #: their ids; with a pad, decoy pads around it (other colours, blue first: keep away;
-    #: marker pads with other ids): how many
-    decoys: Annotated[int, Field(ge=0, le=30)] | list[Annotated[int, Field(ge=0)]] = 0
-    wind: WindScenario = WindScenario()
-    #: injected faults, each a window after the first arming (drivers/sim/faults.py)
-    faults: list[Fault] = Field(default_factory=list)
-
     @model_validator(mode="after")
-    def _target_sections(self) -> Scenario:
+    def _target_sections(self) -> ScenarioRules:
         from autopilot.targets import validate_sections
 
         validate_sections(self.__pydantic_extra__ or {}, lambda kind: kind.scenario, "scenario",
                           unknown="unknown key", also_known=list(type(self).model_fields))
         return self
 
+    def section(self, kind: str) -> BaseModel | None:
+        """A target kind's section (validated), None when the scenario has none."""
+        value = getattr(self, kind, None) if kind in type(self).model_fields else \
+            (self.__pydantic_extra__ or {}).get(kind)
+        return value if isinstance(value, BaseModel) else None
+
     def targets(self) -> dict[str, BaseModel]:
-        """The plugins' target sections this scenario has (validated), by kind."""
-        return dict(self.__pydantic_extra__ or {})
+        """The target sections this scenario has (validated), by kind, in the order the kinds
+        were registered."""
+        found = {name: self.section(name) for name in TARGET_KINDS}
+        return {name: section for name, section in found.items() if section is not None}
 
     @model_validator(mode="after")
-    def _faults_apply(self) -> Scenario:
+    def _faults_apply(self) -> ScenarioRules:
         for i, f in enumerate(self.faults):
-            if f.kind == "decoy_crossing" and self.ball is None:
-                raise ValueError(f"faults[{i}] decoy_crossing: the scenario has no ball to cross")
-            if f.kind == "rover_stop" and self.rover is None:
-                raise ValueError(f"faults[{i}] rover_stop: the scenario has no rover")
+            if f.needs_target is not None and self.section(f.needs_target) is None:
+                raise ValueError(f"faults[{i}] {f.kind}: the scenario has no "
+                                 f"{f.needs_target}")
             color = getattr(f, "color", None)
             if color is not None and color not in COLORS:
-                raise ValueError(f"faults[{i}] decoy_crossing: unknown color {color!r} "
+                raise ValueError(f"faults[{i}] {f.kind}: unknown color {color!r} "
                                  f"(known: {', '.join(COLORS)})")
         return self
 
     @model_validator(mode="after")
-    def _marker_dictionary(self) -> Scenario:
-        if self.marker is not None:
-            from drivers.markers import aruco_dictionary_name
-
-            try:
-                aruco_dictionary_name(self.marker.dictionary)
-            except ValueError as exc:
-                raise ValueError(f"marker.dictionary: {exc}") from None
-        if self.pad is not None and isinstance(self.decoys, list):
-            raise ValueError("decoys: with a pad, the number of decoy pads (not a list of ids)")
-        if self.pad is not None and self.pad.kind == "markers" and self.decoys:
-            from autopilot.perception.pad import marker_pad_layout
-
-            ids = self.pad.ids
-            top = max(ids) + (max(ids) - min(ids) + 1) * int(self.decoys)
-            try:
-                marker_pad_layout(self.pad.size_m, [top - 4, top - 3, top - 2, top - 1, top],
-                                  self.pad.dictionary)
-            except ValueError:
-                raise ValueError(f"decoys: {self.decoys} decoy marker pads need marker ids up "
-                                 f"to {top}, more than {self.pad.dictionary} has") from None
+    def _kinds_checks(self) -> ScenarioRules:
+        for kind in TARGET_KINDS.values():
+            if kind.check is not None:
+                kind.check(self)
         return self
+
+
+def _fields() -> dict[str, Any]:
+    fields: dict[str, Any] = {"seed": (Annotated[int, Field(ge=0)], 0)}
+    for kind in TARGET_KINDS.values():  # the shipped kinds, in the order registered
+        if kind.scenario is not None:
+            default = kind.scenario() if kind.present_by_default else None
+            fields[kind.name] = (kind.scenario | None, default)  # null: none
+        fields.update(kind.scenario_keys)
+    fields.update({
+        #: decoys of the scenario's targets, each target kind placing its own (marker: decoy
+        #: boards beside its path; pad: decoy pads around it): how many, or (for kinds that
+        #: take them) their ids
+        "decoys": (Annotated[int, Field(ge=0, le=30)] | list[Annotated[int, Field(ge=0)]], 0),
+        "wind": (WindScenario, WindScenario()),
+        #: injected faults, each a window after the first arming (drivers/sim/faults.py)
+        "faults": (list[Fault], Field(default_factory=list)),
+    })
+    return fields
+
+
+#: The simulated world: beside the shipped kinds' sections, a section for each target kind a
+#: plugin registered, validated by that kind's scenario model.
+Scenario = create_model("Scenario", __base__=ScenarioRules, __module__=__name__,
+                        __doc__="The simulated world a mission flies in (``scenario:``).",
+                        **_fields())

@@ -178,4 +178,9 @@ def detection_record(seq: int, time_s: float, camera: str, det: BallDetection | 
 
 
 register(KIND, BallPipeline)
-ch.register_schema(ch.detection_topic(KIND), ch.SCHEMAS[ch.BALL_DETECTIONS])
+ch.register_schema(ch.detection_topic(KIND), ch.record_schema(
+    "BallDetection", time_s=ch.NUM, seq=ch.INT, camera=ch.STR, detected=ch.BOOL, u_px=ch.NUM,
+    v_px=ch.NUM, radius_px=ch.NUM, range_m=ch.NUM, position_cam_m=ch.vector_schema(3),
+    score=ch.NUM, candidates=ch.INT, cut_by_border=ch.BOOL, processing_ms=ch.NUM,
+    received_s=ch.NUM, detected_s=ch.NUM, hint_u_px=ch.NUM, hint_v_px=ch.NUM,
+    hint_radius_px=ch.NUM))

@@ -289,3 +289,27 @@ register(KIND, DeckPipeline)
 ch.register_schema(ch.detection_topic(KIND), ch.detection_schema(
     "DeckTagDetection", quaternion_cam_pad=ch.nullable_array(4), clipped=ch.BOOL,
     ids=ch.nullable_array(items={"type": "integer"}), fit_error=ch.NUM))
+
+
+def uwb_ranges_from_record(r: dict) -> UwbRanges:
+    return UwbRanges(float(r["time_s"]), tuple(int(i) for i in r["anchor_ids"]),
+                     tuple(ch.num(v) for v in r["ranges_m"]))
+
+
+def rover_state_from_record(r: dict) -> RoverState:
+    return RoverState(float(r["time_s"]), ch.vec(r["position_ned_m"]),
+                      ch.vec(r["velocity_ned_m_s"]), ch.num(r.get("heading_rad")),
+                      ch.num(r.get("position_std_m")), ch.num(r.get("velocity_std_m_s")),
+                      ch.num(r.get("heading_std_rad")), int(r.get("system_id") or 0))
+
+
+# the extra sensor streams this pipeline takes (drivers.capabilities.SENSOR_STREAMS): logged on
+# /sensors/<stream>, read back for replay in this order
+ch.register_sensor("uwb", ch.record_schema(
+    "UwbRanges", time_s=ch.NUM, anchor_ids={"type": "array", "items": {"type": "integer"}},
+    ranges_m={"type": "array", "items": ch.NUM}, received_s=ch.NUM), uwb_ranges_from_record)
+ch.register_sensor("rover", ch.record_schema(
+    "RoverState", time_s=ch.NUM, position_ned_m=ch.vector_schema(3),
+    velocity_ned_m_s=ch.vector_schema(3), heading_rad=ch.NUM, position_std_m=ch.NUM,
+    velocity_std_m_s=ch.NUM, heading_std_rad=ch.NUM, system_id={"type": "integer"},
+    received_s=ch.NUM), rover_state_from_record)

@@ -167,8 +167,8 @@ def _standoff(fig, records, phases, target) -> None:
     values = np.concatenate([v[np.isfinite(v)] for v in values])
     if spans and len(values):
         low, high = np.percentile(values, [0.5, 99.5])
-        pad = max(0.1 * (high - low), 0.02)
-        ax.set_ylim(min(low - pad, -0.02), max(high + pad, 0.02))
+        margin = max(0.1 * (high - low), 0.02)
+        ax.set_ylim(min(low - margin, -0.02), max(high + margin, 0.02))
         note = "scaled to the following (off-scale outside it)"
     else:
         note = None

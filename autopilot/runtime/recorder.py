@@ -123,7 +123,7 @@ class MissionRecorder:
             self.set_status(tracker.step_succeeded(codes), event.step_index)
         elif event.kind in ("fallback_started", "aborted"):
             self.set_status(tracker.abort())
-        elif event.kind in ("standby", "goal_cancelled"):
+        elif event.kind in ("waiting_for_goals", "goal_cancelled"):
             self.set_status(tracker.idle(f.in_air), event.step_index)
 
     @property

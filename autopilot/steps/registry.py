@@ -13,6 +13,7 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import Future
 from dataclasses import dataclass, field
+from typing import Any
 
 from autopilot.behaviors.base import Behavior, BehaviorInputs, Params
 from autopilot.config import AppConfig
@@ -144,6 +145,8 @@ class StepKind:
     #: whether a step with these parameters has no end of its own (it waits until told: a
     #: mission with such a step that waits for goals needs the goal API)
     endless: Callable[[Params], bool] = lambda params: False
+    #: example parameters, for the goal API's documentation (the first kind with one is shown)
+    example: Mapping[str, Any] | None = None
 
 
 STEP_KINDS: dict[str, StepKind] = {}

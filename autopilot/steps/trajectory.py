@@ -49,6 +49,7 @@ from autopilot.flightlog.metrics import camera_intrinsics, project_target, scori
 from autopilot.flightlog.truth import truth_table
 from autopilot.planning.footprint import ground_footprint
 from autopilot.planning.trajectory import Limits, cross_track_m, resample
+from autopilot.status import register_status
 from autopilot.steps.registry import Figure, StepContext, StepKind, register
 from drivers.camera_model import pinhole
 
@@ -513,17 +514,23 @@ def _survey_info(params: SurveyParams, config: AppConfig) -> dict:
             "footprint_m": list(footprint_m(params, config))}
 
 
+#: the status codes of seed 005's protocol (the same numbers and labels)
+GOTO_CODES = (register_status(4, "goto in progress"), register_status(5, "goto completed"))
+ORBIT_CODES = (register_status(6, "images in progress"), register_status(7, "images completed"))
+SURVEY_CODES = (register_status(10, "coverage in progress"),
+                register_status(11, "coverage completed"))
+
 register(StepKind(
     "goto", GotoParams, _goto, check=_check_goto, metrics=goto_metrics, reach=_goto_reach,
     summary=((Figure("goto", "final_error_m", "final position error", "m"),
               Figure("goto", "rms_cross_track_m", "cross-track error RMS", "m"),
               Figure("goto", "rms_cross_track_nav_m", "as navigation saw it RMS", "m")),),
     pipelines=_frame_pipelines,
-    report=("trajectory", "path"), status=(4, 5),
+    report=("trajectory", "path"), status=GOTO_CODES,
     description="fly a straight line to position_m (or latlon) at speed_m_s"))
 register(StepKind(
     "orbit", OrbitParams, _orbit, check=_check_orbit, metrics=orbit_metrics, reach=_orbit_reach,
-    warnings=_orbit_warnings,
+    warnings=_orbit_warnings, example={"center_m": [6, 0], "radius_m": 3, "images": 8},
     summary=((Figure("orbit", "rms_cross_track_m", "cross-track error RMS", "m"),
               Figure("orbit", "max_cross_track_m", "max", "m"),
               Figure("orbit", "rms_cross_track_nav_m", "as navigation saw it RMS", "m"),
@@ -531,7 +538,7 @@ register(StepKind(
               Figure("orbit", "photos", "photos"), Figure("orbit", "images_planned", "of"),
               Figure("orbit", "centre_in_frame", "with the centre in frame")),),
     pipelines=_frame_pipelines,
-    report=("trajectory", "path"), status=(6, 7),
+    report=("trajectory", "path"), status=ORBIT_CODES,
     photo_camera=lambda params, config: _photo_camera(params, config) if params.images
     else None,
     description="circle center_m at radius_m facing it, taking `images` photos"))
@@ -545,7 +552,7 @@ register(StepKind(
               Figure("survey", "photos", "photos"), Figure("survey", "photos_planned", "of")),),
     reach=_survey_reach,
     pipelines=_frame_pipelines,
-    report=("trajectory", "path"), status=(10, 11), photo_camera=_photo_camera,
+    report=("trajectory", "path"), status=SURVEY_CODES, photo_camera=_photo_camera,
     plan_info=_survey_info,
     description="lawnmower over polygon_m at altitude_m, photos every photo_spacing_m"))
 

@@ -54,7 +54,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import Annotated, Literal, Union
+from typing import Annotated, ClassVar, Literal, Union
 
 import numpy as np
 import yaml
@@ -70,6 +70,8 @@ class _Fault(BaseModel):
     start_s: Annotated[float, Field(ge=0, le=86400)] = 0.0
     #: how long it lasts (omitted: to the end of the flight)
     duration_s: Annotated[float, Field(gt=0, le=86400)] | None = None
+    #: the scenario section (target kind) it acts on, when it needs one
+    needs_target: ClassVar[str | None] = None
 
     def active_at(self, scenario_time_s: float | None) -> bool:
         if scenario_time_s is None or scenario_time_s < self.start_s:
@@ -153,11 +155,13 @@ class WindStep(_Fault):
 
 class RoverStop(_Fault):
     kind: Literal["rover_stop"]
+    needs_target: ClassVar[str | None] = "rover"
     mode: Literal["stop", "reverse"] = "stop"
 
 
 class DecoyCrossing(_Fault):
     kind: Literal["decoy_crossing"]
+    needs_target: ClassVar[str | None] = "ball"
     duration_s: Annotated[float, Field(gt=0, le=600)] = 6.0
     speed_m_s: Annotated[float, Field(gt=0, le=10)] = 1.0
     behind_m: Annotated[float, Field(ge=-5, le=20)] = 1.5

@@ -210,7 +210,7 @@ def test_rover_stops_then_drives_on(app_config):
 
     plan = load_mission("land_on_rover", [
         'scenario.faults=[{kind: rover_stop, start_s: 2, duration_s: 3}]'])
-    cfg, objects = build_world(plan.mission.scenario, plan.config.sim, plan.config.rover)
+    cfg, objects = build_world(plan.mission.scenario, plan.config.sim, plan.config)
     cfg = cfg.model_copy(update={"cameras": {}})
     sim = Simulator(cfg, objects)
     sim.advance_to(cfg.estimator.init_time_s + 0.1)

@@ -52,7 +52,7 @@ def test_follow_marker_closed_loop(marker_flight):
     found = [f for f in frames if f["detected"]]
     assert {f["marker_id"] for f in found} == {36}
     assert all(len(f["corners_px"]) == 8 for f in found)
-    assert ch.BALL_DETECTIONS not in log or not log[ch.BALL_DETECTIONS]
+    assert ch.detection_topic("ball") not in log or not log[ch.detection_topic("ball")]
 
 
 def test_replay_reproduces_the_marker_flight(marker_flight):

@@ -34,8 +34,8 @@ def test_lands_on_the_moving_deck_within_5_cm(tmp_path):
     assert relative["availability"]["uwb"] > 0.9
     assert relative["availability"]["tag"] > 0.3
     log = read_log(tmp_path / "flight.mcap")
-    assert len(log[ch.UWB_RANGES]) > 50
-    assert len(log[ch.ROVER_STATES]) > 50
+    assert len(log[ch.sensor_topic("uwb")]) > 50
+    assert len(log[ch.sensor_topic("rover")]) > 50
     assert {r["source"] for r in log[ch.RELATIVE_ESTIMATES]} >= {"uwb", "tag", "range", "rover"}
     page = write_report(tmp_path).read_text()
     assert "Landing on the rover" in page

@@ -74,7 +74,13 @@ def test_the_plugin_flies_its_own_mission_with_its_own_target_and_step(site, tmp
     # replay rebuilds its pipeline from the log (registered by kind, loaded from the plugin)
     replayed = _autopilot("replay", str(out), "--json", site=site)
     assert replayed.returncode == 0, replayed.stderr[-2000:]
-    assert json.loads(replayed.stdout)["frames"]["replayed"] > 0
+    replay = json.loads(replayed.stdout)
+    assert replay["frames"]["replayed"] > 0
+    # ... and recomputes its step's detection figures (its StepKind.replay) from the frames:
+    # the same detector on the same frames sees what the flight saw
+    now, then = replay["metrics"]["beacon"], replay["flight_metrics"]["beacon"]
+    assert set(now) == {"detection_rate", "found_after_s"}, now
+    assert now["detection_rate"] == pytest.approx(then["detection_rate"], abs=0.02), (now, then)
 
 
 def test_the_plugins_sections_are_validated_by_its_models_and_named_on_their_lines(

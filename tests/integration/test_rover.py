@@ -25,7 +25,7 @@ ANCHORS = ((0.5, 0.4, -0.47), (0.5, -0.4, -0.47), (-0.5, 0.4, -0.47), (-0.55, -0
 
 def _simulator(overrides=(), seed=3):
     plan = load_mission("land_on_rover", [f"scenario.seed={seed}", *overrides])
-    sim_cfg, objects = build_world(plan.mission.scenario, plan.config.sim, plan.config.rover)
+    sim_cfg, objects = build_world(plan.mission.scenario, plan.config.sim, plan.config)
     sim_cfg = sim_cfg.model_copy(update={"cameras": {}})  # no rendering needed here
     return Simulator(sim_cfg, objects, seed)
 

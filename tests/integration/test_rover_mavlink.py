@@ -21,7 +21,7 @@ pytestmark = pytest.mark.serial  # the simulator's MAVLink face in real time
 
 def test_the_rovers_reports_reach_the_driver_as_a_second_system():
     plan = load_mission("land_on_rover", ["scenario.rover.path=straight"])
-    sim_cfg, objects = build_world(plan.mission.scenario, plan.config.sim, plan.config.rover)
+    sim_cfg, objects = build_world(plan.mission.scenario, plan.config.sim, plan.config)
     cams = {k: v.model_copy(update={"enabled": False}) for k, v in sim_cfg.cameras.items()}
     link = sim_cfg.rover_link.model_copy(update={"mavlink": True})
     sim_cfg = sim_cfg.model_copy(update={"cameras": cams, "rover_link": link})
@@ -72,7 +72,7 @@ def test_the_mavsdk_driver_reads_the_rover_too_and_never_shows_it_to_mavsdk():
     from drivers.mavlink.mavsdk_driver import MavsdkDriver
 
     plan = load_mission("land_on_rover")
-    sim_cfg, objects = build_world(plan.mission.scenario, plan.config.sim, plan.config.rover)
+    sim_cfg, objects = build_world(plan.mission.scenario, plan.config.sim, plan.config)
     cams = {k: v.model_copy(update={"enabled": False}) for k, v in sim_cfg.cameras.items()}
     link = sim_cfg.rover_link.model_copy(update={"mavlink": True})
     sim_cfg = sim_cfg.model_copy(update={"cameras": cams, "rover_link": link})

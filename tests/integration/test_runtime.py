@@ -70,7 +70,7 @@ def test_follow_ball_closed_loop(tmp_path):
             if channel.message_encoding == "json":
                 json.loads(message.data)  # strict JSON
             counts[channel.topic] = counts.get(channel.topic, 0) + 1
-    for topic in (ch.VEHICLE_STATE, ch.BALL_DETECTIONS, ch.TARGET_ESTIMATES, ch.SETPOINTS,
+    for topic in (ch.VEHICLE_STATE, ch.detection_topic("ball"), ch.TARGET_ESTIMATES, ch.SETPOINTS,
                   ch.GROUND_TRUTH, ch.MISSION_EVENTS, ch.CAMERA_INFO, ch.MISSION_PLAN):
         assert counts.get(topic, 0) > 0, topic
         assert channels[topic].message_encoding == "json"

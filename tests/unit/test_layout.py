@@ -101,3 +101,71 @@ def test_no_module_or_class_grows_past_its_size():
     assert too_big == [], too_big
     assert classes == [], classes
     assert shrunk == [], f"now within the size: take them off OVERSIZE_MODULES: {shrunk}"
+
+
+#: the shared modules: the runtime, the mission and configuration models, the flight log,
+#: replay and the report, the command line, the registries, the drivers' common types. A step
+#: or target kind lives in its own module (autopilot/steps/, autopilot/target_kinds/, its
+#: behaviour, pipeline, detector, estimator), never here.
+SHARED = ("autopilot/*.py", "autopilot/runtime/*.py", "autopilot/config/*.py",
+          "autopilot/mission/*.py", "autopilot/flightlog/*.py", "autopilot/report/*.py",
+          "autopilot/cli/*.py", "drivers/base.py")
+#: names kept on purpose, with why
+KIND_NAME_EXCEPTIONS = {
+    ("autopilot/cli/doctor.py", "follow_ball"): "the default of --mission: the main job",
+}
+
+
+#: step kinds that are the vehicle's own commands (PX4's takeoff, hold and land modes): every
+#: flight has them, and the shared code commands them (the safe stop, the fallback)
+VEHICLE_COMMANDS = {"takeoff", "hold", "land"}
+
+
+def _kind_names() -> set[str]:
+    import autopilot.steps  # noqa: F401 (registers the step kinds, and the plugins')
+    from autopilot.steps import STEP_KINDS
+    from autopilot.targets import TARGET_KINDS
+
+    return (set(STEP_KINDS) - VEHICLE_COMMANDS) | set(TARGET_KINDS)
+
+
+def _kind_references(path: Path, kinds: set[str]):
+    """Where the code (not its comments, docstrings or prose) names a kind: a string that is
+    one (or a channel path with one as a part: ``/perception/ball``), an attribute (``.ball``),
+    a variable or an argument. ``image`` is also a camera's pixels (a variable) and its frames'
+    channel (``/camera/front/image/compressed``), so only the string ``"image"`` counts for
+    it."""
+    import re
+
+    tree = ast.parse(path.read_text())
+    docstrings = {id(node.body[0].value) for node in ast.walk(tree)
+                  if isinstance(node, ast.Module | ast.ClassDef | ast.FunctionDef
+                                | ast.AsyncFunctionDef)
+                  and node.body and isinstance(node.body[0], ast.Expr)
+                  and isinstance(node.body[0].value, ast.Constant)}
+    identifiers = kinds - {"image"}
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Constant) and isinstance(node.value, str) \
+                and id(node) not in docstrings and " " not in node.value.strip():
+            for part in set(re.split(r"[^A-Za-z0-9_]+", node.value)) & identifiers:
+                yield node.lineno, part
+            if node.value == "image":
+                yield node.lineno, node.value
+        elif isinstance(node, ast.Attribute) and node.attr in identifiers:
+            yield node.lineno, node.attr
+        elif isinstance(node, ast.Name) and node.id in identifiers:
+            yield node.lineno, node.id
+        elif isinstance(node, ast.arg) and node.arg in identifiers:
+            yield node.lineno, node.arg
+
+
+def test_no_step_or_target_kind_is_named_in_the_shared_modules():
+    kinds = _kind_names()
+    assert {"follow_ball", "orbit", "ball", "pad", "rover"} <= kinds  # the scan has its names
+    found = []
+    for pattern in SHARED:
+        for path in sorted(ROOT.glob(pattern)):
+            rel = str(path.relative_to(ROOT))
+            found += [f"{rel}:{line}: {name}" for line, name in _kind_references(path, kinds)
+                      if (rel, name) not in KIND_NAME_EXCEPTIONS]
+    assert not found, "step or target kind names in shared modules:\n" + "\n".join(found)

@@ -276,14 +276,14 @@ def test_goals_run_in_place_of_standby_and_return_to_it():
     assert ex.goal_running
     out = ex.update(_inputs(0.2))
     kinds = [e.kind for e in out.events]
-    assert kinds == ["step_failed", "standby"]
+    assert kinds == ["step_failed", "waiting_for_goals"]
     assert out.events[0].step_index == 1
     assert ex.status == "running"
     assert ex.accepts_goals
     # a cancelled goal: the same
     ex.start_goal(_Scripted(Status.SUCCEEDED, after=100), 2, _inputs(0.3))
     out = ex.cancel_goal(_inputs(0.4))
-    assert [e.kind for e in out.events] == ["goal_cancelled", "standby"]
+    assert [e.kind for e in out.events] == ["goal_cancelled", "waiting_for_goals"]
     assert out.step_index == 0
     # landed (disarmed on the ground after flying): standby ends the mission
     ex.start_goal(_Scripted(Status.SUCCEEDED), 3, _inputs(0.5))

@@ -72,7 +72,8 @@ def _records():
     return {
         ch.CAMERA_INFO: [CAM],
         ch.VEHICLE_STATE: [state, later],
-        ch.BALL_DETECTIONS: [{"time_s": 0.5, "camera": "front", "detected": True, "u_px": 300.0,
+        ch.detection_topic("ball"): [{
+                              "time_s": 0.5, "camera": "front", "detected": True, "u_px": 300.0,
                               "v_px": 240.0, "radius_px": 16.0, "score": 0.9, "range_m": 4.0,
                               "hint_u_px": 310.0, "hint_v_px": 240.0, "hint_radius_px": 15.0}],
         # the target 4 m east (the vehicle faces east), moving 1 m/s further east

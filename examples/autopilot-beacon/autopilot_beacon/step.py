@@ -162,6 +162,8 @@ STEP = StepKind(
     lambda params, ctx: HoverBeacon(params),
     pipelines=lambda params, config: (beacon_spec(config, params.size_m),),
     metrics=metrics, report=("beacon", "detections"),
+    # what replay recomputes from the logged frames (the hold's path stays the flight's)
+    replay={"beacon": ("detection_rate", "found_after_s")},
     status=(int(SEARCHING_OR_HOVERING), int(HOVERED)),
     description="find a beacon on the ground with the down camera and hover over it "
                 "(an example plugin's step kind)",

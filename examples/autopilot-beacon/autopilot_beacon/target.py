@@ -12,7 +12,7 @@ from typing import Annotated
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from autopilot.targets import TargetKind
+from autopilot.targets import TargetKind, World
 from drivers.sim.scenario import Geom, MocapBody, Static
 
 BODY = "beacon"  # its body in the simulated world (ground truth: scoring only)
@@ -46,8 +46,8 @@ class BeaconSettings(BaseModel):
     stale_after_s: Annotated[float, Field(gt=0)] = 1.0
 
 
-def build(section: BeaconScenario, sim, seed: int) -> list[MocapBody]:
-    north, east = sim.vehicle.initial_north_east_m
+def build(section: BeaconScenario, world: World) -> list[MocapBody]:
+    north, east = world.sim.vehicle.initial_north_east_m
     half = section.size_m / 2.0
     position = (north + section.north_east_m[0], east + section.north_east_m[1], -0.006)
     return [MocapBody(BODY, [Geom("box", (half, half, 0.005), (*section.color_rgb, 1.0))],
