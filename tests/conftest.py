@@ -91,6 +91,16 @@ def pytest_configure(config):
                             "tests share the others (set it as the module's pytestmark)")
 
 
+def pytest_xdist_auto_num_workers(config):
+    """``-n auto``: a worker per core for the lockstep tests, which keep their cores busy, and
+    one more for the serial group, whose real-time flights spend most of their time waiting on
+    the wall clock (they are built to keep their timing on a busy machine)."""
+    import os
+
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    return (cores or 1) + 1
+
+
 def pytest_xdist_make_scheduler(config, log):
     """With ``-n`` (``--dist load``, the default): each test is its own unit of work, except
     the modules that mark tests ``serial`` (``pytestmark = pytest.mark.serial``), which are one
