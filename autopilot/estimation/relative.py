@@ -42,7 +42,6 @@ off; the rover's reports are always used (without UWB and tag they are all there
 
 from __future__ import annotations
 
-import bisect
 import itertools
 import math
 from collections.abc import Sequence
@@ -51,6 +50,8 @@ from dataclasses import dataclass
 import numpy as np
 from filterpy.kalman import KalmanFilter
 
+from autopilot.estimation.delayed import DelayedFusion
+from autopilot.estimation.relative_model import A_, B_, BETA, PSI, R_, V_, W_, N, transition
 from autopilot.estimation.relative_types import (
     DeckGeometry,
     FusionResult,
@@ -59,8 +60,6 @@ from autopilot.estimation.relative_types import (
 )
 from drivers.geometry import rot_z as _yaw
 
-N = 14
-R_, V_, B_, PSI, W_, A_, BETA = slice(0, 3), slice(3, 6), slice(6, 9), 9, 10, slice(11, 13), 13
 SOURCES = ("uwb", "tag", "range", "rover")
 
 
@@ -99,9 +98,8 @@ class RelativeFilter:
         self._initialised = False
         self._time = -math.inf
         self._velocity: np.ndarray | None = None  # the drone's, at the last input
-        self._events: list[_Event] = []
-        self._snapshots: list[_Snapshot] = []  # state after each event
-        self._base: _Snapshot | None = None  # state before the first kept event
+        self._history = DelayedFusion(settings.history_s, self._apply, self._snapshot,
+                                      self._restore)
         self._seq = itertools.count()
         self.last_update_s = dict.fromkeys(SOURCES, -math.inf)
         self.updates = dict.fromkeys(SOURCES, 0)
@@ -110,7 +108,6 @@ class RelativeFilter:
             + np.array([0.0, 0.0, geometry.deck_height_m])  # from the deck's top centre
         self._tag = np.array(geometry.tag_frd_m, dtype=float)
         self.results: list[FusionResult] = []  # since the last take_results()
-        self._replaying = False
 
     # -- feeding --------------------------------------------------------------------------
 
@@ -176,7 +173,7 @@ class RelativeFilter:
         t = self._time if time_s is None else min(time_s,
                                                   self._time + self.s.max_extrapolation_s)
         dt = max(0.0, t - self._time)
-        f, q = self._transition(dt)
+        f, q = transition(self.s, dt)
         x, p = (f @ kf.x)[:, 0], f @ kf.P @ f.T + q
         return RelativeEstimate(
             time_s=self._time + dt if time_s is None else time_s, position_m=x[R_].copy(),
@@ -190,39 +187,8 @@ class RelativeFilter:
     # -- time ordering and replay ----------------------------------------------------------
 
     def _add(self, event: _Event) -> None:
-        if not math.isfinite(event.time_s):
-            return
-        events = self._events
-        if not events or event.time_s >= events[-1].time_s:
-            events.append(event)
-            self._apply(event, late=False)
-            self._snapshots.append(self._snapshot())
-            self._trim()
-            return
-        horizon = events[-1].time_s - self.s.history_s
-        if event.time_s < horizon or (self._base is not None
-                                      and event.time_s < self._base.time_s):
+        if math.isfinite(event.time_s) and not self._history.add(event):
             self.dropped_late += 1
-            return
-        i = bisect.bisect_right([e.time_s for e in events], event.time_s)
-        events.insert(i, event)
-        self._restore(self._snapshots[i - 1] if i > 0 else self._base)
-        del self._snapshots[i:]
-        for k in range(i, len(events)):
-            self._replaying = k > i  # already counted and reported when first fused
-            self._apply(events[k], late=k == i)
-            self._snapshots.append(self._snapshot())
-        self._replaying = False
-
-    def _trim(self) -> None:
-        horizon = self._events[-1].time_s - self.s.history_s
-        n = 0
-        while n < len(self._events) - 1 and self._events[n].time_s < horizon:
-            n += 1
-        if n:
-            self._base = self._snapshots[n - 1]
-            del self._events[:n]
-            del self._snapshots[:n]
 
     def _snapshot(self) -> _Snapshot:
         kf = self._kf
@@ -248,55 +214,12 @@ class RelativeFilter:
 
     # -- the model ------------------------------------------------------------------------
 
-    def _transition(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
-        s = self.s
-        f = np.eye(N)
-        f[R_, V_] = np.eye(3) * dt
-        a = math.exp(-dt / s.bias_time_constant_s)
-        f[B_, B_] = np.eye(3) * a
-        f[PSI, W_] = dt
-        # the rover's acceleration a: v' = −a (the drone's own is the input), r'' = −a
-        tau = s.accel_time_constant_s
-        g = math.exp(-dt / tau)
-        f[A_, A_] = np.eye(2) * g
-        c = math.exp(-dt / s.compass_bias_time_constant_s)
-        f[BETA, BETA] = c
-        # a decays over the interval: its integrals, exactly
-        f[3:5, A_] = -np.eye(2) * tau * (1.0 - g)
-        f[0:2, A_] = -np.eye(2) * tau * (dt - tau * (1.0 - g))
-        q = np.zeros((N, N))
-        for axis, sigma in ((0, s.accel_noise_m_s2), (1, s.accel_noise_m_s2),
-                            (2, s.vertical_accel_noise_m_s2)):
-            var = sigma * sigma
-            q[axis, axis] = var * dt ** 3 / 3.0
-            q[axis, 3 + axis] = q[3 + axis, axis] = var * dt ** 2 / 2.0
-            q[3 + axis, 3 + axis] = var * dt
-        bias = np.square(np.array(s.rough_position_std_m)) * (1.0 - a * a)
-        q[B_, B_] = np.diag(bias)
-        var = s.yaw_accel_noise_rad_s2 ** 2
-        q[PSI, PSI] = var * dt ** 3 / 3.0
-        q[PSI, W_] = q[W_, PSI] = var * dt ** 2 / 2.0
-        q[W_, W_] = var * dt
-        q[BETA, BETA] = s.compass_bias_std_rad ** 2 * (1.0 - c * c)
-        # jerk noise on a (integrated into v and r: the discrete white-jerk model, truncated)
-        var = s.jerk_noise_m_s3 ** 2
-        for axis in (0, 1):
-            ia, iv, ir = 11 + axis, 3 + axis, axis
-            q[ia, ia] += var * dt
-            q[iv, iv] += var * dt ** 3 / 3.0
-            q[ia, iv] = q[iv, ia] = -var * dt ** 2 / 2.0
-            q[ir, ir] += var * dt ** 5 / 20.0
-            q[ir, ia] = q[ia, ir] = -var * dt ** 3 / 6.0
-            q[ir, iv] += var * dt ** 4 / 8.0
-            q[iv, ir] += var * dt ** 4 / 8.0
-        return f, q
-
     def _predict_to(self, time_s: float, dv: np.ndarray | None = None) -> None:
         dt = time_s - self._time
         if dt <= 0.0 and dv is None:
             return
         dt = max(dt, 0.0)
-        f, q = self._transition(dt)
+        f, q = transition(self.s, dt)
         kf = self._kf
         if dv is not None:  # the drone's velocity change over the interval: a known input
             b = np.zeros((N, 3))
@@ -343,7 +266,7 @@ class RelativeFilter:
         accepted, d2, parts = result
         if accepted:
             self.last_update_s[source] = max(self.last_update_s[source], time_s)
-        if self._replaying:
+        if self._history.replaying:  # already counted and reported when first fused
             return
         self.results.append(FusionResult(source, time_s, accepted, d2, parts, late))
         if accepted:

@@ -32,21 +32,20 @@ import logging
 import math
 import struct
 import time
-from collections.abc import AsyncIterator, Callable, Coroutine
-from typing import ClassVar
+from collections.abc import AsyncIterator, Coroutine
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from drivers.base import CommandDenied, LandingTarget, VehicleError, VehicleState
+from drivers.base import VehicleState
 from drivers.mavlink import px4
 from drivers.mavlink.common import cancel_all
-from drivers.mavlink.face_commands import CommandHandler, ModeNotAvailable
+from drivers.mavlink.face_commands import CommandHandler
+from drivers.mavlink.face_incoming import IncomingMessages
 from drivers.mavlink.face_link import (
-    COMPONENT_ID,
     FaceLink,
-    FaceRequests,
     FaceStats,
     FaceStreams,
+    LinkImpairment,
 )
 from drivers.mavlink.face_mission import MissionServer
 from drivers.mavlink.face_params import ParamServer
@@ -55,19 +54,13 @@ from drivers.mavlink.signing import Signing
 
 log = logging.getLogger(__name__)
 
-#: compids PX4 takes mission and parameter messages for besides its own (0: broadcast,
-#: 190: MAV_COMP_ID_MISSIONPLANNER)
-_OUR_COMPONENTS = (0, COMPONENT_ID, 190)
 #: MISSION_ITEM_REACHED is repeated this many times with the 1 Hz MISSION_CURRENT (as PX4)
 _REACHED_REPEATS = 10
 
 # MAV_RESULT
-ACCEPTED, DENIED = px4.MAV_RESULT_ACCEPTED, px4.MAV_RESULT_DENIED
-UNSUPPORTED, FAILED = px4.MAV_RESULT_UNSUPPORTED, px4.MAV_RESULT_FAILED
-TEMPORARILY_REJECTED = px4.MAV_RESULT_TEMPORARILY_REJECTED
+ACCEPTED, UNSUPPORTED = px4.MAV_RESULT_ACCEPTED, px4.MAV_RESULT_UNSUPPORTED
 
 _HEARTBEAT = mavlink.MAVLINK_MSG_ID_HEARTBEAT
-_MAV_TYPE_GCS = mavlink.MAV_TYPE_GCS
 
 
 class MavlinkFace:
@@ -108,49 +101,14 @@ class MavlinkFace:
         origin = vehicle.global_origin
         self.telemetry = TelemetryEncoder(vehicle, origin, self._boot_ms, instance)
         self.commands = CommandHandler(vehicle, origin, lambda: self._state)
-        self.params = ParamServer(vehicle, self._send, self._spawn, self._say)
-        self.missions = MissionServer(vehicle, self._send, self._spawn, self._say)
+        self.params = ParamServer(vehicle, self._send, self.spawn, self.say)
+        self.missions = MissionServer(vehicle, self._send, self.spawn, self.say)
         self._reached: list[list[int]] = []  # [seq, sends left]
         self._text_id = 0
-        self._delayed: list[asyncio.TimerHandle] = []  # datagrams held back (link_loss)
-
-    # ------------------------------------------------------------------------------------
-    # Link impairment (the simulator's link_loss fault: drivers/sim/faults.py)
-    # ------------------------------------------------------------------------------------
-
-    def link_fault(self):
-        """The simulated vehicle's active ``link_loss`` fault (None: a clean link)."""
-        try:
-            sim = self.vehicle.simulator
-        except Exception:  # not a simulator, or not connected
-            return None
-        faults = getattr(sim, "faults", None)
-        if not faults or not faults.of("link_loss"):
-            return None
-        active = faults.active("link_loss", sim.fault_time_s())
-        return active[0] if active else None
-
-    def impaired(self, fault, deliver: Callable[[], None]) -> None:
-        """One datagram across an impaired link: lost (``fraction``), delivered twice
-        (``duplicate``), held back behind later ones (``reorder``: 20–150 ms) and late
-        (``latency_s``)."""
-        rng = self.vehicle.simulator.faults.link_rng
-        if rng.random() < fault.fraction:
-            self.stats.link_dropped += 1
-            return
-        delay = fault.latency_s
-        if fault.reorder and rng.random() < fault.reorder:
-            delay += float(rng.uniform(0.02, 0.15))
-        copies = 2 if fault.duplicate and rng.random() < fault.duplicate else 1
-        for _ in range(copies):
-            if delay > 0.0:
-                loop = asyncio.get_running_loop()
-                if len(self._delayed) > 256:  # forget the ones delivered already
-                    now = loop.time()
-                    self._delayed = [h for h in self._delayed if h.when() > now]
-                self._delayed.append(loop.call_later(delay, deliver))
-            else:
-                deliver()
+        #: the simulator's link_loss fault, acting on the datagrams both ways
+        self.impairment = LinkImpairment(vehicle, self.stats)
+        #: what arrives: checked, counted and dispatched (:mod:`.face_incoming`)
+        self.incoming = IncomingMessages(self)
 
     # ------------------------------------------------------------------------------------
     # Life cycle
@@ -185,9 +143,7 @@ class MavlinkFace:
     async def close(self) -> None:
         await cancel_all(self._tasks)
         self._tasks = []
-        for handle in self._delayed:  # datagrams the impaired link still held back
-            handle.cancel()
-        self._delayed = []
+        self.impairment.close()  # datagrams the impaired link still held back
         for link in self.links.values():
             if link.transport is not None:
                 link.transport.close()
@@ -209,7 +165,7 @@ class MavlinkFace:
         for link in self.links.values():
             link.send(make(link.mav))
 
-    def _say(self, link: FaceLink | None, text: str, severity: int = 6) -> None:
+    def say(self, link: FaceLink | None, text: str, severity: int = 6) -> None:
         """STATUSTEXT on ``link`` (all links if None); longer texts in 50-byte chunks with an
         id, as MAVLink 2 allows (the last chunk ends short, or with an empty one)."""
         data = _statustext(text)
@@ -229,7 +185,7 @@ class MavlinkFace:
             else:
                 link.send(make(link.mav))
 
-    def _spawn(self, coro: Coroutine) -> asyncio.Task:
+    def spawn(self, coro: Coroutine) -> asyncio.Task:
         """Run ``coro`` as a task the face owns (cancelled at close; failures logged)."""
         task = asyncio.get_running_loop().create_task(coro)
         self._tasks.append(task)
@@ -292,13 +248,29 @@ class MavlinkFace:
                     streams = self._streams[name]
                     for msg_id in streams.rates_hz:
                         if streams.due(msg_id, state.time_s):
-                            msg = self._message(msg_id, link.mav)
+                            msg = self.message(msg_id, link.mav)
                             if msg is not None:
                                 link.send(msg)
                             if msg_id == mavlink.MAVLINK_MSG_ID_MISSION_CURRENT:
                                 self._repeat_reached(link)
 
-    def _message(self, msg_id: int, mav):
+    def set_interval(self, link: FaceLink, msg_id: int, interval_us: float) -> int:
+        """SET_MESSAGE_INTERVAL on ``link``: the MAV_RESULT."""
+        streams = self._streams[link.name]
+        if msg_id == _HEARTBEAT:
+            return ACCEPTED  # fixed at 1 Hz, as PX4
+        if msg_id not in DEFAULT_RATES_HZ:
+            return UNSUPPORTED
+        if interval_us == 0:
+            streams.rates_hz[msg_id] = DEFAULT_RATES_HZ[msg_id]
+        elif interval_us < 0:
+            streams.rates_hz[msg_id] = 0.0
+        else:
+            streams.rates_hz[msg_id] = 1e6 / interval_us
+        streams.next_s.pop(msg_id, None)
+        return ACCEPTED
+
+    def message(self, msg_id: int, mav):
         try:
             return self.telemetry.encode(msg_id, mav, self._state)
         except (ValueError, OverflowError, struct.error):
@@ -331,183 +303,12 @@ class MavlinkFace:
         assert self._events is not None
         async with contextlib.aclosing(self._events) as events:
             async for _, text in events:
-                self._say(None, text, 6)  # MAV_SEVERITY_INFO
+                self.say(None, text, 6)  # MAV_SEVERITY_INFO
 
     async def _housekeeping(self) -> None:
         while True:
             await asyncio.sleep(0.05)
             self.missions.tick()
-
-    # ------------------------------------------------------------------------------------
-    # Incoming
-    # ------------------------------------------------------------------------------------
-
-    def _receive(self, link: FaceLink, msg) -> None:
-        self.stats.received += 1
-        kind = msg.get_type()
-        if kind == "BAD_DATA":
-            reason = str(getattr(msg, "reason", "")).lower()
-            if "signature" in reason or "unsigned" in reason:
-                self.stats.bad_signature += 1
-            else:
-                self.stats.bad_data += 1
-            return
-        target = getattr(msg, "target_system", self.system_id)
-        component = getattr(msg, "target_component", COMPONENT_ID)
-        if target not in (0, self.system_id) or component not in _OUR_COMPONENTS:
-            self.stats.ignored += 1
-            return
-        handler = self._handlers.get(kind)
-        if handler is None:
-            self.stats.ignored += 1
-            return
-        try:
-            handler(self, link, msg)
-        except Exception:  # a message we cannot act on must never take the vehicle down
-            self.stats.ignored += 1
-            log.warning("ignoring %s from %s", kind, link.peer, exc_info=True)
-
-    def _on_heartbeat(self, link: FaceLink, msg) -> None:
-        if msg.type == _MAV_TYPE_GCS:
-            self._spawn(self.vehicle.gcs_heartbeat())
-
-    def _on_command(self, link: FaceLink, msg) -> None:
-        self.stats.commands += 1
-        frame = None
-        if msg.get_type() == "COMMAND_INT":
-            params = (msg.param1, msg.param2, msg.param3, msg.param4, float(msg.x),
-                      float(msg.y), msg.z)
-            frame = msg.frame
-        else:
-            params = (msg.param1, msg.param2, msg.param3, msg.param4, msg.param5, msg.param6,
-                      msg.param7)
-        self._spawn(self._command(link, msg, params, frame))
-
-    async def _command(self, link: FaceLink, msg, params: tuple[float, ...],
-                       frame: int | None) -> None:
-        command = msg.command
-        try:
-            result = await self.commands.execute(command, params, frame, FaceRequests(self, link))
-        except ModeNotAvailable as exc:
-            log.info("command %d: %s", command, exc.reason)
-            self._say(link, exc.reason, 4)
-            result = TEMPORARILY_REJECTED
-        except CommandDenied as exc:
-            log.info("command %d denied: %s", command, exc.reason)
-            self._say(link, exc.reason, 4)
-            result = DENIED
-        except VehicleError as exc:
-            log.warning("command %d failed: %s", command, exc)
-            result = FAILED
-        except Exception:  # a command we cannot read must still be answered
-            log.warning("command %d failed", command, exc_info=True)
-            result = FAILED
-        link.send(link.mav.command_ack_encode(command, result, 0, 0, msg.get_srcSystem(),
-                                              msg.get_srcComponent()))
-
-    def _on_set_mode(self, link: FaceLink, msg) -> None:
-        """SET_MODE (the message older clients send instead of DO_SET_MODE)."""
-        main, sub = (msg.custom_mode >> 16) & 0xFF, (msg.custom_mode >> 24) & 0xFF
-
-        async def change() -> None:
-            try:
-                await self.commands.set_mode(msg.base_mode, main, sub)
-            except CommandDenied as exc:
-                self._say(link, exc.reason, 4)
-
-        self._spawn(change())
-
-    def _set_interval(self, link: FaceLink, msg_id: int, interval_us: float) -> int:
-        streams = self._streams[link.name]
-        if msg_id == _HEARTBEAT:
-            return ACCEPTED  # fixed at 1 Hz, as PX4
-        if msg_id not in DEFAULT_RATES_HZ:
-            return UNSUPPORTED
-        if interval_us == 0:
-            streams.rates_hz[msg_id] = DEFAULT_RATES_HZ[msg_id]
-        elif interval_us < 0:
-            streams.rates_hz[msg_id] = 0.0
-        else:
-            streams.rates_hz[msg_id] = 1e6 / interval_us
-        streams.next_s.pop(msg_id, None)
-        return ACCEPTED
-
-    def _on_setpoint(self, link: FaceLink, msg) -> None:
-        try:
-            if msg.get_type() == "SET_POSITION_TARGET_GLOBAL_INT":
-                setpoint = self._global_setpoint(msg)
-            else:
-                setpoint = px4.setpoint_from_mavlink(
-                    msg.coordinate_frame, msg.type_mask, (msg.x, msg.y, msg.z),
-                    (msg.vx, msg.vy, msg.vz), msg.yaw, msg.yaw_rate,
-                    (msg.afx, msg.afy, msg.afz))
-        except px4.SetpointNotSupported as exc:
-            self.stats.rejected_setpoints += 1
-            log.debug("setpoint ignored: %s", exc)
-            return
-        self.stats.setpoints += 1
-        self._spawn(self.vehicle.send_setpoint(setpoint))
-
-    def _global_setpoint(self, msg):
-        """SET_POSITION_TARGET_GLOBAL_INT as a local setpoint (position about the origin)."""
-        origin = self.telemetry.origin
-        n, e, _ = origin.to_ned(msg.lat_int / 1e7, msg.lon_int / 1e7, origin.alt_amsl_m)
-        if msg.coordinate_frame in (mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
-                                    mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT):
-            home = self.vehicle.home()
-            d = (float(home[3][2]) if home is not None else 0.0) - msg.alt
-        elif msg.coordinate_frame in (mavlink.MAV_FRAME_GLOBAL_INT, mavlink.MAV_FRAME_GLOBAL):
-            d = origin.alt_amsl_m - msg.alt
-        else:
-            raise px4.SetpointNotSupported(f"coordinate frame {msg.coordinate_frame}")
-        return px4.setpoint_from_mavlink(px4.MAV_FRAME_LOCAL_NED, msg.type_mask, (n, e, d),
-                                         (msg.vx, msg.vy, msg.vz), msg.yaw, msg.yaw_rate,
-                    (msg.afx, msg.afy, msg.afz))
-
-    def _on_landing_target(self, link: FaceLink, msg) -> None:
-        """LANDING_TARGET, as PX4's receiver takes it: a position in MAV_FRAME_LOCAL_NED is the
-        target for precision landing (stamped on arrival); another frame is refused with a
-        critical status text; angles only (IR-LOCK style, no ``position_valid``) need PX4's
-        landing target estimator, which the simulator does not model: ignored."""
-        if getattr(msg, "position_valid", 0) and msg.frame == px4.MAV_FRAME_LOCAL_NED:
-            target = LandingTarget(self.vehicle.clock.now(), (msg.x, msg.y, msg.z),
-                                   msg.target_num)
-            self.stats.landing_targets += 1
-            self._spawn(self.vehicle.send_landing_target(target))
-        elif getattr(msg, "position_valid", 0):
-            self._say(link, f"Landing target: coordinate frame {msg.frame} unsupported", 2)
-        else:
-            self.stats.ignored += 1
-
-    def _on_timesync(self, link: FaceLink, msg) -> None:
-        """MAVLink time synchronisation: answer a request (tc1 = 0) with our boot time."""
-        if msg.tc1 == 0:
-            now_ns = int(self.vehicle.clock.now() * 1e9)
-            link.send(link.mav.timesync_encode(now_ns, msg.ts1))
-
-    _handlers: ClassVar[dict[str, Callable[[MavlinkFace, FaceLink, object], None]]] = {
-        "COMMAND_LONG": _on_command,
-        "COMMAND_INT": _on_command,
-        "SET_MODE": _on_set_mode,
-        "SET_POSITION_TARGET_LOCAL_NED": _on_setpoint,
-        "SET_POSITION_TARGET_GLOBAL_INT": _on_setpoint,
-        "PARAM_REQUEST_LIST": lambda self, link, msg: self.params.on_request_list(link, msg),
-        "PARAM_REQUEST_READ": lambda self, link, msg: self.params.on_request_read(link, msg),
-        "PARAM_SET": lambda self, link, msg: self.params.on_set(link, msg),
-        "MISSION_COUNT": lambda self, link, msg: self.missions.on_count(link, msg),
-        "MISSION_ITEM": lambda self, link, msg: self.missions.on_item(link, msg),
-        "MISSION_ITEM_INT": lambda self, link, msg: self.missions.on_item(link, msg),
-        "MISSION_REQUEST_LIST": lambda self, link, msg: self.missions.on_request_list(link, msg),
-        "MISSION_REQUEST": lambda self, link, msg: self.missions.on_request(link, msg),
-        "MISSION_REQUEST_INT": lambda self, link, msg: self.missions.on_request(link, msg),
-        "MISSION_ACK": lambda self, link, msg: self.missions.on_ack(link, msg),
-        "MISSION_CLEAR_ALL": lambda self, link, msg: self.missions.on_clear_all(link, msg),
-        "MISSION_SET_CURRENT": lambda self, link, msg: self.missions.on_set_current(link, msg),
-        "TIMESYNC": _on_timesync,
-        "LANDING_TARGET": _on_landing_target,
-        "HEARTBEAT": _on_heartbeat,
-    }
-
 
 def _statustext(text: str) -> bytes:
     """A status text in ASCII (ground stations show other bytes as garbage), at most four

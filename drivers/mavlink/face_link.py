@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -36,6 +37,55 @@ class FaceStats:
     link_dropped: int = 0  # lost to a link_loss fault
 
 
+class LinkImpairment:
+    """The simulator's ``link_loss`` fault (:mod:`drivers.sim.faults`) on the face's datagrams,
+    both ways: lost (``fraction``), delivered twice (``duplicate``), held back behind later ones
+    (``reorder``: 20–150 ms) and late (``latency_s``), drawn from the fault schedule's seeded
+    generator."""
+
+    def __init__(self, vehicle, stats: FaceStats) -> None:
+        self.vehicle = vehicle
+        self.stats = stats
+        self._delayed: list[asyncio.TimerHandle] = []  # datagrams held back
+
+    def fault(self):
+        """The simulated vehicle's active ``link_loss`` fault (None: a clean link)."""
+        try:
+            sim = self.vehicle.simulator
+        except Exception:  # not a simulator, or not connected
+            return None
+        faults = getattr(sim, "faults", None)
+        if not faults or not faults.of("link_loss"):
+            return None
+        active = faults.active("link_loss", sim.fault_time_s())
+        return active[0] if active else None
+
+    def carry(self, fault, deliver: Callable[[], None]) -> None:
+        """One datagram across the impaired link (``deliver`` it, or not, or twice, later)."""
+        rng = self.vehicle.simulator.faults.link_rng
+        if rng.random() < fault.fraction:
+            self.stats.link_dropped += 1
+            return
+        delay = fault.latency_s
+        if fault.reorder and rng.random() < fault.reorder:
+            delay += float(rng.uniform(0.02, 0.15))
+        copies = 2 if fault.duplicate and rng.random() < fault.duplicate else 1
+        for _ in range(copies):
+            if delay > 0.0:
+                loop = asyncio.get_running_loop()
+                if len(self._delayed) > 256:  # forget the ones delivered already
+                    now = loop.time()
+                    self._delayed = [h for h in self._delayed if h.when() > now]
+                self._delayed.append(loop.call_later(delay, deliver))
+            else:
+                deliver()
+
+    def close(self) -> None:
+        for handle in self._delayed:
+            handle.cancel()
+        self._delayed = []
+
+
 class FaceLink(asyncio.DatagramProtocol):
     """One UDP port of the vehicle: sends to ``peer`` (the last sender, or the default)."""
 
@@ -59,9 +109,9 @@ class FaceLink(asyncio.DatagramProtocol):
         self.transport = transport
 
     def datagram_received(self, data: bytes, addr) -> None:
-        fault = self.face.link_fault()
+        fault = self.face.impairment.fault()
         if fault is not None:  # the simulator's link_loss fault, on the way in
-            self.face.impaired(fault, lambda: self._parse(data, addr))
+            self.face.impairment.carry(fault, lambda: self._parse(data, addr))
             return
         self._parse(data, addr)
 
@@ -80,7 +130,7 @@ class FaceLink(asyncio.DatagramProtocol):
         if good:  # only a sender that spoke valid (and, with signing, signed) MAVLink is answered
             self.peer = self.heard_from = addr
         for msg in messages:
-            self.face._receive(self, msg)
+            self.face.incoming.receive(self, msg)
 
     def error_received(self, exc: Exception) -> None:  # e.g. ICMP port unreachable
         log.debug("%s: %s", self.name, exc)
@@ -92,9 +142,9 @@ class FaceLink(asyncio.DatagramProtocol):
         mav = mav or self.mav
         refresh(mav)
         data, peer = pack(mav, msg), self.peer
-        fault = self.face.link_fault()
+        fault = self.face.impairment.fault()
         if fault is not None:  # the simulator's link_loss fault, on the way out
-            self.face.impaired(fault, lambda: self._sendto(data, peer))
+            self.face.impairment.carry(fault, lambda: self._sendto(data, peer))
             return
         self.transport.sendto(data, peer)
 
@@ -128,10 +178,10 @@ class FaceRequests:
         self.face, self.link = face, link
 
     def set_interval(self, msg_id: int, interval_us: float) -> int:
-        return self.face._set_interval(self.link, msg_id, interval_us)
+        return self.face.set_interval(self.link, msg_id, interval_us)
 
     def send_now(self, msg_id: int) -> bool:
-        msg = self.face._message(msg_id, self.link.mav)
+        msg = self.face.message(msg_id, self.link.mav)
         if msg is None:
             return False
         self.link.send(msg)

@@ -331,7 +331,7 @@ class SimDriver(Vehicle):
 
     @property
     def mission_status(self) -> MissionStatus:
-        return self._require_sim().flight.mission_status
+        return self._require_sim().flight.navigator.status
 
     def mission_events(self, buffer: int = 64) -> AsyncIterator[NavEvent]:
         """Mission progress (current item, item reached, finished) and video events."""
@@ -344,7 +344,7 @@ class SimDriver(Vehicle):
     def home(self) -> tuple[float, float, float, np.ndarray] | None:
         """Home as (lat °, lon °, alt AMSL m, local NED), None before the first arming."""
         sim = self._require_sim()
-        home = sim.flight.home_ned_m
+        home = sim.flight.navigator.home
         if home is None:
             return None
         lat, lon, alt = sim.origin.to_global(*(float(v) for v in home))
@@ -356,7 +356,7 @@ class SimDriver(Vehicle):
 
     @property
     def home_ned_m(self) -> np.ndarray | None:
-        home = self._require_sim().flight.home_ned_m
+        home = self._require_sim().flight.navigator.home
         return None if home is None else np.array(home, dtype=float)
 
     @property

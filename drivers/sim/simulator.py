@@ -76,6 +76,8 @@ PHOTO_CAMERA = "down"
 #: sensor failures a test can inject; "telemetry" stops the telemetry stream (the vehicle flies
 #: on, as when a companion computer's telemetry stalls while its commands still get through)
 FAILURE_NAMES = ("gyro", "accel", "mag", "local_position", "telemetry")
+#: commands the navigator answers itself, as PX4's does (DO_CHANGE_SPEED, the camera trigger)
+NAVIGATOR_COMMANDS = frozenset({"set_speed", "take_photo", "start_photos", "stop_photos"})
 _EPS = 1e-9
 _INSTABILITY_WARNINGS = np.array([
     int(mujoco.mjtWarning.mjWARN_BADQPOS),
@@ -424,8 +426,9 @@ class Simulator:
             while self.flight.events:
                 when, text = self.flight.events.popleft()
                 self._queue(when, "event", text)
-            for nav_event in self.flight.nav_events():
-                self._nav_event(nav_event)
+            nav_events = self.flight.navigator.events  # mission and camera events, drained
+            while nav_events:
+                self._nav_event(nav_events.popleft())
         else:
             q_est, gyro = self.estimator.attitude(*self._truth_attitude())
         self._tick += 1
@@ -442,7 +445,7 @@ class Simulator:
             return
         est = self._est
         lat, lon, alt = self.origin.to_global(*(float(v) for v in est.position_ned_m))
-        home = self.flight.home_ned_m
+        home = self.flight.navigator.home
         height = float((home[2] if home is not None else 0.0) - est.position_ned_m[2])
         meta = Photo(event.time_s, event.seq, None, est.position_ned_m.copy(),
                      est.q_ned_frd.copy(), lat, lon, alt, height)
@@ -661,10 +664,12 @@ class Simulator:
 
     def command(self, name: str, *args: Any) -> Any:
         """Run a flight-stack command: arm, disarm, takeoff, land, hold, start_offboard,
-        stop_offboard, start_mission, return_to_launch, set_mode, reposition, set_speed,
-        set_mission, set_mission_current, take_photo, gcs_heartbeat."""
+        stop_offboard, start_mission, return_to_launch, set_mode, reposition, set_mission,
+        set_mission_current, gcs_heartbeat, precision_land, landing_target; and the ones the
+        navigator answers itself (:data:`NAVIGATOR_COMMANDS`: the speed, the camera)."""
         self.flight.observe(self.time_s, self._est, self.health())
-        return getattr(self.flight, name)(*args)
+        target = self.flight.navigator if name in NAVIGATOR_COMMANDS else self.flight
+        return getattr(target, name)(*args)
 
     def set_param(self, name: str, value: float) -> float:
         """Set a PX4 parameter (raises ParamError if refused); returns the stored value."""

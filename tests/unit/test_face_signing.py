@@ -25,7 +25,8 @@ def _face(signing=KEY):
             received.append((link.name, msg))
 
     face = SimpleNamespace(system_id=1, rover_system_id=2, signing=signing, signed_streams={},
-                           stats=FaceStats(), link_fault=lambda: None, _receive=receive)
+                           stats=FaceStats(), impairment=SimpleNamespace(fault=lambda: None),
+                           incoming=SimpleNamespace(receive=receive))
     return face, received
 
 

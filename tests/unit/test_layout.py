@@ -15,7 +15,7 @@ MAX_CLASS_LINES = 300
 CLASS_ALLOWANCE = {"RelativeFilter": 400, "PymavlinkDriver": 400, "MavsdkDriver": 400}
 #: still over their size, to be split (issue 32's remaining work): this list only shrinks
 OVERSIZE_MODULES = {"drivers/sim/simulator.py", "drivers/sim/driver.py"}
-OVERSIZE_CLASSES = {"Simulator", "SimDriver", "FlightStack", "RelativeFilter", "MavlinkFace"}
+OVERSIZE_CLASSES = {"Simulator", "SimDriver"}
 
 
 def _modules() -> dict[str, Path]:
