@@ -81,6 +81,25 @@ class TargetKind:
 TARGET_KINDS: dict[str, TargetKind] = {}
 
 
+class ScenarioProblem(ValueError):
+    """What a kind's :attr:`TargetKind.check` finds wrong, at the scenario key it names
+    (``"decoys"``, or a path: ``("pad", "ids")``): the error points at that key, or at the
+    ``--set`` argument that wrote it."""
+
+    def __init__(self, key: str | tuple, message: str) -> None:
+        super().__init__(message)
+        self.key = (key,) if isinstance(key, str) else tuple(key)
+        self.message = message
+
+
+def scenario_error(key: tuple, message: str) -> Exception:
+    """A validation error at ``scenario.<key>`` (the loader names its file and line)."""
+    from pydantic_core import PydanticCustomError
+
+    return PydanticCustomError("scenario", message.replace("{", "(").replace("}", ")"),
+                               {"key_path": ("scenario", *key)})
+
+
 def config_sections(parent: str) -> dict[str, type[BaseModel]]:
     """The registered kinds' configuration sections directly under ``parent`` (``""``: the
     top level), by key, in the order the kinds were registered."""

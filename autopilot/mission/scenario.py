@@ -12,7 +12,7 @@ from pydantic import BaseModel, ConfigDict, Field, create_model, model_validator
 import autopilot.target_kinds  # noqa: F401 (registers the shipped kinds before the model is made)
 from autopilot.config import ConfigModel, NonNegative
 from autopilot.perception.colors import COLORS
-from autopilot.targets import TARGET_KINDS
+from autopilot.targets import TARGET_KINDS, ScenarioProblem, scenario_error
 from drivers.sim.faults import Fault
 
 
@@ -51,19 +51,22 @@ class ScenarioRules(ConfigModel):
     def _faults_apply(self) -> ScenarioRules:
         for i, f in enumerate(self.faults):
             if f.needs_target is not None and self.section(f.needs_target) is None:
-                raise ValueError(f"faults[{i}] {f.kind}: the scenario has no "
-                                 f"{f.needs_target}")
+                raise scenario_error(("faults", i), f"{f.kind}: the scenario has no "
+                                     f"{f.needs_target}")
             color = getattr(f, "color", None)
             if color is not None and color not in COLORS:
-                raise ValueError(f"faults[{i}] {f.kind}: unknown color {color!r} "
-                                 f"(known: {', '.join(COLORS)})")
+                raise scenario_error(("faults", i, "color"), f"{f.kind}: unknown color "
+                                     f"{color!r} (known: {', '.join(COLORS)})")
         return self
 
     @model_validator(mode="after")
     def _kinds_checks(self) -> ScenarioRules:
         for kind in TARGET_KINDS.values():
             if kind.check is not None:
-                kind.check(self)
+                try:
+                    kind.check(self)
+                except ScenarioProblem as problem:
+                    raise scenario_error(problem.key, problem.message) from None
         return self
 
 

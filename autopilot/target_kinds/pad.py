@@ -10,7 +10,7 @@ import numpy as np
 from pydantic import Field, ValidationInfo, field_validator, model_validator
 
 from autopilot.config.base import ColorName, ConfigModel, HsvTriple, Positive
-from autopilot.targets import TargetKind, World, register_target
+from autopilot.targets import ScenarioProblem, TargetKind, World, register_target
 
 if TYPE_CHECKING:
     from drivers.sim.scenario import ScenarioObject
@@ -124,12 +124,13 @@ def build(p: PadScenario, world: World) -> list[ScenarioObject]:
 
 def check(scenario) -> None:
     """The scenario's ``decoys`` with a pad: a number of decoy pads, each (marker pads) with
-    ids of its own from the pad's dictionary."""
+    ids of its own from the pad's dictionary (:class:`~autopilot.targets.ScenarioProblem`)."""
     pad, decoys = scenario.pad, scenario.decoys
     if pad is None:
         return
     if isinstance(decoys, list):
-        raise ValueError("decoys: with a pad, the number of decoy pads (not a list of ids)")
+        raise ScenarioProblem("decoys", "with a pad, the number of decoy pads (not a list of "
+                                        "ids)")
     if pad.kind == "markers" and decoys:
         from autopilot.perception.pad import marker_pad_layout
 
@@ -139,8 +140,8 @@ def check(scenario) -> None:
             marker_pad_layout(pad.size_m, [top - 4, top - 3, top - 2, top - 1, top],
                               pad.dictionary)
         except ValueError:
-            raise ValueError(f"decoys: {decoys} decoy marker pads need marker ids up "
-                             f"to {top}, more than {pad.dictionary} has") from None
+            raise ScenarioProblem("decoys", f"{decoys} decoy marker pads need marker ids up "
+                                  f"to {top}, more than {pad.dictionary} has") from None
 
 
 KIND = register_target(TargetKind(

@@ -74,7 +74,8 @@ def test_mission_faults_are_validated_with_the_mission():
     assert plan.mission.scenario.faults[0].camera == "front"
     with pytest.raises(Exception, match="no camera 'rear'"):
         load_mission("follow_ball", ['scenario.faults=[{kind: camera_dropout, camera: rear}]'])
-    with pytest.raises(Exception, match="no rover"):
+    with pytest.raises(Exception, match=r"--set: scenario.faults\[0\]: rover_stop: the scenario "
+                       "has no rover"):
         load_mission("follow_ball", ['scenario.faults=[{kind: rover_stop}]'])
     with pytest.raises(Exception, match="start_s"):
         load_mission("follow_ball", ['scenario.faults=[{kind: gps_loss, start_s: -1}]'])
