@@ -36,12 +36,8 @@ from drivers.geo import GlobalOrigin
 from drivers.sim.camera import CameraRig, SimCamera
 from drivers.sim.camera_effects import CameraEffects, CaptureModel, VehicleMotion
 from drivers.sim.config import SimConfig
-from drivers.sim.faults import (
-    FaultSchedule,
-    TimeWarp,
-    WarpedPath,
-    corrupt_image,
-)
+from drivers.sim.fault_effects import FaultEffects
+from drivers.sim.faults import FaultSchedule, TimeWarp, WarpedPath
 from drivers.sim.flight.flight_stack import FlightStack
 from drivers.sim.flight.navigator import NavEvent
 from drivers.sim.flight.params import Parameters, config_defaults
@@ -207,31 +203,16 @@ class Simulator:
 
         #: injected faults (drivers/sim/faults.py), on the scenario's clock
         self.faults = FaultSchedule(config.faults, self.seed)
-        for f in self.faults.faults:
-            camera = getattr(f, "camera", None)
-            if camera is not None and camera not in self.cameras:
-                raise ValueError(f"fault {f.kind}: no camera {camera!r} (the vehicle's cameras: "
-                                 f"{', '.join(self.cameras) or 'none'})")
-            if f.kind == "motor_failure" and f.motor >= len(self._act):
-                raise ValueError(f"fault motor_failure: no motor {f.motor} (the vehicle has "
-                                 f"{len(self._act)}: 0 to {len(self._act) - 1})")
+        self.fault_effects = FaultEffects(self.faults, self.seed, self.cameras, len(self._act))
         if self.faults.of("rover_stop"):
             if self.rover is None:
                 raise ValueError("fault rover_stop: the scenario has no rover")
             path = self.rover.path
             path = path.path if isinstance(path, WarpedPath) else path
             self.rover.path = WarpedPath(path, TimeWarp(self.faults.of("rover_stop")))
-        self._fault_rng = np.random.default_rng((self.seed, 6152))
         #: set by the MAVLink face, which applies link_loss to its datagrams itself (the
         #: simulator then does not lose telemetry and setpoints a second time)
         self.link_faults_in_face = False
-        self._last_image: dict[str, np.ndarray] = {}
-        self._frozen: dict[str, np.ndarray] = {}
-        self._motor_scale = np.ones(len(self._act))
-        self._sagged: set[int] = set()
-        self._gps_drift = np.zeros(3)
-        self._gps_dir = np.zeros(3)
-        self._gust_state: dict[int, np.ndarray] = {}
 
         self._step = 0
         #: Scripted motion starts when the vehicle first arms (None until then), so that a
@@ -290,7 +271,7 @@ class Simulator:
                     continue
                 frame = self._rig.finish(item.payload)
                 if self.faults:
-                    frame = self._faulted_frame(frame)
+                    frame = self.fault_effects.frame(frame, self._fault_time(frame.time_s))
                 item = SimOutput(item.delivery_s, "frame", frame)
             elif item.kind == "photo" and isinstance(item.payload, tuple):
                 meta, pending = item.payload
@@ -344,7 +325,8 @@ class Simulator:
             self._control_tick()
         omega = self._omega
         omega += self._motor_alpha * (self._omega_cmd - omega)
-        self.rotor_thrust_n = thrust = self._thrust_max * omega * omega * self._motor_scale
+        self.rotor_thrust_n = thrust = self._thrust_max * omega * omega * \
+            self.fault_effects.motor_scale
         d.ctrl[self._act] = thrust
         if k >= self._next_capture:
             self._captures(k)
@@ -407,7 +389,8 @@ class Simulator:
             dt_outer = self._dt_ctrl * self._outer_div
             self.estimator.step(dt_outer, vel)
             if self.faults:
-                self._outer_faults(dt_outer)
+                self.fault_effects.outer(self._fault_time(self.time_s), dt_outer, self.battery,
+                                         self.wind)
             thrust = self.rotor_thrust_n
             self.battery.step(dt_outer, thrust)
             wind = self.wind.step(dt_outer)
@@ -416,7 +399,7 @@ class Simulator:
             self._health = self.health()
             est = self.estimator.estimate(pos, vel, q, rates)
             if self.faults:
-                est = self._faulted_estimate(est, dt_outer)
+                est = self.fault_effects.estimate(est, self._fault_time(self.time_s), dt_outer)
             self._est = est
             self.flight.update_outer(self.time_s, dt_outer, est, self._health,
                                      self._range(),
@@ -520,7 +503,8 @@ class Simulator:
             gyro_ok="gyro" not in f,
             accel_ok="accel" not in f,
             mag_ok="mag" not in f,
-            local_position_ok=est_ok and "local_position" not in f and not self._position_lost(),
+            local_position_ok=est_ok and "local_position" not in f and not (
+                self.faults and self.fault_effects.position_lost(self._fault_time(self.time_s))),
             battery_ok=self.battery.remaining > self.params["BAT_LOW_THR"],
         )
 
@@ -589,74 +573,6 @@ class Simulator:
                                               self._fault_time(self.time_s)):
             return math.nan
         return self.rangefinder.measure(self.model, self.data)
-
-    def _faulted_frame(self, frame: Frame) -> Frame:
-        name = frame.camera.name
-        ft = self._fault_time(frame.time_s)
-        image = frame.image
-        if self.faults.camera("camera_freeze", name, ft):
-            frozen = self._frozen.setdefault(name, self._last_image.get(name, image))
-            image = frozen
-        else:
-            self._frozen.pop(name, None)
-            self._last_image[name] = image
-        corrupt = self.faults.camera("camera_corrupt", name, ft)
-        if corrupt is not None:
-            image = corrupt_image(image, corrupt, self._fault_rng)
-        if image is frame.image:
-            return frame
-        image.flags.writeable = False
-        return dataclasses.replace(frame, image=image)
-
-    def _position_lost(self) -> bool:
-        ft = self._fault_time(self.time_s)
-        return any(ft - f.start_s >= f.invalid_after_s
-                   for f in self.faults.active("gps_loss", ft)) if self.faults else False
-
-    def _outer_faults(self, dt_s: float) -> None:
-        """The slowly varying faults, at the position-loop rate: motors, battery, wind."""
-        ft = self._fault_time(self.time_s)
-        scale = np.ones(len(self._act))
-        for f in self.faults.active("motor_failure", ft):
-            scale[f.motor] *= f.efficiency
-        self._motor_scale = scale
-        for f in self.faults.active("battery_sag", ft):
-            if id(f) not in self._sagged:
-                self._sagged.add(id(f))
-                self.battery.remaining = min(self.battery.remaining, f.remaining_fraction)
-        extra = np.zeros(3)
-        for f in self.faults.active("wind_step", ft):
-            angle = math.radians(f.direction_deg)
-            extra += f.speed_m_s * np.array([math.cos(angle), math.sin(angle), 0.0])
-            if f.gust_mps > 0.0:  # Gauss–Markov gusts (2 s), horizontal
-                g = self._gust_state.setdefault(id(f), np.zeros(3))
-                a = math.exp(-dt_s / 2.0)
-                g[:] = a * g + f.gust_mps * math.sqrt(1.0 - a * a) * np.array(
-                    [*self._fault_rng.standard_normal(2), 0.0])
-                extra += g
-        self.wind.extra_ned_m_s = extra
-
-    def _faulted_estimate(self, est, dt_s: float):
-        ft = self._fault_time(self.time_s)
-        offset = np.zeros(3)
-        for f in self.faults.active("ekf_glitch", ft):
-            angle = math.radians(f.direction_deg)
-            direction = np.array([math.cos(angle), math.sin(angle), 0.0])
-            offset += direction * (f.magnitude_m + f.drift_m_s * (ft - f.start_s))
-        lost = self.faults.active("gps_loss", ft)
-        if lost:
-            if not self._gps_dir.any():
-                angle = float(self._fault_rng.uniform(0.0, 2.0 * math.pi))
-                self._gps_dir = np.array([math.cos(angle), math.sin(angle), 0.0])
-            self._gps_drift = self._gps_drift + self._gps_dir * max(
-                f.drift_m_s for f in lost) * dt_s
-            offset += self._gps_drift
-        else:
-            self._gps_drift = np.zeros(3)  # position aiding back: the estimate converges
-            self._gps_dir = np.zeros(3)
-        if not offset.any():
-            return est
-        return dataclasses.replace(est, position_ned_m=est.position_ned_m + offset)
 
     # ------------------------------------------------------------------------------------
     # Commands and inputs (raise CommandRejected to deny)

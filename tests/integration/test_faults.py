@@ -200,7 +200,7 @@ def test_motor_battery_and_wind(sim_config):
     # motor 2 gives 70 % of what its command asks: the others carry the rest, and the
     # vehicle (a quad with margin) still holds its height
     assert truth[-1].vehicle.position_ned_m[2] == pytest.approx(-2.1, abs=0.5)
-    assert sim._motor_scale[2] == pytest.approx(0.7)
+    assert sim.fault_effects.motor_scale[2] == pytest.approx(0.7)
     tel = [o.payload for o in out if o.kind == "telemetry"]
     assert tel[-1].battery.remaining_fraction <= 0.1
     assert not tel[-1].health.battery_ok
