@@ -92,12 +92,18 @@ class ScenarioProblem(ValueError):
         self.message = message
 
 
-def scenario_error(key: tuple, message: str) -> Exception:
-    """A validation error at ``scenario.<key>`` (the loader names its file and line)."""
+def keyed_error(kind: str, message: str, key_path: tuple) -> Exception:
+    """A validation error at ``key_path`` (from the mission's or configuration's top: the
+    loader names its file and line, or the ``--set`` argument); ``message`` is plain text."""
     from pydantic_core import PydanticCustomError
 
-    return PydanticCustomError("scenario", message.replace("{", "(").replace("}", ")"),
-                               {"key_path": ("scenario", *key)})
+    return PydanticCustomError(kind, message.replace("{", "(").replace("}", ")"),
+                               {"key_path": key_path})
+
+
+def scenario_error(key: tuple, message: str) -> Exception:
+    """A validation error at ``scenario.<key>``."""
+    return keyed_error("scenario", message, ("scenario", *key))
 
 
 def config_sections(parent: str) -> dict[str, type[BaseModel]]:
@@ -139,8 +145,6 @@ def validate_sections(sections: dict, model_of: Callable[[TargetKind], type[Base
     refused (``unknown`` and a "did you mean", or with ``list_known`` the known names); with
     ``fill_defaults`` every kind with such a model has its section afterwards (the model's
     defaults when it was absent)."""
-    from pydantic_core import PydanticCustomError
-
     from autopilot.plugins import load_plugins
     from autopilot.suggest import did_you_mean
 
@@ -152,8 +156,7 @@ def validate_sections(sections: dict, model_of: Callable[[TargetKind], type[Base
             hint = did_you_mean(key, known)
             if not hint and list_known:
                 hint = f" (known: {', '.join(known)})" if known else " (none is installed)"
-            raise PydanticCustomError("unknown_key", (unknown + hint).replace("{", "(").replace(
-                "}", ")"), {"key_path": (prefix, key)})
+            raise keyed_error("unknown_key", unknown + hint, (prefix, key))
         sections[key] = validate_section(kind, model_of(kind), value, (prefix, key))
     if fill_defaults:
         for name, kind in TARGET_KINDS.items():
@@ -166,16 +169,13 @@ def validate_section(kind: TargetKind, model: type[BaseModel] | None, value: Any
     """``value`` as ``model``; a pydantic error naming ``key_path`` + the key inside it (the
     configuration loader places it on its file's line)."""
     from pydantic import ValidationError
-    from pydantic_core import PydanticCustomError
 
     if model is None:
-        raise PydanticCustomError("target", f"the {kind.name} target takes no section here",
-                                  {"key_path": key_path})
+        raise keyed_error("target", f"the {kind.name} target takes no section here", key_path)
     try:
         return model.model_validate({} if value is None else value)
     except ValidationError as exc:
         err = exc.errors(include_url=False)[0]
         loc = tuple(err["loc"])
         message = "unknown key" if err["type"] == "extra_forbidden" else err["msg"]
-        raise PydanticCustomError("target", message.replace("{", "(").replace("}", ")"),
-                                  {"key_path": (*key_path, *loc)}) from None
+        raise keyed_error("target", message, (*key_path, *loc)) from None
