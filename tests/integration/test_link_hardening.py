@@ -253,8 +253,16 @@ def test_a_lossy_link_still_flies(no_camera_config, driver_class):
             try:
                 await wait_for_state(driver, lambda s: s.health.armable, 15.0, "armable")
                 await until(driver.arm, lambda s: s.armed, "armed")
+                async def takeoff() -> None:
+                    # the vehicle disarms itself when it is not taken off soon after arming
+                    # (PX4's COM_DISARM_PRFLT): with the takeoffs lost, arm it again first
+                    state = driver.latest_state
+                    if state is not None and not state.armed:
+                        await driver.arm()
+                    await driver.takeoff(2.0)
+
                 async with collected(driver.telemetry(buffer=256)) as states:
-                    await until(lambda: driver.takeoff(2.0),
+                    await until(takeoff,
                                 lambda s: s.mode is FlightMode.TAKEOFF or
                                 -s.position_ned_m[2] > 0.5, "taking off")
                     await wait_for_state(driver, lambda s: -s.position_ned_m[2] > 1.7, 30.0,
