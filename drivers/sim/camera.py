@@ -120,7 +120,7 @@ class SimCamera:
         self.active = False
         self.seq = 0
         self.rendered = 0
-        #: frames skipped, not rendered, to keep real time (``Simulator.shed_rendering``)
+        #: frames skipped, not rendered, to keep real time (``CameraCaptures.shed_rendering``)
         self.shed = 0
         #: the last frame due was rendered: the next may be shed
         self.may_shed = True

@@ -14,12 +14,13 @@ from collections.abc import Mapping
 import numpy as np
 
 from drivers.base import Frame
-from drivers.sim.faults import FaultSchedule, corrupt_image
+from drivers.sim.faults import FaultSchedule, TimeWarp, WarpedPath, corrupt_image
+from drivers.sim.rover import Rover
 
 
 class FaultEffects:
     def __init__(self, schedule: FaultSchedule, seed: int, cameras: Mapping[str, object],
-                 motors: int) -> None:
+                 motors: int, rover: Rover | None = None) -> None:
         for f in schedule.faults:  # what the faults name must exist on this vehicle
             camera = getattr(f, "camera", None)
             if camera is not None and camera not in cameras:
@@ -28,6 +29,12 @@ class FaultEffects:
             if f.kind == "motor_failure" and f.motor >= motors:
                 raise ValueError(f"fault motor_failure: no motor {f.motor} (the vehicle has "
                                  f"{motors}: 0 to {motors - 1})")
+        if schedule.of("rover_stop"):  # the rover's path on a clock that stops or reverses
+            if rover is None:
+                raise ValueError("fault rover_stop: the scenario has no rover")
+            path = rover.path
+            path = path.path if isinstance(path, WarpedPath) else path
+            rover.path = WarpedPath(path, TimeWarp(schedule.of("rover_stop")))
         self.schedule = schedule
         self._rng = np.random.default_rng((seed, 6152))
         self._last_image: dict[str, np.ndarray] = {}

@@ -36,6 +36,14 @@ def fly_short(overrides, out=None, **kwargs):
     return asyncio.run(main())
 
 
+def ended_down(log) -> dict:
+    """The flight's last telemetry, checked to be on the ground and disarmed."""
+    last = log[ch.VEHICLE_STATE][-1]
+    assert last["armed"] is False
+    assert log[ch.GROUND_TRUTH][-1]["vehicle_position_ned_m"][2] > -0.3  # on the ground
+    return last
+
+
 def run(coro):
     return asyncio.run(coro)
 

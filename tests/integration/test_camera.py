@@ -143,7 +143,7 @@ def test_render_gate_holds_rendering_until_shortly_before_the_frame_is_due(sim_c
     cam = sim_config.cameras["front"]
     sim = Simulator(sim_config)
     asked = []
-    sim.set_realtime_rendering(asked.append)
+    sim.rig.render_gate, sim.rig.background = asked.append, True
     sim.set_camera_active("front", True)
     frames = []
     while len(frames) < 5:
@@ -185,7 +185,7 @@ def test_render_contexts_are_made_at_connect_and_missing_opengl_fails_it(sim_con
     error instead of the first frame failing in the air."""
     async def connects():
         async with simulator(sim_config) as drv:
-            rig = drv.simulator._rig
+            rig = drv.simulator.rig
             assert {t.context is not None for t in rig._targets.values()} == {True}
             assert len(rig._targets) == len(drv.cameras) == 2
             assert all(cam.rendered == 0 for cam in drv.simulator.cameras.values())

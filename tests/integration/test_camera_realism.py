@@ -44,10 +44,7 @@ def _capture(cfg, scenario=(), position=HOVER, attitude=LEVEL, rates_frd=(0.0, 0
     sim = Simulator(cfg, scenario=list(scenario), seed=seed)
     try:
         sim.set_vehicle_pose(position, attitude)
-        qv = sim._qvel0
-        vn, ve, vd = velocity_ned
-        p, q, r = rates_frd
-        sim.data.qvel[qv:qv + 6] = (ve, vn, -vd, p, -q, -r)  # ENU linear, FLU angular
+        sim.body.set_motion(velocity_ned, rates_frd)
         frames = [sim.capture(camera) for _ in range(count)]
     finally:
         sim.close()
@@ -123,7 +120,7 @@ def test_distorted_frame_has_no_empty_border(sim_config):
     try:
         for name in ("front", "down"):
             frame = sim.capture(name)
-            target = sim._rig._targets[sim.cameras[name].cam_id]
+            target = sim.rig._targets[sim.cameras[name].cam_id]
             source = target.source
             assert source.fx == frame.camera.intrinsics.fx  # the frame's resolution
             assert (source.width_px, source.height_px) > (640, 480)

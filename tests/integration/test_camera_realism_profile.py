@@ -54,7 +54,7 @@ def _still(cfg, gain=1.0):
     try:
         sim.set_vehicle_pose((0.0, 0.0, -2.0), (1.0, 0.0, 0.0, 0.0))
         cam = sim.cameras["front"]
-        return sim._rig.finish(sim._rig.submit(sim.data, cam, 0.0, gain=gain)).image
+        return sim.rig.finish(sim.rig.submit(sim.data, cam, 0.0, gain=gain)).image
     finally:
         sim.close()
 

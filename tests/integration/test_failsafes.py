@@ -1,14 +1,13 @@
-"""The autopilot's own failsafes in closed loop (lockstep unless said): the battery reserve
-for the way home, a detector, estimator or step that raises, and the event loop's watchdog.
-(The geofence is in test_offboard.py; the target lost, stale telemetry and a stalled control
-task in test_runtime.py.)"""
+"""The autopilot's own failsafes in closed loop, in lockstep: the battery reserve for the way
+home, a detector, estimator or step that raises, a loop stall the vehicle waited for. (The
+event loop's watchdog on the wall clock is in test_failsafes_realtime.py; the geofence in
+test_offboard.py; the target lost, stale telemetry and a stalled control task in
+test_runtime.py.)"""
 
 from __future__ import annotations
 
-import asyncio
 import logging
 import math
-import time
 
 import numpy as np
 import pytest
@@ -17,22 +16,12 @@ from autopilot.control.battery import BatteryReserve, ReserveSettings
 from autopilot.flightlog import records as ch
 from autopilot.flightlog.log import read_log
 from autopilot.runtime import LAND_RETRY_S
-from autopilot.watchdog import LoopWatchdog
 from drivers.base import CommandDenied
 from drivers.sim.driver import SimDriver
 
-from .simtools import fly_short
-
-pytestmark = pytest.mark.serial  # real-time flights
+from .simtools import ended_down, fly_short
 
 _fly = fly_short
-
-
-def _ended_down(log) -> dict:
-    last = log[ch.VEHICLE_STATE][-1]
-    assert last["armed"] is False
-    assert log[ch.GROUND_TRUTH][-1]["vehicle_position_ned_m"][2] > -0.3  # on the ground
-    return last
 
 
 # -- the battery reserve ---------------------------------------------------------------------
@@ -97,7 +86,7 @@ def test_battery_reserve_returns_home_and_lands(tmp_path):
     texts = [e["text"] for e in log[ch.MISSION_EVENTS]]
     assert "request return" in texts
     assert "fallback return_home started" in texts
-    _ended_down(log)
+    ended_down(log)
     truth = np.array([r["vehicle_position_ned_m"] for r in log[ch.GROUND_TRUTH]])
     far = np.linalg.norm(truth[:, :2], axis=1)
     assert far.max() > 3.0  # it had followed away from home (beyond the 3 m home radius) ...
@@ -132,7 +121,7 @@ def test_a_return_that_climbs_into_the_fence_ceiling_lands_where_it_is(monkeypat
     assert any("geofence during the fallback: landing where it is" in t for t in texts)
     assert refused
     assert any(t.startswith("land refused") for t in texts)
-    _ended_down(log)
+    ended_down(log)
     truth = np.array([r["vehicle_position_ned_m"] for r in log[ch.GROUND_TRUTH]])
     # stopped within the fence's margin, plus the climb (3 m/s) until the land asked again
     assert -truth[:, 2].min() < 6.0 + 2.0 + 3.0 * LAND_RETRY_S
@@ -179,36 +168,12 @@ def test_a_raising_detector_estimator_or_step_fails_into_the_fallback(where, mon
     failed = next(i for i, t in enumerate(texts) if t.startswith("step follow_ball failed"))
     assert "fallback safe_stop started" in texts[failed:]
     assert "request land" in texts[failed:]
-    _ended_down(log)
+    ended_down(log)
     assert "Traceback" not in summary["reason"]
     assert any("broken" in (r.exc_text or "") or r.exc_info for r in caplog.records)
 
 
-# -- the event loop's watchdog ---------------------------------------------------------------
-
-def test_watchdog_measures_lag_and_reports_a_stall_while_it_lasts(caplog):
-    stalls = []
-
-    async def main():
-        dog = LoopWatchdog(0.2, stalls.append, period_s=0.02)
-        task = asyncio.ensure_future(dog.run())
-        await asyncio.sleep(0.2)
-        time.sleep(0.6)  # noqa: ASYNC251 - the loop is stuck here (on purpose)
-        await asyncio.sleep(0.1)
-        task.cancel()
-        await asyncio.gather(task, return_exceptions=True)
-        return dog
-
-    with caplog.at_level(logging.WARNING, logger="autopilot.watchdog"):
-        dog = asyncio.run(main())
-    assert len(stalls) == 1
-    assert stalls[0] == pytest.approx(0.6, abs=0.15)
-    during = [r for r in caplog.records if "has not answered" in r.getMessage()]
-    assert during  # logged by the thread while the loop was stuck, with where it was
-    assert "time.sleep(0.6)" in during[0].getMessage()
-    assert dog.lag_percentile_ms(50) < 50.0
-    assert dog.lag_percentile_ms(100) > 400.0
-
+# -- a loop stall the vehicle waited for ----------------------------------------------------
 
 def test_a_stall_the_vehicle_waited_for_does_not_fail_the_step():
     """Real time, flying: a loop stall fails the step when the vehicle's clock ran on through
@@ -236,36 +201,3 @@ def test_a_stall_the_vehicle_waited_for_does_not_fail_the_step():
     assert "its world waited" in events[0]
     failed, _ = runtime(10.85, 10.0)  # a vehicle whose clock ran on (any real one)
     assert failed == ["event loop stalled for 0.80 s"]
-
-
-@pytest.mark.long
-def test_a_stalled_event_loop_in_real_time_ends_in_the_fallback(monkeypatch, tmp_path):
-    """Real time: the loop blocks for 1.5 s while following; setpoints stop, the vehicle's
-    offboard failsafe holds it; back, the autopilot does not resume the step: fallback, land."""
-    from autopilot.runtime.control import ControlLoop
-
-    original = ControlLoop.next_tick
-    stalled = []
-
-    async def stalling(self, period):
-        if self.flight.cursor.step == "follow_ball" and self.flight.clock.now() > 10.0 and \
-                not stalled:
-            stalled.append(True)
-            time.sleep(1.5)  # noqa: ASYNC251 - a blocking call on the event loop (on purpose)
-        return await original(self, period)
-
-    monkeypatch.setattr(ControlLoop, "next_tick", stalling)
-    summary, orphans = _fly([], tmp_path, realtime=True)
-    # back from the stall the step does not resume: the stall's own failsafe stops it (the
-    # telemetry queued meanwhile arrives at once, so the vehicle is not silent past its
-    # telemetry_grace_s; the silence guard holds the step at most)
-    assert summary["status"] in ("failed", "aborted")
-    assert "event loop stalled" in summary["reason"] or "telemetry lost" in summary["reason"]
-    assert orphans == []
-    log = read_log(tmp_path / "flight.mcap")
-    texts = [e["text"] for e in log[ch.MISSION_EVENTS]]
-    stalled = next(i for i, t in enumerate(texts) if t.startswith("event loop stalled for 1."))
-    assert "fallback safe_stop started" in texts[stalled:]
-    modes = [s["mode"] for s in log[ch.VEHICLE_STATE] if s["time_s"] > 10.0]
-    assert "hold" in modes  # the vehicle's own offboard-loss failsafe
-    _ended_down(log)

@@ -13,7 +13,6 @@ import contextlib
 import math
 import os
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -49,24 +48,12 @@ class _Track:
 
     def __init__(self, vehicle) -> None:
         self.states = []
-        self._wall_s: list[float] = []
         self._task = asyncio.ensure_future(self._collect(vehicle))
 
     async def _collect(self, vehicle) -> None:
         async with contextlib.aclosing(vehicle.telemetry(buffer=256)) as samples:
             async for state in samples:
                 self.states.append(state)
-                self._wall_s.append(time.monotonic())
-
-    def pace(self, mode: FlightMode) -> float:
-        """Simulated seconds per wall second while the vehicle flew in ``mode`` (1 at real
-        time; less when a busy machine slowed the simulator down, while the example's sleeps
-        kept wall time)."""
-        flown = [k for k, s in enumerate(self.states) if s.mode is mode]
-        first, last = flown[0], flown[-1]
-        wall = self._wall_s[last] - self._wall_s[first]
-        simulated = self.states[last].time_s - self.states[first].time_s
-        return min(1.0, simulated / wall) if wall > 0 else 1.0
 
     async def aclose(self) -> None:
         self._task.cancel()
@@ -190,16 +177,21 @@ def test_offboard_velocity_ned(no_camera_config):
             await track.aclose()
             assert "failed" not in out
             assert track.modes()[-2:] == [FlightMode.OFFBOARD, FlightMode.HOLD]
-            # 4 s at 2 m/s, less the takeoff ramp (MPC_TKO_RAMP_T), and 4 s at 1 m/s down: the
-            # example's seconds are wall seconds, which a simulator slowed by a busy machine
-            # flies fewer of
-            pace = track.pace(FlightMode.OFFBOARD)
-            assert 0.3 < pace <= 1.0
-            assert 8.0 * pace - 2.5 < track.max_altitude_m < 8.5
+            # up at 2 m/s, later down at 1 m/s, each for 4 s of the example's sleeps: wall
+            # seconds, which a simulator slowed by a busy machine flies fewer of (and unevenly),
+            # so the vertical speeds it flew are judged, and the heights only loosely
+            offboard = [s for s in track.states if s.mode is FlightMode.OFFBOARD]
+            climb_m_s = max(-float(s.velocity_ned_m_s[2]) for s in offboard)
+            sink_m_s = max(float(s.velocity_ned_m_s[2]) for s in offboard)
+            assert 1.7 < climb_m_s < 2.3, climb_m_s
+            assert 0.8 < sink_m_s < 1.2, sink_m_s
+            assert 1.5 < track.max_altitude_m < 8.5  # at most 4 s at 2 m/s
             down = track.max_altitude_m - vehicle.latest_state.altitude_m
-            assert 4.0 * pace - 1.5 < down < 4.0 + 1.0
-            assert vehicle.latest_state.in_air  # the example leaves it hovering in HOLD
-            await vehicle.land()
+            assert 0.5 < down < 4.0 + 1.0
+            if track.max_altitude_m > 5.0:  # more than the descent can take: still flying
+                assert vehicle.latest_state.in_air  # the example leaves it hovering in HOLD
+            if vehicle.latest_state.armed:
+                await vehicle.land()
             await wait_for_state(vehicle, lambda s: not s.armed, 30.0, "landed")
 
     asyncio.run(main())

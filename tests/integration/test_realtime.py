@@ -74,9 +74,10 @@ def test_a_slow_simulator_slows_its_world_and_says_so(sim_config, monkeypatch, c
             async with contextlib.aclosing(drv.frames("front")) as stream:
                 frame = await anext(stream)
                 frame_lag = drv.clock.now() - frame.time_s
-            return lags, reads, frame_lag, drv.slowest_pace_factor, drv.clock.held_back_s
+            pacer = drv.runner.pacer
+            return lags, reads, frame_lag, pacer.slowest_pace_factor, drv.clock.held_back_s
 
-    with caplog.at_level(logging.WARNING, logger="drivers.sim.driver"):
+    with caplog.at_level(logging.WARNING, logger="drivers.sim"):
         lags, reads, frame_lag, factor, held_back = run(main())
     # 2.5 s simulated took ~7.5 s: unpaced, the last samples would arrive 5 s old
     assert held_back > 3.0
@@ -109,7 +110,7 @@ def test_a_stand_alone_vehicle_sheds_rendering_when_behind(sim_config, monkeypat
             cam = drv.simulator.cameras["front"]
             return received, cam.shed, cam.rendered
 
-    with caplog.at_level(logging.WARNING, logger="drivers.sim.driver"):
+    with caplog.at_level(logging.WARNING, logger="drivers.sim"):
         received, shed, rendered = run(main())
     # half the frames were not rendered; the video went on with the other half
     assert shed > 10
@@ -137,8 +138,8 @@ def test_the_simulator_yields_the_cpu_only_in_process(sim_config, stand_alone):
         async with simulator(sim_config, lockstep=False, background=not stand_alone) as drv:
             async with contextlib.aclosing(drv.frames("front")) as frames:
                 await anext(frames)  # the render thread has drawn (and lowered itself)
-            physics = drv._executor.submit(niceness).result()
-            render = drv.simulator._rig._executor().submit(niceness).result()
+            physics = drv.runner.executor.submit(niceness).result()
+            render = drv.simulator.rig._executor().submit(niceness).result()
             return physics, render
 
     ours = niceness()
@@ -161,11 +162,11 @@ def test_shedding_physics_never_waits_for_a_frame_still_drawing(sim_config):
     sim = Simulator(sim_config)
     try:
         sim.set_camera_active("front", True)
-        sim.shed_rendering = True
+        sim.captures.shed_rendering = True
         cam = sim.cameras["front"]
         release = threading.Event()
         # the render thread is busy (for 30 s at most: physics that waited would fail, not hang)
-        sim._rig._executor().submit(release.wait, 30.0)
+        sim.rig._executor().submit(release.wait, 30.0)
         outputs = sim.advance_to(0.5)  # 15 frames due: the first waits behind the busy thread
         assert sim.time_s >= 0.5
         assert not [o for o in outputs if o.kind == "frame"]
@@ -173,7 +174,7 @@ def test_shedding_physics_never_waits_for_a_frame_still_drawing(sim_config):
         assert cam.rendered == 1
         assert cam.shed >= 10
         release.set()
-        sim._rig._executor().submit(lambda: None).result()  # (one thread: the frame is drawn)
+        sim.rig._executor().submit(lambda: None).result()  # (one thread: the frame is drawn)
         later = [o.payload for o in sim.advance_to(sim.time_s + 0.01) if o.kind == "frame"]
         (frame,) = later
         assert frame.time_s < 0.05  # captured when it was, delivered when drawn

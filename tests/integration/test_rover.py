@@ -51,7 +51,7 @@ def test_the_rover_body_tracks_its_script_and_carries_a_drone_on_its_deck():
     start, _, _ = rover.path(0.0)
     # the drone stands on the deck, motors off; the rover drives off
     sim.set_vehicle_pose(np.array([start[0], start[1], -0.45 - 0.095]), [1.0, 0.0, 0.0, 0.0])
-    sim._scenario_t0 = 0.0
+    sim.start_scenario()
     worst_track, worst_slip = 0.0, 0.0
     for k in range(1, 41):
         sim.advance_to(0.5 * k)
@@ -74,7 +74,7 @@ def test_the_land_detector_judges_motion_over_the_deck():
     sim = _simulator(["scenario.rover.speed_mps=1.5"])
     start, _, _ = sim.rover.path(0.0)
     sim.set_vehicle_pose(np.array([start[0], start[1], -0.45 - 0.095]), [1.0, 0.0, 0.0, 0.0])
-    sim._scenario_t0 = 0.0
+    sim.start_scenario()
     sim.advance_to(3.0)  # the rover is at 1.5 m/s, the drone with it
     sim.command("arm")
     sim.advance_to(4.0)
