@@ -10,7 +10,7 @@ from autopilot.bench import down
 from autopilot.cli import main
 
 
-# about 20 s (hover_image) and 60 s (land_pad: seed 001's 13 templates a frame) of CPU; the
+# about 20 s (hover_image) and 30 s (land_pad: seed 001's 13 templates a frame) of CPU; the
 # timeout is a guard against a hang, wide enough for a shared machine
 @pytest.mark.timeout(1800)
 @pytest.mark.parametrize("bench", ["hover_image", "land_pad"])
