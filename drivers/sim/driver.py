@@ -201,7 +201,7 @@ class SimDriver(Px4Services, Vehicle):
         """The cameras as they really are — true intrinsics, the mount with its error — where
         :attr:`cameras` is what their frames report (a fitted calibration, the nominal mount).
         For the log's scoring only (what a detection should have found)."""
-        return {name: true_camera_info(name, self.config.cameras[name], self.config.seed)
+        return {name: true_camera_info(name, self.config.cameras[name], self.runner.seed)
                 for name in self._cameras}
 
     def ground_truth(self, buffer: int = 256) -> AsyncIterator[GroundTruth]:

@@ -35,7 +35,8 @@ class SimRunner:
                  fail: Callable[[Exception], None]) -> None:
         self.config = config
         self._scenario = list(scenario)
-        self._seed = seed
+        #: the simulator's seed (its noise, its cameras' mount errors)
+        self.seed = seed
         self.lockstep = lockstep
         self.clock: LockstepClock | PacedClock = LockstepClock() if lockstep \
             else PacedClock(slack_s=CATCH_UP_S)
@@ -109,7 +110,7 @@ class SimRunner:
         return await self.clock.run_blocking(on_sim_thread, executor=self.executor)
 
     def _build(self) -> Simulator:
-        sim = Simulator(self.config, self._scenario, self._seed)
+        sim = Simulator(self.config, self._scenario, self.seed)
         try:
             if not self.lockstep:
                 # rendering as the real-time driver needs (see camera.py): each scheduled frame

@@ -110,3 +110,20 @@ def test_frames_arrive_with_drops_and_jitter_describing_the_nominal_mount():
     assert all(np.allclose(f[3].rotation_body_cam, nominal) for f in frames)
     again = _stream(cfg, 7)  # deterministic: drops, jitter, exposure, noise and codec
     assert [(f[0], f[1], f[2], f[4]) for f in again] == [(f[0], f[1], f[2], f[4]) for f in frames]
+
+
+def test_the_true_cameras_are_those_of_the_simulator_s_own_seed(realistic_sim_config):
+    """The mount errors the log scores against are drawn from the seed the simulator was
+    started with (a driver given its own seed), not from the configuration's."""
+    from drivers.sim.driver import SimDriver
+
+    cfg = realistic_sim_config
+    seed = cfg.seed + 5
+    sim = Simulator(cfg, seed=seed)
+    try:
+        flown = sim.cameras["front"].info.rotation_body_cam
+    finally:
+        sim.close()
+    scored = SimDriver(cfg, seed=seed).true_cameras()["front"].rotation_body_cam
+    np.testing.assert_allclose(scored, flown, atol=1e-12)
+    assert np.abs(SimDriver(cfg).true_cameras()["front"].rotation_body_cam - flown).max() > 1e-3
