@@ -84,7 +84,7 @@ class SimDriver(Px4Services, Vehicle):
             (name, on)))
         #: steps the simulator against the clock, in lockstep or in real time (the module's
         #: notes say what ``background``, ``warn_every_s`` and ``shed_rendering`` do there)
-        self.runner = SimRunner(config, scenario, config.seed if seed is None else seed,
+        self.runner = SimRunner(config, self._scenario, config.seed if seed is None else seed,
                                 lockstep=lockstep, background=background,
                                 warn_every_s=warn_every_s, shed_rendering=shed_rendering,
                                 publish=self.outlets.publish, fail=self._fail)
@@ -116,6 +116,9 @@ class SimDriver(Px4Services, Vehicle):
         except RenderingUnavailable as exc:
             await self.close()
             raise CameraUnavailable(f"simulator cameras: {exc}", "rendering") from exc
+        except BaseException:
+            await self.close()  # (its thread too)
+            raise
         # as a real link: connected once the vehicle has been heard from
         async with contextlib.aclosing(self.telemetry()) as samples:
             try:  # (on the wall clock: a simulator that never steps must not hang us)

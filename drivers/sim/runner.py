@@ -34,7 +34,7 @@ class SimRunner:
                  shed_rendering: bool, publish: Callable[[list[SimOutput]], None],
                  fail: Callable[[Exception], None]) -> None:
         self.config = config
-        self._scenario = list(scenario)
+        self._scenario = scenario
         #: the simulator's seed (its noise, its cameras' mount errors)
         self.seed = seed
         self.lockstep = lockstep
@@ -54,6 +54,7 @@ class SimRunner:
         #: what the event loop queued for the next batch
         self.setpoints: deque[Setpoint] = deque()
         self.camera_toggles: deque[tuple[str, bool]] = deque()
+        self._closed = False
         self._wall_start = 0.0
         self._batch_end = 0.0  # (perf_counter) when the newest batch ended
 
@@ -68,6 +69,7 @@ class SimRunner:
     async def start(self) -> None:
         """Build the simulator (its cameras ready to render) and start stepping it."""
         loop = asyncio.get_running_loop()
+        self._closed = False
         if self.lockstep:
             self.sim = self._build()
         else:
@@ -88,8 +90,11 @@ class SimRunner:
             self._task = None
 
     async def close(self) -> None:
-        """Stop stepping and release the simulator (its renderer, its thread)."""
+        """Stop stepping and release the simulator (its renderer, its thread); once."""
         await self.stop()
+        if self._closed:
+            return
+        self._closed = True
         if self.executor is not None:
             if self.sim is not None:
                 await asyncio.get_running_loop().run_in_executor(self.executor, self.sim.close)

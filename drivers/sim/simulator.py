@@ -130,7 +130,7 @@ class Simulator:
         self.fault_effects = FaultEffects(self.faults, self.seed, self.cameras,
                                           self.body.rotors, self.rover)
         #: what the vehicle knows of itself and reports (estimate, rangefinder, battery, health)
-        self.sensors = VehicleSensors(config, self.model, self.data, self.body.body_id,
+        self.onboard = VehicleSensors(config, self.model, self.data, self.body.body_id,
                                       self.params, self.faults, self.fault_effects, rng_est,
                                       rng_range, rng_latency)
         #: set by the MAVLink face, which applies link_loss to its datagrams itself (the
@@ -145,14 +145,14 @@ class Simulator:
         rate = config.physics_rate_hz
         self._tel = Schedule(rate / config.telemetry.rate_hz)
         self._truth = Schedule(rate / config.ground_truth_rate_hz)
-        self._sensors = self.rover_sensors.schedules if self.rover_sensors else {}
+        self._rover_schedules = self.rover_sensors.schedules if self.rover_sensors else {}
         self._schedules = (self._tel, self._truth, *self.captures.schedules.values(),
-                           *self._sensors.values())
+                           *self._rover_schedules.values())
         self._next_capture = 0
         self._tick = 0
         self._outer_div = config.flight_stack.rate_loop_hz // config.flight_stack.position_loop_hz
         # the flight stack sees an estimate before the first step, so commands can be answered
-        self.flight.observe(self.time_s, self.sensors.first_estimate(self.body.state()),
+        self.flight.observe(self.time_s, self.onboard.first_estimate(self.body.state()),
                             self.health())
 
     # ------------------------------------------------------------------------------------
@@ -191,7 +191,7 @@ class Simulator:
         candidates.extend(self._outbox.deliveries(include_truth))
         candidates.extend(self.captures.next_due_s(dt))
         candidates.extend(sched.next_step * dt + self.rover_sensors.latency_s(name)
-                          for name, sched in self._sensors.items())
+                          for name, sched in self._rover_schedules.items())
         if include_truth:
             candidates.append(self._truth.next_step * dt)
         return max(min(candidates), self.time_s + dt)
@@ -230,7 +230,7 @@ class Simulator:
         time)."""
         t = k * self.dt
         if k >= self._tel.next_step:
-            report = self.sensors.telemetry(t, self._fault_time(t), self.flight,
+            report = self.onboard.telemetry(t, self._fault_time(t), self.flight,
                                             not self.link_faults_in_face)
             if report is not None:
                 self._outbox.put(*report)
@@ -238,7 +238,7 @@ class Simulator:
         if k >= self._truth.next_step:
             self._outbox.put(t, "truth", self.ground_truth())
             self._truth.advance(k)
-        for name, sched in self._sensors.items():
+        for name, sched in self._rover_schedules.items():
             if k >= sched.next_step:
                 reading = self.rover_sensors.capture(name, t, self.data, self.body.state)
                 if reading is not None:
@@ -258,7 +258,7 @@ class Simulator:
             self.body.check_stability(t, self.flight)
             truth = self.body.state()
             dt_outer = self._dt_ctrl * self._outer_div
-            battery = self.sensors.battery
+            battery = self.onboard.battery
             if self.faults:
                 self.fault_effects.outer(ft, dt_outer, battery, self.wind)
             thrust = self.body.rotor_thrust_n
@@ -266,11 +266,11 @@ class Simulator:
             wind = self.wind.step(dt_outer)
             self.body.push(self.drag.force_ned(truth[1], wind, truth[2],
                                                float(thrust.sum()) / self.body.weight_n))
-            health = self.sensors.health(t, ft)
-            est = self.sensors.update(dt_outer, truth, ft)
-            self.flight.update_outer(t, dt_outer, est, health, self.sensors.range(ft),
+            health = self.onboard.health(t, ft)
+            est = self.onboard.update(dt_outer, truth, ft)
+            self.flight.update_outer(t, dt_outer, est, health, self.onboard.range(ft),
                                      battery.remaining,
-                                     self.sensors.rangefinder.surface_velocity(self.model,
+                                     self.onboard.rangefinder.surface_velocity(self.model,
                                                                                self.data))
             q_est, gyro = est.q_ned_frd.tolist(), est.rates_frd_rad_s.tolist()
             while self.flight.events:
@@ -280,7 +280,7 @@ class Simulator:
             while nav_events:
                 self._nav_event(nav_events.popleft())
         else:
-            q_est, gyro = self.sensors.estimator.attitude(*self.body.attitude())
+            q_est, gyro = self.onboard.estimator.attitude(*self.body.attitude())
         self._tick += 1
         self.body.command_thrust(self.flight.update_inner(self._dt_ctrl, q_est, gyro),
                                  self.time_s)
@@ -290,7 +290,7 @@ class Simulator:
             self._outbox.put(event.time_s, "mission", event)
             return
         self._outbox.put(*self.captures.photo(
-            self.data, event, self.sensors.estimate, self.origin, self.flight.navigator.home,
+            self.data, event, self.onboard.estimate, self.origin, self.flight.navigator.home,
             self.body.motion()))
 
     # ------------------------------------------------------------------------------------
@@ -299,7 +299,7 @@ class Simulator:
 
     def health(self) -> Health:
         """The vehicle's sensor health now."""
-        return self.sensors.health(self.time_s, self.fault_time_s())
+        return self.onboard.health(self.time_s, self.fault_time_s())
 
     def ground_truth(self) -> GroundTruth:
         pos, vel, q, rates = self.body.state()
@@ -334,7 +334,7 @@ class Simulator:
         stop_offboard, start_mission, return_to_launch, set_mode, reposition, set_mission,
         set_mission_current, gcs_heartbeat, precision_land, landing_target; and the ones the
         navigator answers itself (:data:`NAVIGATOR_COMMANDS`: the speed, the camera)."""
-        self.flight.observe(self.time_s, self.sensors.estimate, self.health())
+        self.flight.observe(self.time_s, self.onboard.estimate, self.health())
         target = self.flight.navigator if name in NAVIGATOR_COMMANDS else self.flight
         return getattr(target, name)(*args)
 
@@ -353,7 +353,7 @@ class Simulator:
 
     def inject_failure(self, name: str, failed: bool = True) -> None:
         """Make a sensor unhealthy (or healthy again): one of :data:`FAILURE_NAMES`."""
-        self.sensors.inject_failure(name, failed)
+        self.onboard.inject_failure(name, failed)
 
     # -- test and debugging utilities ---------------------------------------------------------
 
