@@ -55,6 +55,13 @@ def arg_float(value: int) -> float:
     return struct.unpack("<f", struct.pack("<i", int(value)))[0]
 
 
+def config_value(value: str | int | float | bool) -> str:
+    """A configuration value as CONFIG carries it (booleans as ``TRUE`` / ``FALSE``)."""
+    if isinstance(value, bool):
+        return "TRUE" if value else "FALSE"
+    return str(value)
+
+
 def _clamp(value: float) -> float:
     return max(-1.0, min(1.0, float(value)))
 
@@ -120,9 +127,7 @@ class AtCommands:
 
     def config(self, key: str, value: str | int | float | bool) -> bytes:
         """Set a configuration key (``section:name``), e.g. ``control:altitude_max``."""
-        if isinstance(value, bool):
-            value = "TRUE" if value else "FALSE"
-        return self._line("CONFIG", key, str(value))
+        return self._line("CONFIG", key, config_value(value))
 
     def config_ids(self, session: str, user: str, application: str) -> bytes:
         """The ids a CONFIG applies under (AR.Drone 2.0 needs them before each CONFIG)."""

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from drivers.ardrone.at import AtCommands
+from drivers.ardrone.at import AtCommands, config_value
 from drivers.ardrone.navdata import Navdata, State
 
 #: what the client sends to UDP 5554 to start (and keep) the navdata coming
@@ -72,9 +72,7 @@ class NavdataSession:
     def configure(self, key: str, value: str | int | float | bool) -> None:
         """Queue a CONFIG: sent (with its ids) when the drone can take it, again until it is
         acknowledged; one at a time, in order."""
-        if isinstance(value, bool):
-            value = "TRUE" if value else "FALSE"
-        self._configs.append(_Pending(key, str(value)))
+        self._configs.append(_Pending(key, config_value(value)))
 
     def on_packet(self, navdata: Navdata, now_s: float) -> Step:
         """A navdata packet received at ``now_s``: what to use of it and what to send."""
