@@ -30,3 +30,12 @@ def profile_path(name: str) -> Path | None:
     ``config.yaml`` as it stands."""
     path = _HERE / "profiles" / f"{name}.yaml"
     return path if path.exists() else None
+
+
+def vehicle_path(name: str) -> Path | None:
+    """The overlay of vehicle family ``name`` (``sim.firmware``, a driver's family), or None:
+    no such family (validation says so where the name was written)."""
+    if not name.isidentifier():
+        return None
+    path = _HERE / "vehicles" / f"{name}.yaml"
+    return path if path.exists() else None

@@ -50,7 +50,8 @@ def make_vehicle(plan: MissionPlan, *, realtime: bool = False, connect: str | No
                  calibration: str | Path | Sequence[str] | None = None,
                  signing_key: Path | None = None,
                  warn: Callable[[str], None] | None = None) -> tuple[Vehicle, int | None]:
-    """The vehicle the configuration's ``driver`` names, and the simulator's seed (if any).
+    """The vehicle the configuration's ``driver`` names (:mod:`autopilot.vehicle_kinds`), and
+    the simulator's seed (if any).
 
     MAVLink drivers get each camera the mission uses as its own network video stream
     (:mod:`autopilot.cameras`: ``vehicle.cameras.NAME.video``, or ``video``), with the
@@ -59,66 +60,131 @@ def make_vehicle(plan: MissionPlan, *, realtime: bool = False, connect: str | No
     checked here, before anything opens: a malformed URL or an unreadable key file is an input
     error (:class:`~autopilot.config.ConfigError`) that names the option and what was
     expected."""
-    driver = plan.config.driver
-    if driver == "sim":
-        from autopilot.scenario import build_world  # MuJoCo loads only when the simulator flies
-        from drivers.sim.driver import SimDriver
+    from autopilot.vehicle_kinds import DRIVER_KINDS
 
-        sim = with_calibrations(plan, calibration) if calibration else plan.config.sim
-        sim_config, objects = build_world(plan.mission.scenario, sim, plan.config)
-        return SimDriver(sim_config, scenario=objects, lockstep=not realtime), sim_config.seed
-    if driver in ("pymavlink", "mavsdk"):
-        from drivers.mavlink.link import Endpoint, UrlError
-        from drivers.mavlink.signing import Signing, SigningKeyError
-        from drivers.video import VideoSource
+    kind = DRIVER_KINDS.get(plan.config.driver)
+    if kind is None:
+        raise ConfigError([Problem("config", None, "driver",
+                                   f"unknown driver {plan.config.driver!r} "
+                                   f"({', '.join(DRIVER_KINDS)})")])
+    return kind.build(plan, realtime=realtime, connect=connect, video=video,
+                      calibration=calibration, signing_key=signing_key, warn=warn)
 
-        link = plan.config.link
-        url = connect or link.connect
-        key = signing_key or (Path(link.signing_key) if link.signing_key else None)
-        problems = []
+
+def make_sim_vehicle(plan: MissionPlan, *, realtime: bool = False, calibration=None,
+                     **_unused) -> tuple[Vehicle, int | None]:
+    """The simulator in process (lockstep unless ``realtime``)."""
+    from autopilot.scenario import build_world  # MuJoCo loads only when the simulator flies
+
+    sim = with_calibrations(plan, calibration) if calibration else plan.config.sim
+    sim_config, objects = build_world(plan.mission.scenario, sim, plan.config)
+    vehicle_class = SIM_VEHICLES[sim_config.firmware]()
+    return vehicle_class(sim_config, scenario=objects, lockstep=not realtime), sim_config.seed
+
+
+def _px4_sim_vehicle():
+    from drivers.sim.driver import SimDriver
+
+    return SimDriver
+
+
+def _ardrone_sim_vehicle():
+    from drivers.sim.ardrone_driver import SimArdroneDriver
+
+    return SimArdroneDriver
+
+
+#: the in-process simulator's vehicle by firmware (``sim.firmware``): the PX4-like one is the
+#: simulator's own driver; an AR.Drone is flown by the AR.Drone driver, in process
+SIM_VEHICLES = {"px4": _px4_sim_vehicle, "ardrone": _ardrone_sim_vehicle}
+
+
+def make_mavlink_vehicle(plan: MissionPlan, driver_class: type, *, connect: str | None = None,
+                         video: str | Sequence[str] | None = None,
+                         calibration: str | Path | Sequence[str] | None = None,
+                         signing_key: Path | None = None,
+                         warn: Callable[[str], None] | None = None,
+                         **_unused) -> tuple[Vehicle, int | None]:
+    """A MAVLink vehicle through ``driver_class`` (MAVSDK's or pymavlink's), its cameras as
+    network streams."""
+    from drivers.mavlink.link import Endpoint, UrlError
+    from drivers.mavlink.signing import Signing, SigningKeyError
+    from drivers.video import VideoSource
+
+    link = plan.config.link
+    url = connect or link.connect
+    key = signing_key or (Path(link.signing_key) if link.signing_key else None)
+    problems = []
+    try:
+        Endpoint.parse(url)
+    except UrlError as exc:
+        problems.append(Problem("command line", None, "--connect", str(exc)))
+    used = plan.cameras_used()
+    first = used[0] if used else None
+    setups = []
+    try:
+        calibrations = [str(calibration)] if isinstance(calibration, Path) else calibration
+        setups = camera_setups(
+            plan.config, used,
+            videos=parse_camera_options(video, "--video", first),
+            calibrations=parse_camera_options(calibrations, "--calibration", first))
+    except ConfigError as exc:
+        problems += exc.problems
+    signing = None
+    if key is not None:
         try:
-            Endpoint.parse(url)
-        except UrlError as exc:
-            problems.append(Problem("command line", None, "--connect", str(exc)))
-        used = plan.cameras_used()
-        first = used[0] if used else None
-        setups = []
-        try:
-            calibrations = [str(calibration)] if isinstance(calibration, Path) else calibration
-            setups = camera_setups(
-                plan.config, used,
-                videos=parse_camera_options(video, "--video", first),
-                calibrations=parse_camera_options(calibrations, "--calibration", first))
-        except ConfigError as exc:
-            problems += exc.problems
-        signing = None
-        if key is not None:
-            try:
-                signing = Signing.load(key)
-            except SigningKeyError as exc:
-                problems.append(Problem("command line", None, "--signing-key", str(exc)))
-        if problems:
-            raise ConfigError(problems)
-        if driver == "mavsdk":
-            from drivers.mavlink.mavsdk_driver import MavsdkDriver as Driver
-        else:
-            from drivers.mavlink.pymavlink_driver import PymavlinkDriver as Driver
-        vehicle = Driver(url, signing=signing)
-        if link.rover_system_id is not None:  # a rover on the same link (land_on_rover)
-            vehicle.rover_system_id = link.rover_system_id
-            vehicle.rover_latency_s = link.rover_latency_s
-        for setup in setups:
-            if warn is not None and setup.warning():
-                warn(setup.warning())
-            vehicle.add_camera(VideoSource(setup.url, setup.info,
-                                           to_local=vehicle.vehicle_time_to_local,
-                                           clock=vehicle.clock.now,
-                                           latency_s=setup.stream_latency_s,
-                                           source=setup.video_source))
-        vehicle.camera_setups = {setup.name: setup for setup in setups}
-        return vehicle, None
-    raise ConfigError([Problem("config", None, "driver",
-                               f"unknown driver {driver!r} (sim, mavsdk, pymavlink)")])
+            signing = Signing.load(key)
+        except SigningKeyError as exc:
+            problems.append(Problem("command line", None, "--signing-key", str(exc)))
+    if problems:
+        raise ConfigError(problems)
+    vehicle = driver_class(url, signing=signing)
+    if link.rover_system_id is not None:  # a rover on the same link (land_on_rover)
+        vehicle.rover_system_id = link.rover_system_id
+        vehicle.rover_latency_s = link.rover_latency_s
+    for setup in setups:
+        if warn is not None and setup.warning():
+            warn(setup.warning())
+        vehicle.add_camera(VideoSource(setup.url, setup.info,
+                                       to_local=vehicle.vehicle_time_to_local,
+                                       clock=vehicle.clock.now,
+                                       latency_s=setup.stream_latency_s,
+                                       source=setup.video_source))
+    vehicle.camera_setups = {setup.name: setup for setup in setups}
+    return vehicle, None
+
+
+def make_ardrone_vehicle(plan: MissionPlan, *, connect: str | None = None,
+                         **_unused) -> tuple[Vehicle, int | None]:
+    """A Parrot AR.Drone 2.0 over its SDK protocol (``ardrone://HOST``)."""
+    from drivers.ardrone.driver import ArdroneDriver
+    from drivers.ardrone.urls import ArdroneUrlError, parse_ardrone_url
+    from drivers.sim.model import camera_info
+
+    url = connect or plan.config.link.connect
+    try:
+        parse_ardrone_url(url)
+    except ArdroneUrlError as exc:
+        raise ConfigError([Problem("command line", None, "--connect", str(exc))]) from None
+    cameras = {name: camera_info(name, cam) for name, cam in plan.config.vehicle.cameras.items()
+               if cam.enabled}
+    return ArdroneDriver(url, cameras=cameras), None
+
+
+def check_vehicle_can_fly(plan: MissionPlan, vehicle: Vehicle) -> None:
+    """Refuse (:class:`~autopilot.config.ConfigError`, before anything opens or flies) a
+    mission with a step that needs what this vehicle does not have (a survey's geotagged
+    photos on a vehicle without GNSS), naming the step and the capability."""
+    from drivers.capabilities import NEEDS, lacks
+
+    problems = []
+    for index, name, need in plan.needs():
+        if lacks(vehicle, (need,)):
+            problems.append(Problem(str(plan.source), None, f"steps[{index}].{name}", (
+                f"needs {NEEDS[need][1]} ({need}), which this vehicle (driver "
+                f"{plan.config.driver}) does not have")))
+    if problems:
+        raise ConfigError(problems)
 
 
 def with_calibrations(plan: MissionPlan, calibration: str | Path | Sequence[str]):
@@ -224,6 +290,7 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
     set_background_nice(plan.config.runtime.background_nice)
     vehicle, seed = make_vehicle(plan, realtime=realtime, connect=connect, video=video,
                                  calibration=calibration, signing_key=signing_key, warn=warn)
+    check_vehicle_can_fly(plan, vehicle)
     log_cameras = None
     if record_video is not None:
         log_cameras = logged_cameras(plan, record_video, vehicle.cameras)

@@ -111,16 +111,7 @@ async def serve(config: AppConfig, scenario: Scenario | None, *, instance: int =
     truth: asyncio.Task | None = None
     photos: asyncio.Task | None = None
     if out_dir is not None:  # ground truth, on the vehicle's boot clock, for `autopilot score`
-        await asyncio.to_thread(out_dir.mkdir, parents=True, exist_ok=True)
-        truth_log = FlightLog(out_dir / TRUTH_LOG)
-
-        async def log_truth() -> None:
-            async with contextlib.aclosing(vehicle.ground_truth()) as samples:
-                async for gt in samples:
-                    truth_log.write(ch.GROUND_TRUTH, gt.time_s, ch.ground_truth_record(gt))
-
-        truth = loop.create_task(log_truth(), name="sim-truth")
-        log(f"ground truth → {out_dir / TRUTH_LOG}")
+        truth_log, truth = await record_truth(vehicle, out_dir, log)
         photos = loop.create_task(save_photos(vehicle, out_dir / PHOTOS, log), name="sim-photos")
         log(f"photos → {out_dir / PHOTOS}/ (JPEG, geotagged; photos.jsonl)")
         for name, info in vehicle.cameras.items():  # as a factory calibration would come
@@ -179,6 +170,23 @@ async def serve(config: AppConfig, scenario: Scenario | None, *, instance: int =
         await vehicle.close()
         if truth_log is not None:
             truth_log.close()
+
+
+async def record_truth(vehicle: SimDriver, out_dir: Path,
+                       log: Callable[[str], None]) -> tuple[FlightLog, asyncio.Task]:
+    """Record the vehicle's ground truth into ``out_dir/truth.mcap`` (on its boot clock, for
+    ``autopilot score``) until the returned task is cancelled; close the log after it."""
+    await asyncio.to_thread(out_dir.mkdir, parents=True, exist_ok=True)
+    truth_log = FlightLog(out_dir / TRUTH_LOG)
+
+    async def log_truth() -> None:
+        async with contextlib.aclosing(vehicle.ground_truth()) as samples:
+            async for gt in samples:
+                truth_log.write(ch.GROUND_TRUTH, gt.time_s, ch.ground_truth_record(gt))
+
+    task = asyncio.get_running_loop().create_task(log_truth(), name="sim-truth")
+    log(f"ground truth → {out_dir / TRUTH_LOG}")
+    return truth_log, task
 
 
 async def announce_ready(vehicle: SimDriver, say: Callable[[float, str], None]) -> None:

@@ -6,9 +6,12 @@ the simulated world and how it moves, a pydantic model) and the world builder th
 section into simulator bodies; its configuration (how it is found: pydantic models); and the
 perception pipelines that find it (registered by kind in :mod:`autopilot.pipeline`, so replay
 rebuilds them from a log). Report panels are registered beside them
-(:func:`autopilot.report.panels.register_panel`).
+(:func:`autopilot.report.panels.register_panel`). A kind that matters to every step, not only
+to the one that looks for it (the keep-out discs), also brings what watches over every flight
+(:attr:`TargetKind.watch`: watchers on the frames the running step reads, setpoint guards;
+:mod:`autopilot.watch`).
 
-The shipped kinds (:mod:`autopilot.target_kinds`: ball, marker, image, pad, rover) are
+The shipped kinds (:mod:`autopilot.target_kinds`: ball, marker, image, pad, rover, keep_out) are
 registered before the scenario and configuration models are made, so their sections are fields
 of those models, at the places ``config.yaml`` has always had them (``perception.<name>``,
 ``estimation.<name>``, ``rover``; :attr:`TargetKind.config`). Kinds from other packages arrive
@@ -76,6 +79,9 @@ class TargetKind:
     #: ``rover``): fields of the configuration's models, which are made once the shipped
     #: kinds are registered (a plugin's kind has ``settings`` instead)
     config: Mapping[str, type[BaseModel]] = field(default_factory=dict)
+    #: what it watches over in every flight, whatever the steps (:mod:`autopilot.watch`):
+    #: (the autopilot's configuration) → watchers and setpoint guards (none: switched off)
+    watch: Callable[[Any], Sequence[object]] | None = None
 
 
 TARGET_KINDS: dict[str, TargetKind] = {}

@@ -163,6 +163,21 @@ class VehicleState:
                                      LandedState.LANDING)
 
 
+@dataclass(frozen=True, slots=True)
+class ProgressiveCommand:
+    """A Parrot AR.Drone's progressive command (``AT*PCMD``), as fractions in [−1, 1] of the
+    drone's limits: ``roll`` of ``control:euler_angle_max`` (+ right), ``pitch`` of it (+ nose
+    up: negative flies forward), ``gaz`` of ``control:control_vz_max`` (+ climb), ``yaw`` of
+    ``control:control_yaw`` (+ clockwise from above). ``hover``: the drone's own hover (the
+    fractions ignored)."""
+
+    roll: float = 0.0
+    pitch: float = 0.0
+    gaz: float = 0.0
+    yaw: float = 0.0
+    hover: bool = True
+
+
 @dataclass(frozen=True, slots=True, eq=False)
 class Setpoint:
     """An offboard setpoint, as PX4's SET_POSITION_TARGET_LOCAL_NED understands it.
@@ -175,6 +190,10 @@ class Setpoint:
     kept. In :attr:`SetpointFrame.BODY_FRD` only velocity is allowed.
 
     ``time_s`` is when the setpoint was computed (for latency accounting); drivers do not send it.
+
+    ``progressive``: the same intent as an AR.Drone's progressive command (a seed rule's own
+    ``cmd_vel``, in its units); a vehicle that flies such commands (the AR.Drone) flies it as
+    it is, and every other vehicle flies the setpoint's position and velocity.
     """
 
     position_ned_m: np.ndarray = field(default_factory=lambda: np.full(3, NAN))
@@ -184,6 +203,7 @@ class Setpoint:
     frame: SetpointFrame = SetpointFrame.LOCAL_NED
     time_s: float = NAN
     acceleration_m_s2: np.ndarray = field(default_factory=lambda: np.full(3, NAN))
+    progressive: ProgressiveCommand | None = None
 
     def __post_init__(self) -> None:
         pos = _frozen_array(self.position_ned_m, (3,))
@@ -452,6 +472,10 @@ class Vehicle(abc.ABC):
         """Return to launch (PX4 AUTO.RTL, ArduPilot RTL): home at the return altitude, then
         land there."""
         raise CommandDenied("return to launch", "this vehicle has no return mode")
+
+    #: whether the vehicle knows where it is on Earth (GNSS: global positions, geotags); a
+    #: vehicle without (the AR.Drone: optical flow and sonar) sets it False
+    has_global_position: bool = True
 
     @property
     def home_ned_m(self) -> np.ndarray | None:

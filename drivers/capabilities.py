@@ -17,6 +17,10 @@ SimulatorTruth      the simulator: ground truth and the cameras as they really a
                     (for scoring and the log only, never for the autopilot's decisions)
 ==================  ======================================================================
 
+A vehicle without a global position (no GNSS: the AR.Drone) says so with
+``has_global_position = False`` (:class:`~drivers.base.Vehicle`). What a mission step needs of
+these is named in :data:`NEEDS`.
+
 A stream that a driver has but a particular vehicle does not deliver (the simulator without
 a rover in its world) is also absent from :attr:`~drivers.base.Vehicle.sensors`.
 """
@@ -107,3 +111,26 @@ SENSOR_STREAMS = {
     "uwb": (UwbRanging, lambda vehicle: vehicle.uwb_ranges),
     "rover": (RoverLink, lambda vehicle: vehicle.rover_states),
 }
+
+
+def _knows_global_position(vehicle) -> bool:
+    return bool(getattr(vehicle, "has_global_position", True))
+
+
+#: what a mission step may need of its vehicle beyond the interface every vehicle has, by
+#: name: (does this vehicle have it, what it is). A step kind says what it needs
+#: (:attr:`autopilot.steps.registry.StepKind.needs`); a mission whose step needs what the
+#: vehicle lacks is refused before anything flies.
+NEEDS = {
+    "global_position": (_knows_global_position,
+                        "a global position (GNSS): positions on Earth, geotagged photos"),
+    "precision_landing": (lambda vehicle: isinstance(vehicle, PrecisionLanding),
+                          "the vehicle's own precision landing (PX4 AUTO.PRECLAND)"),
+    "rover_link": (lambda vehicle: isinstance(vehicle, RoverLink),
+                   "the rover's reports (a MAVLink link that hears the rover)"),
+}
+
+
+def lacks(vehicle, needs) -> list[str]:
+    """Of ``needs`` (names in :data:`NEEDS`), what ``vehicle`` does not have."""
+    return [need for need in needs if not NEEDS[need][0](vehicle)]

@@ -17,6 +17,7 @@ from autopilot.cli.common import (
     fmt,
 )
 from autopilot.config import ConfigError, InputError, Problem
+from autopilot.vehicle_kinds import DRIVER_KINDS, DRIVER_NAMES
 
 #: what a run writes into its folder (``--overwrite`` removes them first)
 RUN_OUTPUTS = ("flight.mcap", "summary.json", "report.html", "onboard.mp4", "autopilot.log",
@@ -57,13 +58,15 @@ def arguments(run: argparse.ArgumentParser) -> None:
     run.add_argument("--record-video", nargs="?", const="", metavar="CAMERA",
                      help="log every frame of a camera (default: the followed one) and write "
                      "DIR/onboard.mp4 with what the autopilot saw and decided drawn over it")
-    run.add_argument("--driver", choices=("sim", "mavsdk", "pymavlink"),
-                     help="the vehicle driver (default: the configuration's 'driver')")
+    run.add_argument("--driver", choices=DRIVER_NAMES,
+                     help="the vehicle driver (default: the configuration's 'driver'): "
+                     + "; ".join(f"{k.name}: {k.summary}" for k in DRIVER_KINDS.values()))
     run.add_argument("--connect", metavar="URL",
-                     help="MAVLink connection for MAVLink drivers: udpin://HOST:PORT, "
+                     help="the vehicle's address: for MAVLink drivers udpin://HOST:PORT, "
                      "udpout://HOST:PORT, tcpout://HOST:PORT, tcpin://HOST:PORT or "
                      "serial:///dev/DEVICE[:BAUD] (default link.connect, "
-                     "udpin://127.0.0.1:14540)")
+                     "udpin://127.0.0.1:14540); for the AR.Drone ardrone://HOST[:PORT] "
+                     "(default ardrone://192.168.1.1)")
     run.add_argument("--video", action="append", metavar="[CAMERA=]URL",
                      help="a camera's video stream for MAVLink drivers (repeatable; a bare URL "
                      "is the mission's first camera's; default vehicle.cameras.NAME.video: "
@@ -202,9 +205,10 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"--fault acts on the simulated vehicle, not on a vehicle flown through "
                          f"--driver {plan.config.driver}: give it to 'autopilot sim --fault ...' "
                          "(the MAVLink vehicle it simulates), or fly --driver sim")
-    if plan.config.driver != "sim":
-        check_network_exposure("--connect", args.connect or plan.config.link.connect,
-                               args.signing_key or plan.config.link.signing_key, args.insecure)
+    kind = DRIVER_KINDS[plan.config.driver]
+    if kind.check_connect is not None:
+        kind.check_connect("--connect", args.connect or kind.default_connect(plan.config),
+                           args.signing_key or plan.config.link.signing_key, args.insecure)
     if plan.config.driver == "sim" and args.calibration:
         from autopilot.run import with_calibrations
 

@@ -15,8 +15,14 @@ from autopilot.config import ConfigError, InputError, Problem, load_config
 def arguments(sim: argparse.ArgumentParser) -> None:
     sim.add_argument("--mission", metavar="NAME|FILE",
                      help="put this mission's scenario (e.g. the moving ball) in the world")
+    sim.add_argument("--firmware", choices=("px4", "ardrone"), default=None,
+                     help="the vehicle it is: px4 (default: a PX4 SITL vehicle over MAVLink) "
+                     "or ardrone (a Parrot AR.Drone 2.0 over its SDK protocol: AT commands "
+                     "udp 5556, navdata udp 5554, video tcp 5555, configuration tcp 5559); "
+                     "as --set sim.firmware=…")
     sim.add_argument("--instance", type=int, default=0, metavar="N",
-                     help="PX4 SITL instance number: ports 14580+N, 18570+N (default 0)")
+                     help="instance number: PX4 SITL's ports 14580+N, 18570+N; an AR.Drone's "
+                     "ports moved by 10×N (default 0)")
     sim.add_argument("--video", action="append", metavar="[CAMERA=]URL",
                      help="where a camera streams (RTP H.264; repeatable; default: every "
                      "camera to the address its vehicle.cameras.NAME.video names — front "
@@ -46,6 +52,8 @@ def arguments(sim: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from autopilot.sim_server import serve
 
+    if args.firmware is not None:
+        args.overrides = [*(args.overrides or []), f"sim.firmware={args.firmware}"]
     if args.mission:
         from autopilot.mission import load_mission
 
@@ -66,6 +74,8 @@ def run(args: argparse.Namespace) -> int:
                                        str(exc))]) from None
     check_network_exposure("--bind", f"udpin://{args.bind}:14580", args.signing_key,
                            args.insecure)
+    if config.sim.firmware == "ardrone":
+        return _serve_ardrone(args, config, scenario)
     if args.out:
         prepare_out_dir(Path(args.out), True, False, ("truth.mcap", "photos"), "a recording")
     from autopilot.logs import route_library_logs
@@ -84,6 +94,23 @@ def run(args: argparse.Namespace) -> int:
                       host=args.bind, signing=signing, console=args.console,
                       console_token=token,
                       title=plan.mission.name if args.mission else "empty world"))
+    return EXIT_OK
+
+
+def _serve_ardrone(args: argparse.Namespace, config, scenario) -> int:
+    from autopilot.ardrone_server import ArdronePorts, serve
+    from autopilot.logs import route_library_logs
+
+    for option, given in (("--signing-key", args.signing_key), ("--console", args.console),
+                          ("--video", args.video)):
+        if given:
+            raise InputError(f"{option}: not available with --firmware ardrone (the AR.Drone "
+                             "protocol has no signing; its one video stream is TCP 5555)")
+    route_library_logs()
+    asyncio.run(serve(config, scenario, host=args.bind,
+                      ports=ArdronePorts().offset(10 * args.instance),
+                      log=lambda line: print(line, file=sys.stderr, flush=True),
+                      video=not args.no_video, out_dir=Path(args.out) if args.out else None))
     return EXIT_OK
 
 

@@ -27,6 +27,7 @@ from autopilot.config.sections import (
     VehicleSetup,
     kind_fields,
 )
+from autopilot.vehicle_kinds import DRIVER_NAMES
 from drivers.sim.config import SimConfig
 
 
@@ -64,7 +65,7 @@ class AppConfigRules(ConfigModel):
 AppConfig = create_model(
     "AppConfig", __base__=AppConfigRules, __module__=__name__,
     __doc__="The whole of ``config.yaml``.",
-    driver=(Literal["sim", "mavsdk", "pymavlink"], ...),
+    driver=(Literal[DRIVER_NAMES], ...),  # autopilot/vehicle_kinds.py
     link=(LinkConfig, ...),
     vehicle=(VehicleSetup, ...),
     runtime=(RuntimeConfig, ...),

@@ -26,7 +26,7 @@ from autopilot.config.yaml_source import (
     dotted_key,
     load_yaml,
 )
-from autopilot.resources import default_config_path, profile_path
+from autopilot.resources import default_config_path, profile_path, vehicle_path
 
 # ------------------------------------------------------------------------------------------
 # Overrides and validation
@@ -179,25 +179,52 @@ def merge_located(base: Located, other: Located, prefix: tuple[str, ...] = ()) -
 PROFILES = ("realistic", "ideal")
 
 
-def _chosen_profile(layers: Sequence[Any], overrides: Iterable[str]) -> Any:
-    """The profile the last layer to name one chose: ``--set sim.profile=…``, else a
-    mission's ``config.sim.profile``, else the base configuration's."""
+def _chosen(layers: Sequence[Any], overrides: Iterable[str], *path: str) -> Any:
+    """The value the last layer to name ``path`` chose: ``--set a.b=…``, else a mission's
+    ``config``, else the base configuration's (None: nobody named it)."""
+    dotted = ".".join(path)
     for item in reversed(list(overrides)):
         key, sep, raw = item.partition("=")
-        if sep and key.strip() == "sim.profile":
+        if sep and key.strip() == dotted:
             return raw.strip()
     for data in reversed(list(layers)):
-        sim = data.get("sim") if isinstance(data, dict) else None
-        if isinstance(sim, dict) and "profile" in sim:
-            return sim["profile"]
+        for key in path[:-1]:
+            data = data.get(key) if isinstance(data, dict) else None
+        if isinstance(data, dict) and path[-1] in data:
+            return data[path[-1]]
     return None
+
+
+def _chosen_profile(layers: Sequence[Any], overrides: Iterable[str]) -> Any:
+    """The profile the last layer to name one chose (``sim.profile``)."""
+    return _chosen(layers, overrides, "sim", "profile")
+
+
+def chosen_vehicle(layers: Sequence[Any], overrides: Iterable[str] = ()) -> str | None:
+    """The vehicle family the configuration flies, when it is not the default (PX4-like):
+    the simulated firmware ``sim.firmware`` names, or the family of the ``driver``
+    (:data:`~autopilot.vehicle_kinds.DRIVER_KINDS`)."""
+    from autopilot.vehicle_kinds import DRIVER_KINDS
+
+    firmware = _chosen(layers, overrides, "sim", "firmware")
+    driver = _chosen(layers, overrides, "driver")
+    kind = DRIVER_KINDS.get(driver) if isinstance(driver, str) else None
+    family = kind.family if kind is not None else None
+    if family is None and isinstance(firmware, str):
+        family = firmware
+    return family if family != "px4" else None
 
 
 def with_profile(base: Located, layers: Sequence[Any] = (),
                  overrides: Iterable[str] = ()) -> Located:
-    """``base`` with the chosen profile's overlay laid over it (under ``layers``, the data a
-    mission and ``--set`` will lay over it afterwards). An unknown profile name is left for
-    validation to report, where it was written."""
+    """``base`` with the chosen vehicle's overlay (``autopilot/vehicles/NAME.yaml``, for a
+    vehicle other than the default PX4-like one) and then the chosen profile's laid over it
+    (under ``layers``, the data a mission and ``--set`` will lay over it afterwards). An
+    unknown name is left for validation to report, where it was written."""
+    vehicle = chosen_vehicle([base.data, *layers], overrides)
+    path = vehicle_path(vehicle) if isinstance(vehicle, str) else None
+    if path is not None:
+        base = merge_located(base, load_yaml(path))
     name = _chosen_profile([base.data, *layers], overrides)
     if not isinstance(name, str) or name not in PROFILES:
         return base

@@ -3,7 +3,8 @@
 fields carry their units and bounds. The target kinds' own sections (how each is found and
 estimated: ``perception.<kind>``, ``estimation.<kind>``, …) are their modules'
 (:mod:`autopilot.target_kinds`), made fields of :data:`PerceptionConfig`,
-:data:`EstimationConfig` and the whole (:mod:`.app`) by :func:`kind_fields`."""
+:data:`EstimationConfig`, :data:`ControlConfig` and the whole (:mod:`.app`) by
+:func:`kind_fields`."""
 
 from __future__ import annotations
 
@@ -186,10 +187,12 @@ class Seed004LandingConfig(ConfigModel):
     max_speed_m_s: Positive
 
 
-class ControlConfig(ConfigModel):
-    follow: FollowControlConfig
-    trajectory: TrajectoryControlConfig
-    seed004_landing: Seed004LandingConfig
+#: Control: the following and trajectory limits, seed 004's landing, and the target kinds'
+#: own sections (``control.<kind>``: the keep-out guard's).
+ControlConfig = create_model(
+    "ControlConfig", __base__=ConfigModel, __module__=__name__,
+    follow=(FollowControlConfig, ...), trajectory=(TrajectoryControlConfig, ...),
+    seed004_landing=(Seed004LandingConfig, ...), **kind_fields("control"))
 
 
 class FrameLogConfig(ConfigModel):
@@ -229,9 +232,13 @@ class VehicleCameraConfig(CameraConfig):
 
 
 class VehicleSetup(ConfigModel):
-    """The vehicle's cameras (``vehicle.cameras``), shared by the simulator and MAVLink drivers."""
+    """The vehicle's cameras (``vehicle.cameras``), shared by the simulator and MAVLink drivers,
+    and the height it never flies above by its own rules (``max_altitude_m``)."""
 
     cameras: dict[str, VehicleCameraConfig]
+    #: the vehicle's own ceiling above its take-off point (the AR.Drone's
+    #: ``control:altitude_max``); None: none of its own (the geofence's applies)
+    max_altitude_m: Annotated[float, Field(gt=0, le=1000)] | None = None
 
 
 KeyName = Annotated[str, Field(min_length=1, max_length=12)]

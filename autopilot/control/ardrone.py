@@ -39,10 +39,12 @@ The AR.Drone firmware's auto-hover is not documented beyond "holds its position"
 modelled as braking at the largest tilt it may use (``euler_angle_max``) until stopped, the
 most it could do. Wind is not modelled: our vehicle rejects it (it tracks a velocity).
 
-**Our vehicle.** It takes PX4 offboard velocity setpoints, so :class:`ArDroneTiltModel`
+**Our vehicle.** A PX4 vehicle takes offboard velocity setpoints, so :class:`ArDroneTiltModel`
 integrates the commanded tilt into the velocity the AR.Drone would have, and hands our vehicle
 that velocity (with the acceleration as feed-forward), the climb rate and the yaw rate at every
-control tick. Synchronous; owned by a seed rule.
+control tick. Each setpoint also carries the command itself (``Setpoint.progressive``, as
+ardrone_autonomy hands it to the SDK): an AR.Drone (``--driver ardrone``) flies that, so a seed
+rule flies it in its own units, exactly. Synchronous; owned by a seed rule.
 """
 
 from __future__ import annotations
@@ -52,7 +54,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from drivers.base import Setpoint
+from drivers.base import ProgressiveCommand, Setpoint
 
 __all__ = ["ArDroneLimits", "ArDroneTiltModel", "Twist"]
 
@@ -70,6 +72,16 @@ class Twist:
     angular_z: float = 0.0  # yaw rate: + left (counter-clockwise from above)
     angular_x: float = 0.0  # non-zero (with angular_y): no auto-hover on a zero command
     angular_y: float = 0.0
+
+    def progressive(self) -> ProgressiveCommand:
+        """As ardrone_autonomy hands it to the drone (``AT*PCMD``): pitch is −linear.x, roll
+        −linear.y, the yaw rate −angular.z (the SDK's + is right, nose up, clockwise), each
+        clamped; all zero: the auto-hover."""
+        t = self.clamped()
+        if t.auto_hover:
+            return ProgressiveCommand()
+        return ProgressiveCommand(roll=-t.linear_y, pitch=-t.linear_x, gaz=t.linear_z,
+                                  yaw=-t.angular_z, hover=False)
 
     @property
     def auto_hover(self) -> bool:
@@ -148,12 +160,12 @@ class ArDroneTiltModel:
         if twist.auto_hover:
             return Setpoint(velocity_m_s=(*self._velocity_ne, 0.0),
                             acceleration_m_s2=(*acc, math.nan), yaw_rate_rad_s=0.0,
-                            time_s=now_s)
+                            time_s=now_s, progressive=twist.progressive())
         return Setpoint(
             velocity_m_s=(*self._velocity_ne, -twist.linear_z * lim.control_vz_max_m_s),
             acceleration_m_s2=(*acc, math.nan),
             yaw_rate_rad_s=-twist.angular_z * lim.control_yaw_rad_s,  # FRD: + is clockwise
-            time_s=now_s)
+            time_s=now_s, progressive=twist.progressive())
 
     # -- dynamics -------------------------------------------------------------------------
 

@@ -39,11 +39,18 @@ PHOTOS = "/photos"  # photos taken by the steps (orbit, survey)
 MISSION_STATUS = "/mission/status"  # the status code (autopilot.status), on each change
 MISSION_GOALS = "/mission/goals"  # goals run (the goal API), as the plan's step records
 RELATIVE_ESTIMATES = "/estimation/relative"  # the relative-state filter (land_on_rover)
+#: what the setpoint guards (autopilot.watch) changed, one record per setpoint changed
+GUARDED_SETPOINTS = "/control/guard"
 
 
 def detection_topic(pipeline: str) -> str:
     """The channel of a perception pipeline's per-frame records."""
     return f"/perception/{pipeline}"
+
+
+def watch_topic(watcher: str, part: str) -> str:
+    """A watcher's channel (:mod:`autopilot.watch`): what it saw, what it keeps."""
+    return f"/watch/{watcher}/{part}"
 
 
 def sensor_topic(stream: str) -> str:
@@ -138,6 +145,8 @@ SCHEMAS: dict[str, dict] = {
                          velocity_ned_m_s=_vec(3), position_std_m=_vec(3), age_s=_NUM,
                          stale=_BOOL, confirmed=_BOOL),
     TIME_SYNC: _obj("TimeSync", time_s=_NUM, vehicle_to_local_s=_NUM, round_trip_s=_NUM),
+    GUARDED_SETPOINTS: _obj("GuardedSetpoint", time_s=_NUM, guard=_STR, action=_STR,
+                            subject=_STR, step=_STR, phase=_STR),
     PLANNED_PATH: _obj("PlannedPath", time_s=_NUM, step_index=_INT, step=_STR,
                        points_ned_m={"type": "array"}, photo_points_ned_m={"type": "array"},
                        look_at_ned_m={"type": ["array", "null"]}, lines={"type": "array"},

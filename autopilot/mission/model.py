@@ -69,6 +69,12 @@ class MissionPlan:
                 cameras.append(self.config.photos.camera)
         return list(dict.fromkeys(cameras))
 
+    def needs(self) -> list[tuple[int, str, str]]:
+        """(step index, step name, need) for what each step needs of its vehicle
+        (:attr:`~autopilot.steps.registry.StepKind.needs`)."""
+        return [(i, step.name, need) for i, step in enumerate(self.steps)
+                for need in step_kind(step.name).needs(step.params, self.config)]
+
     def all_pipelines(self) -> dict[str, PipelineSpec]:
         """Every pipeline any step needs, by key (steps that share one share its state)."""
         found: dict[str, PipelineSpec] = {}

@@ -1,6 +1,7 @@
 """Talking to the vehicle: the setpoint stream (an intent with an expiry, re-sent at
-``setpoint_rate_hz`` until it lapses, each checked against the geofence) and the vehicle
-commands the steps, the failsafes and the console ask for."""
+``setpoint_rate_hz`` until it lapses, each passed through the target kinds' setpoint guards —
+the keep-out zones — for the newest telemetry, then checked against the geofence) and the
+vehicle commands the steps, the failsafes and the console ask for."""
 
 from __future__ import annotations
 
@@ -13,8 +14,11 @@ from autopilot.flightlog import records as ch
 from autopilot.hooks import Event
 from autopilot.runtime.flight import Flight, Intent
 from autopilot.runtime.recorder import MissionRecorder
-from drivers.base import CommandDenied, FlightMode, LandingTarget, Setpoint
+from drivers.base import CommandDenied, FlightMode, LandingTarget, Setpoint, VehicleState
 from drivers.capabilities import PrecisionLanding
+
+#: a setpoint as the guards let it go: (setpoint, the newest telemetry, step, phase) → setpoint
+Guard = Callable[[Setpoint, VehicleState | None, str, str], Setpoint]
 
 
 class SetpointStream:
@@ -23,9 +27,11 @@ class SetpointStream:
     streaming stops, and the vehicle's own offboard-loss failsafe takes over."""
 
     def __init__(self, flight: Flight, fence: Geofence, on_breach: Callable[[str], None],
-                 quiet: Callable[[], bool]) -> None:
+                 quiet: Callable[[], bool], guard: Guard | None = None) -> None:
         self.flight = flight
         self.fence = fence
+        #: every setpoint, each time it is sent, as the guards let it go (the watch's)
+        self.guard: Guard = guard or (lambda setpoint, state, step, phase: setpoint)
         self.on_breach = on_breach  # a setpoint the geofence refused: the failsafes act
         self.quiet = quiet  # telemetry is silent or lost: nothing is re-sent
         self.intent: Intent | None = None
@@ -64,19 +70,21 @@ class SetpointStream:
     async def send(self, intent: Intent) -> None:
         f = self.flight
         state = f.state
+        # guarded at every send, not once: the vehicle moves, and zones are found, meanwhile
+        setpoint = self.guard(intent.setpoint, state, intent.step, intent.phase)
         if state is not None and self.fence.settings.active:
-            why = self.fence.check(intent.setpoint, state, f.vehicle.home_ned_m)
+            why = self.fence.check(setpoint, state, f.vehicle.home_ned_m)
             if why is not None:  # nothing goes out; the control loop hands over to the fallback
                 self.on_breach(why)
                 self.intent = None
                 return
-        await f.vehicle.send_setpoint(intent.setpoint)
+        await f.vehicle.send_setpoint(setpoint)
         now = f.clock.now()
         self.last_send_s = now
         f.stats.setpoints_sent += 1
         if not intent.sent:
             intent.sent = True
-            sp = intent.setpoint
+            sp = setpoint  # (as it went out)
             latency = None if intent.source_frame_time_s is None \
                 else (now - intent.source_frame_time_s) * 1e3
             record = {

@@ -98,6 +98,10 @@ class RunStats:
     loop_lag_max_ms: float | None = None
     loop_stalls: int = 0  # the loop silent for runtime.loop_stall_s or longer
     armed: bool = False  # the vehicle was armed at some time during the run (it flew)
+    #: the setpoint guards' interventions (autopilot.watch: acting on one subject, a zone,
+    #: as long as it lasts) and the setpoints they changed
+    guard_interventions: int = 0
+    guarded_setpoints: int = 0
 
 
 @dataclass(slots=True)

@@ -25,6 +25,7 @@ from autopilot.runtime.planner import PlanningWorker
 from autopilot.runtime.readout import Readout
 from autopilot.runtime.recorder import MissionRecorder
 from autopilot.runtime.telemetry import TelemetryIntake
+from autopilot.runtime.watch import Watch
 from autopilot.status import MissionStatus
 from autopilot.steps import step_kind
 from autopilot.watchdog import LoopWatchdog
@@ -64,9 +65,12 @@ class Runtime:
         fence = make_fence(f)
         self.telemetry = TelemetryIntake(f, recorder, [])
         self.failsafes = failsafes = Failsafes(f, recorder, self.telemetry, fence)
-        self.perception = PerceptionLanes(f, specs.values(), failsafes.fail_step)
-        self.telemetry.consumers += [self.photos.add_state, self.perception.add_state]
-        self.setpoints = SetpointStream(f, fence, failsafes.fence_breached, failsafes.quiet)
+        self.watch = Watch(f, recorder)
+        self.perception = PerceptionLanes(f, specs.values(), failsafes.fail_step, self.watch)
+        self.telemetry.consumers += [self.photos.add_state, self.perception.add_state,
+                                     self.watch.add_state]
+        self.setpoints = SetpointStream(f, fence, failsafes.fence_breached, failsafes.quiet,
+                                        self.watch.guard)
         self.commands = VehicleCommands(f, recorder, self.setpoints)
         self.desk = GoalDesk(f, goals, recorder, self.perception, self.photos, self._offload,
                              self._control_by)

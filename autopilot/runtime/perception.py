@@ -1,6 +1,7 @@
 """Perception lanes: what the running step sees. Its pipelines, grouped by camera into lanes
 (a detection task and an estimation task per camera in use), the tracks they keep, and the
-extra sensor streams (UWB, the rover's reports) the pipelines that take them are fed."""
+extra sensor streams (UWB, the rover's reports) the pipelines that take them are fed. Each
+frame a lane receives is then shown to the watch's watchers (:mod:`autopilot.runtime.watch`)."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ import logging
 import time
 from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import ThreadPoolExecutor
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -22,6 +24,9 @@ from autopilot.runtime.flight import Flight, Lane, ProcessedFrame, Track
 from drivers.base import Frame, VehicleState
 from drivers.capabilities import SENSOR_STREAMS
 from drivers.threads import lower_this_thread
+
+if TYPE_CHECKING:
+    from autopilot.runtime.watch import Watch
 
 log = logging.getLogger(__name__)
 
@@ -65,8 +70,10 @@ class PerceptionLanes:
     a later step uses the same pipeline); only the lanes the running step uses run."""
 
     def __init__(self, flight: Flight, specs: Iterable[PipelineSpec],
-                 fail_step: Callable[[str], None]) -> None:
+                 fail_step: Callable[[str], None], watch: Watch | None = None) -> None:
         self.flight = flight
+        #: the watchers that look at every frame a lane receives, after its pipelines
+        self.watch = watch
         self.pipelines: dict[str, Pipeline] = {}
         self.tracks: dict[str, Track] = {}
         self.group: asyncio.TaskGroup | None = None  # (the run's, while it runs)
@@ -215,6 +222,8 @@ class PerceptionLanes:
                     record.update(processing_ms=elapsed_ms, received_s=received,
                                   detected_s=detected)
                     f.log.write(ch.detection_topic(pipeline.name), frame.time_s, record)
+                if self.watch is not None:  # (the step's estimate is on its way already)
+                    await self.watch.look(frame, self._pool)
 
     async def _estimation(self, lane: Lane) -> None:
         while True:

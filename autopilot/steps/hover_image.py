@@ -34,7 +34,7 @@ from autopilot.flightlog.metrics import (
 from autopilot.flightlog.truth import truth_table
 from autopilot.perception.image_pipeline import image_spec
 from autopilot.status import register_status
-from autopilot.steps.land_pad import search_footprint_per_m
+from autopilot.steps.land_pad import search_footprint_per_m, search_warnings, within_ceiling
 from autopilot.steps.registry import (
     ESTIMATE_FIGURES,
     Figure,
@@ -53,7 +53,8 @@ def _behavior(params: HoverImageParams, ctx: StepContext) -> HoverImage:
     footprint = search_footprint_per_m(ctx, config.perception.image.camera,
                                        "perception.image.camera")
     f = config.control.follow
-    return HoverImage(params, HoverSettings(f.lost_after_s, f.lost_timeout_s, footprint))
+    return HoverImage(within_ceiling(params, config),
+                      HoverSettings(f.lost_after_s, f.lost_timeout_s, footprint))
 
 
 def _yaw(q) -> float:
@@ -144,7 +145,7 @@ IN_PROGRESS = register_status(17, "hover image in progress")
 COMPLETED = register_status(18, "hover image completed")
 
 register(StepKind(
-    "hover_image", HoverImageParams, _behavior,
+    "hover_image", HoverImageParams, _behavior, warnings=search_warnings,
     pipelines=lambda params, config: (image_spec(config, params.image, params.size_m),),
     metrics=hover_metrics,
     summary=((Figure("hover", "rms_horizontal_error_m", "horizontal error over the image RMS",

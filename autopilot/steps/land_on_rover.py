@@ -348,6 +348,7 @@ register(StepKind(
               Figure("relative", "lost_share", "rover lost (no estimate)", "%",
                      "of the step"))),
     report=("trajectory", "rover", "latency"), check=_check,
+    needs=lambda params, config: ("rover_link",),
     description="land on a moving rover's deck: UWB, its tag and its reports fused "
                 "(seed 004)",
     replay={"landing": LANDING_REPLAY_KEYS, "relative": None},

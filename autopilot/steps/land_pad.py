@@ -53,6 +53,37 @@ def search_footprint_per_m(ctx: StepContext, name: str, key: str) -> float:
     return width
 
 
+#: a search stays this far below the vehicle's own ceiling (``vehicle.max_altitude_m``)
+CEILING_MARGIN_M = 0.2
+
+
+def search_altitude_m(requested_m: float, config) -> float:
+    """The height a down-camera step searches at: as asked, but below the vehicle's own
+    ceiling (an AR.Drone's ``control:altitude_max``), which it could never climb to."""
+    ceiling = config.vehicle.max_altitude_m
+    if ceiling is None:
+        return requested_m
+    return min(requested_m, ceiling - CEILING_MARGIN_M)
+
+
+def search_warnings(params, config) -> tuple[str, ...]:
+    """A search asked above the vehicle's ceiling, said before the flight."""
+    used = search_altitude_m(params.search_altitude_m, config)
+    if used >= params.search_altitude_m:
+        return ()
+    return (f"search_altitude_m {params.search_altitude_m:g} m is above the vehicle's ceiling "
+            f"(vehicle.max_altitude_m {config.vehicle.max_altitude_m:g} m): it searches at "
+            f"{used:g} m, seeing less of the ground",)
+
+
+def within_ceiling(params, config):
+    """``params`` with the search altitude the vehicle can reach."""
+    used = search_altitude_m(params.search_altitude_m, config)
+    if used == params.search_altitude_m:
+        return params
+    return params.model_copy(update={"search_altitude_m": used})
+
+
 #: the step's landers (``lander``): ours, and seed 001's own logic (a baseline)
 LANDERS = {
     "ours": lambda params, settings, camera: LandPad(params, settings),
@@ -66,7 +97,7 @@ def _behavior(params: LandPadParams, ctx: StepContext) -> Behavior:
     footprint = search_footprint_per_m(ctx, config.perception.pad.camera,
                                        "perception.pad.camera")
     settings = LandPadSettings(config.control.follow.lost_after_s, footprint)
-    return LANDERS[params.lander](params, settings, camera)
+    return LANDERS[params.lander](within_ceiling(params, config), settings, camera)
 
 
 def _spec(params: LandPadParams, config):
@@ -155,6 +186,9 @@ COMPLETED = register_status(20, "land pad completed", stays_landed=True)
 
 register(StepKind(
     "land_pad", LandPadParams, _behavior, pipelines=_spec, metrics=landing_metrics,
+    warnings=search_warnings,
+    needs=lambda params, config: ("precision_landing",) if params.method == "px4_precland"
+    else (),
     summary=((Figure("landing", "on_pad", "on the pad"),
               Figure("landing", "error_m", "touchdown error", "m"),
               Figure("landing", "touchdown_speed_m_s", "touchdown speed", "m/s"),

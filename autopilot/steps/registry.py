@@ -56,6 +56,10 @@ def _no_warnings(params: Params, config: AppConfig) -> tuple[str, ...]:
     return ()
 
 
+def _no_needs(params: Params, config: AppConfig) -> tuple[str, ...]:
+    return ()
+
+
 @dataclass(frozen=True, slots=True)
 class Figure:
     """One number the terminal shows of a finished step: ``key`` of its metric group
@@ -147,6 +151,10 @@ class StepKind:
     endless: Callable[[Params], bool] = lambda params: False
     #: example parameters, for the goal API's documentation (the first kind with one is shown)
     example: Mapping[str, Any] | None = None
+    #: what a step with these parameters needs of its vehicle beyond the vehicle interface
+    #: (names in :data:`drivers.capabilities.NEEDS`): a vehicle that lacks one is refused
+    #: before takeoff
+    needs: Callable[[Params, AppConfig], tuple[str, ...]] = _no_needs
 
 
 STEP_KINDS: dict[str, StepKind] = {}

@@ -520,12 +520,30 @@ ORBIT_CODES = (register_status(6, "images in progress"), register_status(7, "ima
 SURVEY_CODES = (register_status(10, "coverage in progress"),
                 register_status(11, "coverage completed"))
 
+
+def _frame_needs(params) -> tuple[str, ...]:
+    return ("rover_link",) if getattr(params, "frame", "world") == "rover" else ()
+
+
+def _goto_needs(params, config: AppConfig) -> tuple[str, ...]:
+    return (("global_position",) if params.latlon is not None else ()) + _frame_needs(params)
+
+
+def _orbit_needs(params, config: AppConfig) -> tuple[str, ...]:
+    # geotagged photos, or a centre on Earth
+    on_earth = params.images or params.center_latlon is not None
+    return (("global_position",) if on_earth else ()) + _frame_needs(params)
+
+
+def _survey_needs(params, config: AppConfig) -> tuple[str, ...]:
+    return ("global_position", *_frame_needs(params))  # its photos are geotagged
+
 register(StepKind(
     "goto", GotoParams, _goto, check=_check_goto, metrics=goto_metrics, reach=_goto_reach,
     summary=((Figure("goto", "final_error_m", "final position error", "m"),
               Figure("goto", "rms_cross_track_m", "cross-track error RMS", "m"),
               Figure("goto", "rms_cross_track_nav_m", "as navigation saw it RMS", "m")),),
-    pipelines=_frame_pipelines,
+    pipelines=_frame_pipelines, needs=_goto_needs,
     report=("trajectory", "path"), status=GOTO_CODES,
     description="fly a straight line to position_m (or latlon) at speed_m_s"))
 register(StepKind(
@@ -537,7 +555,7 @@ register(StepKind(
               Figure("orbit", "rms_navigation_error_m", "navigation error RMS", "m"),
               Figure("orbit", "photos", "photos"), Figure("orbit", "images_planned", "of"),
               Figure("orbit", "centre_in_frame", "with the centre in frame")),),
-    pipelines=_frame_pipelines,
+    pipelines=_frame_pipelines, needs=_orbit_needs,
     report=("trajectory", "path"), status=ORBIT_CODES,
     photo_camera=lambda params, config: _photo_camera(params, config) if params.images
     else None,
@@ -550,7 +568,7 @@ register(StepKind(
               Figure("survey", "rms_navigation_error_m", "navigation error RMS", "m"),
               Figure("survey", "coverage", "coverage", "%"),
               Figure("survey", "photos", "photos"), Figure("survey", "photos_planned", "of")),),
-    reach=_survey_reach,
+    reach=_survey_reach, needs=_survey_needs,
     pipelines=_frame_pipelines,
     report=("trajectory", "path"), status=SURVEY_CODES, photo_camera=_photo_camera,
     plan_info=_survey_info,

@@ -14,7 +14,7 @@ point group (:mod:`autopilot.plugins`).
 from importlib import import_module
 
 #: the shipped kinds' modules, in the order they are registered
-SHIPPED = ("ball", "marker", "image", "pad", "rover")
+SHIPPED = ("ball", "marker", "image", "pad", "rover", "keep_out")
 
 for _name in SHIPPED:
     import_module(f"{__name__}.{_name}")

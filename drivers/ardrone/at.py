@@ -37,7 +37,9 @@ MAX_DATAGRAM = 1024
 COMMANDS = frozenset({"REF", "PCMD", "PCMD_MAG", "FTRIM", "CALIB", "CONFIG", "CONFIG_IDS",
                       "COMWDG", "CTRL", "LED", "ANIM"})
 
-_COMMAND = re.compile(r'AT\*([A-Z_]+)=(\d+)((?:,(?:-?\d+|"[^"\n]*"))*)$')
+#: (an empty last argument, ``AT*COMWDG=5,``, is taken as none: a client that joins its
+#: arguments after a comma sends it for commands without any, and the drone takes them)
+_COMMAND = re.compile(r'AT\*([A-Z_]+)=(\d+)((?:,(?:-?\d+|"[^"\n]*"))*),?$')
 _ARGUMENT = re.compile(r',(-?\d+|"[^"\n]*")')
 
 

@@ -45,12 +45,12 @@ from drivers.mavlink.face_link import (
     FaceLink,
     FaceStats,
     FaceStreams,
-    LinkImpairment,
 )
 from drivers.mavlink.face_mission import MissionServer
 from drivers.mavlink.face_params import ParamServer
 from drivers.mavlink.face_telemetry import DEFAULT_RATES_HZ, TelemetryEncoder, base_mode
 from drivers.mavlink.signing import Signing
+from drivers.sim.link_impairment import LinkImpairment
 
 log = logging.getLogger(__name__)
 

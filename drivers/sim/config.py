@@ -332,6 +332,10 @@ class SimConfig(_Model):
     #: Which world: ``realistic`` (config.yaml's values) or ``ideal`` (the kind world laid over
     #: them from autopilot/profiles/ideal.yaml); see autopilot.config.PROFILES.
     profile: Literal["realistic", "ideal"]
+    #: Which autopilot the simulated vehicle runs (drivers/sim/firmwares.py): ``px4`` (the
+    #: PX4-like flight stack, spoken to over MAVLink) or ``ardrone`` (a Parrot AR.Drone 2.0's
+    #: firmware, spoken to over its SDK protocol; laid over by autopilot/vehicles/ardrone.yaml).
+    firmware: Literal["px4", "ardrone"] = "px4"
     seed: Annotated[int, Field(ge=0)]
     #: Where the local origin (the vehicle's start, PX4's EKF origin and first home) is on
     #: Earth: latitude °, longitude °, altitude above mean sea level m.

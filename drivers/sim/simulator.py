@@ -35,7 +35,7 @@ from drivers.sim.captures import CameraCaptures, Photo
 from drivers.sim.config import SimConfig
 from drivers.sim.fault_effects import FaultEffects
 from drivers.sim.faults import FaultSchedule
-from drivers.sim.flight.flight_stack import FlightStack
+from drivers.sim.firmwares import make_firmware
 from drivers.sim.flight.navigator import NavEvent
 from drivers.sim.flight.params import Parameters, config_defaults
 from drivers.sim.model import build_model
@@ -107,9 +107,8 @@ class Simulator:
         self._dt_ctrl = self.dt * self._rate_div
         self.params = Parameters(config_defaults(config))
         self.origin = GlobalOrigin(*config.global_origin)
-        self.flight = FlightStack(config.flight_stack, self.airframe,
-                                  config.flight_stack.motor_idle_fraction, self.params,
-                                  self.origin)
+        #: the vehicle's autopilot: the firmware ``sim.firmware`` names
+        self.flight = make_firmware(config, self.airframe, self.params, self.origin)
         self.wind = WindModel(config.wind, rng_wind)
         self.drag = DragModel(config.vehicle)
 
@@ -276,7 +275,7 @@ class Simulator:
             while self.flight.events:
                 when, text = self.flight.events.popleft()
                 self._outbox.put(when, "event", text)
-            nav_events = self.flight.navigator.events  # mission and camera events, drained
+            nav_events = self.flight.nav_events  # mission and camera events, drained
             while nav_events:
                 self._nav_event(nav_events.popleft())
         else:

@@ -64,6 +64,15 @@ def test_a_datagram_of_several_commands_either_line_end():
     assert config.args == ("video:video_channel", "1")
 
 
+def test_an_empty_last_argument_is_none():
+    """The ``ardrone`` 0.2.1 client sends ``AT*NAME=seq,`` for a command without arguments."""
+    commands = at.parse(b"AT*COMWDG=5,\rAT*FTRIM=6,\rAT*REF=7,290718208,\r")
+    assert [(c.name, c.seq, c.args) for c in commands] == [
+        ("COMWDG", 5, ()), ("FTRIM", 6, ()), ("REF", 7, (290718208,))]
+    with pytest.raises(at.AtError):
+        at.parse(b"AT*REF=7,,290718208\r")
+
+
 @pytest.mark.parametrize("datagram", [
     b"AT*PCMD=1,1,0,0,0", b"PCMD=1,1", b"AT*FLY=1,0\r", b"AT*REF=x\r", b"AT*REF=1,99999999999\r",
     b'AT*CONFIG=1,"a\r', b"AT*REF=1,\xff\r", b"AT*COMWDG=1" + b"," + b"1" * 1100])

@@ -97,6 +97,7 @@ class FlightStack:
         self.commander = Commander(self.params, self._event)
         self.navigator = Navigator(self.params, self.origin, request_mode=self._auto_mode,
                                    complete=self.commander.complete, event=self._event)
+        self.nav_events = self.navigator.events  # missions' and the camera's, drained by the sim
         self.commander.on_mode_change = self._mode_changed
         self.commander.on_disarm = self._disarmed
         self.params.on_change(lambda name, value: self._apply_params())

@@ -1,0 +1,188 @@
+"""Independent AR.Drone 2.0 client libraries from PyPI, unmodified, against ``autopilot sim
+--firmware ardrone`` (a process of its own, real time): pyardrone 0.6.1 and ardrone-sdk 0.4.4
+each read navdata, take off, move, hover, take video frames and land, as their own examples
+do. Each client runs in a process of its own and prints what it saw as JSON.
+
+ardrone-sdk's own video decoder reads two PaVE fields at the wrong offsets (it takes the
+header size for the payload's, and the codec for the header's), so it never decodes a frame
+from any drone: the test asserts that, and then that the same library decodes our frames once
+its script sets those two offsets right (module attributes, as its users would; the library's
+files are untouched)."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import pytest
+
+from drivers.ardrone.urls import ArdronePorts
+
+pytestmark = pytest.mark.serial
+
+INSTANCE = 30
+PORTS = ArdronePorts().offset(10 * INSTANCE)
+READY_LINE = "AR.Drone 2.0-compatible simulated drone on"
+
+
+@pytest.fixture(scope="module")
+def drone():
+    """``autopilot sim --firmware ardrone`` on its own ports, until the module ends."""
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "autopilot", "sim", "--firmware", "ardrone", "--instance",
+         str(INSTANCE)], stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True, env=env)
+    lines = []
+    deadline = time.monotonic() + 180
+    while time.monotonic() < deadline:
+        line = proc.stderr.readline()
+        if not line:
+            break
+        lines.append(line)
+        if READY_LINE in line:
+            break
+    else:
+        proc.kill()
+        pytest.fail("the simulated drone did not start: " + "".join(lines))
+    if proc.poll() is not None:
+        pytest.fail("the simulated drone exited: " + "".join(lines) + proc.stderr.read())
+    yield proc
+    proc.terminate()
+    try:
+        proc.wait(60)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+
+
+def _run(script: str, timeout_s: float = 150) -> dict:
+    result = subprocess.run([sys.executable, "-c", textwrap.dedent(script)],
+                            capture_output=True, text=True, timeout=timeout_s,
+                            cwd=Path(__file__).parent)
+    assert result.returncode == 0, result.stderr[-3000:]
+    return json.loads(result.stdout.strip().splitlines()[-1])
+
+
+PYARDRONE = f"""
+import json, time
+from pyardrone import ARDrone, at
+
+def wait(cond, timeout_s, what):
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end:
+        if cond():
+            return
+        time.sleep(0.03)
+    raise SystemExit(what + ": timed out")
+
+seen = {{}}
+drone = ARDrone(host="127.0.0.1", at_port={PORTS.at}, navdata_port={PORTS.navdata},
+                video_port={PORTS.video})
+try:
+    assert drone.navdata_ready.wait(30), "no navdata"
+    drone.send(at.CONFIG("general:navdata_demo", True))
+    wait(lambda: hasattr(drone.navdata, "demo"), 30, "demo navdata")
+    seen["battery_percent"] = drone.navdata.demo.vbat_flying_percentage
+    seen["altitude_before_mm"] = drone.navdata.demo.altitude
+    seen["fly_before"] = bool(drone.state.fly_mask)
+    drone.takeoff()
+    wait(lambda: drone.state.fly_mask, 30, "flying")
+    wait(lambda: drone.navdata.demo.altitude > 700, 30, "climbing")
+    seen["altitude_flying_mm"] = drone.navdata.demo.altitude
+    vx = []
+    for _ in range(60):
+        drone.move(forward=0.5)
+        vx.append(drone.navdata.demo.vx)
+        time.sleep(0.03)
+    seen["max_vx_mm_s"] = max(vx)
+    drone.hover()
+    assert drone.video_ready.wait(60), "no video"
+    wait(lambda: drone.frame is not None, 60, "a decoded frame")
+    seen["frame_shape"] = list(drone.frame.shape)
+    drone.land()
+    wait(lambda: not drone.state.fly_mask, 60, "landed")
+    seen["altitude_landed_mm"] = drone.navdata.demo.altitude
+finally:
+    drone.close()
+print(json.dumps(seen))
+"""
+
+
+def test_pyardrone_flies_it_unmodified(drone) -> None:
+    seen = _run(PYARDRONE)
+    assert seen["battery_percent"] == 100
+    assert not seen["fly_before"]
+    assert seen["altitude_before_mm"] < 200
+    assert 700 < seen["altitude_flying_mm"] < 1400
+    assert seen["max_vx_mm_s"] > 300  # half the tilt, forward
+    assert seen["frame_shape"][1:] == [640, 3]
+    assert seen["frame_shape"][0] in (360, 368)  # (it shows the coded size: 368)
+    assert seen["altitude_landed_mm"] < 200
+
+
+ARDRONE_SDK = f"""
+import json, sys, time
+import ardrone
+import ardrone.constant
+ardrone.constant.NAVDATA_PORT = {PORTS.navdata}
+ardrone.constant.VIDEO_PORT = {PORTS.video}
+ardrone.constant.COMMAND_PORT = {PORTS.at}
+import ardrone.video
+FIX = sys.argv[1:] == ["fix"]
+if FIX:  # its decoder's two PaVE offsets, set right from the script
+    ardrone.video._F_HEADER_SIZE, ardrone.video._F_PAYLOAD_SIZE = 3, 4
+
+def wait(cond, timeout_s, what):
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end:
+        if cond():
+            return True
+        time.sleep(0.05)
+    return False
+
+seen = {{}}
+drone = ardrone.ARDrone("127.0.0.1")
+try:
+    assert wait(lambda: "demo" in drone.navdata, 30, "demo"), "no demo navdata"
+    seen["battery_percent"] = drone.navdata["demo"]["battery"]
+    first = drone.image
+    drone.takeoff()
+    assert wait(lambda: drone.navdata["state"]["fly"], 30, "flying"), "not flying"
+    assert wait(lambda: drone.navdata["demo"]["altitude"] > 700, 30, "up"), "not up"
+    seen["altitude_flying_mm"] = drone.navdata["demo"]["altitude"]
+    drone.move(0.0, -0.5, 0.0, 0.0)  # forward, held until the next command
+    vx = []
+    for _ in range(40):
+        vx.append(drone.navdata["demo"]["vx"])
+        time.sleep(0.05)
+    seen["max_vx_mm_s"] = max(vx)
+    drone.hover()
+    seen["decoded"] = wait(lambda: drone.image is not first, 20 if FIX else 8, "a frame")
+    seen["image_size"] = list(drone.image.size)
+    drone.land()
+    assert wait(lambda: not drone.navdata["state"]["fly"], 60, "landed"), "not landed"
+    seen["altitude_landed_mm"] = drone.navdata["demo"]["altitude"]
+finally:
+    drone.halt()
+print(json.dumps(seen))
+"""
+
+
+def test_ardrone_sdk_flies_it_unmodified(drone) -> None:
+    seen = _run(ARDRONE_SDK)
+    assert seen["battery_percent"] == 100
+    assert 700 < seen["altitude_flying_mm"] < 1400
+    assert seen["max_vx_mm_s"] > 300
+    assert seen["altitude_landed_mm"] < 200
+    assert not seen["decoded"]  # its own decoder's bug (see the module's notes)
+
+
+def test_ardrone_sdk_decodes_our_video_with_its_offsets_set_right(drone) -> None:
+    script = ARDRONE_SDK.replace("FIX = sys.argv[1:] == [\"fix\"]", "FIX = True")
+    seen = _run(script)
+    assert seen["decoded"]
+    assert seen["image_size"][0] == 640

@@ -1,0 +1,59 @@
+"""The seed missions on the simulated AR.Drone 2.0 in process (sim.firmware: ardrone), in
+lockstep: the AR.Drone driver flies the simulator's AR.Drone firmware through the protocol's
+bytes. Scored against the simulator's truth (the flight's own metrics); a mission that needs a
+global position is refused before anything flies."""
+
+from __future__ import annotations
+
+import asyncio
+
+import pytest
+
+from autopilot.config import ConfigError
+from autopilot.mission import load_mission
+from autopilot.run import fly, make_vehicle
+
+ARDRONE = ["sim.firmware=ardrone"]
+
+
+def _fly(mission: str, overrides: list[str]) -> dict:
+    plan = load_mission(mission, [*ARDRONE, *overrides])
+
+    async def main():
+        summary = await fly(plan, None)
+        orphans = [t for t in asyncio.all_tasks() if t is not asyncio.current_task()]
+        return summary, orphans
+
+    summary, orphans = asyncio.run(main())
+    assert orphans == []
+    return summary
+
+
+def _step(summary: dict, name: str) -> dict:
+    return next(s for s in summary["metrics"]["steps"] if s["name"] == name)
+
+
+def test_follow_ball_on_the_ardrone() -> None:
+    summary = _fly("follow_ball", ["steps.1.follow_ball.duration_s=15"])
+    assert summary["status"] == "completed", summary.get("reason")
+    follow = _step(summary, "follow_ball")["follow"]
+    assert follow["detection_rate"] > 0.95
+    assert follow["rms_range_error_m"] < 0.4  # (PX4-like vehicle: ~0.06 m; a slower drone)
+
+
+def test_land_pad_on_the_ardrone_searches_below_its_ceiling() -> None:
+    plan = load_mission("land_pad", ARDRONE)
+    assert any("vehicle's ceiling" in w for w in plan.warnings)
+    summary = _fly("land_pad", [])
+    assert summary["status"] == "completed", summary.get("reason")
+    landing = _step(summary, "land_pad")["landing"]
+    assert landing["on_pad"]
+    assert landing["error_m"] < 0.3
+
+
+def test_a_survey_is_refused_before_takeoff() -> None:
+    plan = load_mission("survey", ARDRONE)
+    vehicle, _ = make_vehicle(plan)
+    assert vehicle.has_global_position is False
+    with pytest.raises(ConfigError, match=r"steps\[1\]\.survey.*global_position"):
+        asyncio.run(fly(plan, None))
