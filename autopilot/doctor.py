@@ -79,15 +79,66 @@ async def run_doctor(plan: MissionPlan, *, connect: str | None = None,
     except OSError as exc:
         add("link", "FAIL", str(exc))
         return checks
+    from autopilot.vehicle_kinds import DRIVER_KINDS
+
     try:
-        await _link_checks(vehicle, url, duration_s, add, signing=bool(
-            signing_key or link.signing_key))
-        setups = vehicle.camera_setups if isinstance(vehicle, VideoInput) else {}
-        for name, setup in setups.items():
-            await _camera_checks(vehicle, name, setup.url, duration_s, setup.calibration, add)
+        await DRIVER_KINDS[plan.config.driver].doctor(
+            vehicle, plan, url, duration_s, add, signing=bool(signing_key or link.signing_key))
     finally:
         await vehicle.close()
     return checks
+
+
+async def mavlink_checks(vehicle, plan: MissionPlan, url: str, duration_s: float, add, *,
+                         signing: bool) -> None:
+    """A MAVLink vehicle's link, telemetry, time sync and health, and its cameras' streams."""
+    await _link_checks(vehicle, url, duration_s, add, signing=signing)
+    setups = vehicle.camera_setups if isinstance(vehicle, VideoInput) else {}
+    for name, setup in setups.items():
+        await _camera_checks(vehicle, name, setup.url, duration_s, setup.calibration, add)
+
+
+async def ardrone_checks(vehicle, plan: MissionPlan, url: str, duration_s: float, add, *,
+                         signing: bool) -> None:
+    """An AR.Drone 2.0's link (its firmware, read from its configuration), navdata rate,
+    battery and state, and each camera the mission uses (the one video stream switched to
+    it: its rate, size and delay)."""
+    from drivers.ardrone.config import parse_config_text
+
+    config = parse_config_text(getattr(vehicle.link, "config_text", b"") or b"")
+    version = config.get("general:num_version_soft")
+    add("link", "PASS" if version else "WARN",
+        f"AR.Drone 2.0 on {url}, firmware {version}" if version else
+        f"AR.Drone 2.0 on {url}; no configuration over TCP {vehicle.ports.config} (its "
+        "firmware unknown, its default limits assumed)")
+    samples = await _samples(vehicle, duration_s)
+    rate = len(samples) / duration_s
+    add("navdata", "PASS" if rate >= 12.0 else "WARN" if rate >= 5.0 else "FAIL",
+        f"{rate:.0f} Hz (demo navdata: 15 Hz); {vehicle.link.bad_packets} bad packets")
+    if samples:
+        s = samples[-1]
+        battery = s.battery.remaining_fraction
+        add("battery", "PASS" if battery >= 0.5 else "WARN" if battery >= 0.2 else "FAIL",
+            f"{battery * 100:.0f} %")
+        where = f"{'flying' if s.in_air else 'on the ground'}, mode {s.mode.value}"
+        add("vehicle", "PASS" if s.health.armable else "FAIL", where if s.health.armable else
+            f"{where}: cannot take off (its emergency state, or its battery low)")
+    for name in plan.cameras_used():
+        if name in vehicle.cameras:
+            await _camera_checks(vehicle, name, f"{url} (tcp {vehicle.ports.video})",
+                                 duration_s, None, add, timing="the drone's PaVE timestamps")
+    add("security", "WARN" if "127.0.0.1" not in url and "localhost" not in url else "PASS",
+        "the AR.Drone's protocol has no authentication: anyone on its Wi-Fi can fly it")
+
+
+async def _samples(vehicle, duration_s: float) -> list:
+    samples = []
+    async with contextlib.aclosing(vehicle.telemetry(buffer=256)) as stream:
+        with contextlib.suppress(TimeoutError):
+            async with asyncio.timeout(duration_s):
+                async for state in stream:
+                    samples.append(state)
+    return samples
 
 
 async def _link_checks(vehicle, url: str, duration_s: float, add, *, signing: bool) -> None:
@@ -143,7 +194,7 @@ async def _link_checks(vehicle, url: str, duration_s: float, add, *, signing: bo
 
 
 async def _camera_checks(vehicle, name: str, url: str, duration_s: float,
-                         calibration: str | None, add) -> None:
+                         calibration: str | None, add, timing: str | None = None) -> None:
     info = vehicle.cameras[name]
     frames = []
     subscribed = vehicle.clock.now()
@@ -177,8 +228,7 @@ async def _camera_checks(vehicle, name: str, url: str, duration_s: float,
         f"(autopilot calibrate) and pass --calibration {name}=FILE")
     delays = sorted(arrived - frame.time_s for frame, arrived in frames)
     source = vehicle.video_sources.get(name) if isinstance(vehicle, VideoInput) else None
-    timing = getattr(source, "timing", None)
-    mode = str(getattr(timing, "mode", "arrival"))
+    mode = timing or str(getattr(getattr(source, "timing", None), "mode", "arrival"))
     detail = f"capture times from {mode}; capture → arrival p50 " \
              f"{delays[len(delays) // 2] * 1e3:.0f} ms"
     add("capture times", "PASS" if "arrival" not in mode else "WARN",

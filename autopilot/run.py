@@ -155,19 +155,49 @@ def make_mavlink_vehicle(plan: MissionPlan, driver_class: type, *, connect: str 
 
 
 def make_ardrone_vehicle(plan: MissionPlan, *, connect: str | None = None,
+                         calibration: str | Path | Sequence[str] | None = None,
+                         warn: Callable[[str], None] | None = None,
                          **_unused) -> tuple[Vehicle, int | None]:
-    """A Parrot AR.Drone 2.0 over its SDK protocol (``ardrone://HOST``)."""
+    """A Parrot AR.Drone 2.0 over its SDK protocol (``ardrone://HOST``): its cameras the
+    configuration's, with the intrinsics of their calibration files (``calibration``, or
+    ``vehicle.cameras.NAME.calibration``) or, uncalibrated, the nominal ones and a warning."""
     from drivers.ardrone.driver import ArdroneDriver
     from drivers.ardrone.urls import ArdroneUrlError, parse_ardrone_url
+    from drivers.calibration import CalibrationError, load_calibration
     from drivers.sim.model import camera_info
 
     url = connect or plan.config.link.connect
+    problems = []
     try:
         parse_ardrone_url(url)
     except ArdroneUrlError as exc:
-        raise ConfigError([Problem("command line", None, "--connect", str(exc))]) from None
+        problems.append(Problem("command line", None, "--connect", str(exc)))
     cameras = {name: camera_info(name, cam) for name, cam in plan.config.vehicle.cameras.items()
                if cam.enabled}
+    used = plan.cameras_used()
+    values = [str(calibration)] if isinstance(calibration, (str, Path)) else calibration
+    files = {name: cam.calibration for name, cam in plan.config.vehicle.cameras.items()
+             if cam.enabled and cam.calibration}
+    try:
+        files.update(parse_camera_options(values, "--calibration", used[0] if used else None))
+    except ConfigError as exc:
+        problems += exc.problems
+    for name, file in files.items():
+        if name not in cameras:
+            problems.append(Problem("command line", None, "--calibration",
+                                    f"{name}={file}: the AR.Drone has no camera {name!r}"))
+            continue
+        try:
+            cameras[name] = dataclasses.replace(cameras[name],
+                                                intrinsics=load_calibration(Path(file)))
+        except CalibrationError as exc:
+            problems.append(Problem("command line", None, "--calibration", str(exc)))
+    if problems:
+        raise ConfigError(problems)
+    for name in used:
+        if name not in files and warn is not None:
+            warn(f"camera {name}: uncalibrated: the nominal pinhole of vehicle.cameras.{name} "
+                 f"(calibrate it: autopilot calibrate, then --calibration {name}=FILE)")
     return ArdroneDriver(url, cameras=cameras), None
 
 

@@ -42,6 +42,8 @@ class DriverKind:
     check_connect: Callable[[str, str, str | None, bool], None] | None = None
     default_connect: Callable[[Any], str] | None = None
     summary: str = ""
+    #: ``autopilot doctor``'s checks of a connected vehicle (see :mod:`autopilot.doctor`)
+    doctor: Callable[..., Any] | None = None
 
     @property
     def simulated(self) -> bool:
@@ -74,6 +76,18 @@ def _build_ardrone(plan: MissionPlan, **kwargs):
     return make_ardrone_vehicle(plan, **kwargs)
 
 
+async def _doctor_mavlink(*args, **kwargs):
+    from autopilot.doctor import mavlink_checks
+
+    await mavlink_checks(*args, **kwargs)
+
+
+async def _doctor_ardrone(*args, **kwargs):
+    from autopilot.doctor import ardrone_checks
+
+    await ardrone_checks(*args, **kwargs)
+
+
 def _check_mavlink(option: str, url: str, key: str | None, insecure: bool) -> None:
     from autopilot.cli.run import check_network_exposure
 
@@ -103,12 +117,14 @@ def _check_ardrone(option: str, url: str, key: str | None, insecure: bool) -> No
 DRIVER_KINDS: dict[str, DriverKind] = {kind.name: kind for kind in (
     DriverKind("sim", _build_sim, None, summary="the simulator, in process"),
     DriverKind("mavsdk", _build_mavsdk, "px4", _check_mavlink,
-               lambda config: config.link.connect, "a MAVLink vehicle through MAVSDK"),
+               lambda config: config.link.connect, "a MAVLink vehicle through MAVSDK",
+               _doctor_mavlink),
     DriverKind("pymavlink", _build_pymavlink, "px4", _check_mavlink,
-               lambda config: config.link.connect, "a MAVLink vehicle through pymavlink"),
+               lambda config: config.link.connect, "a MAVLink vehicle through pymavlink",
+               _doctor_mavlink),
     DriverKind("ardrone", _build_ardrone, "ardrone", _check_ardrone,
                lambda config: config.link.connect,
-               "a Parrot AR.Drone 2.0 over its SDK protocol"),
+               "a Parrot AR.Drone 2.0 over its SDK protocol", _doctor_ardrone),
 )}
 DRIVER_NAMES = tuple(DRIVER_KINDS)
 

@@ -8,15 +8,19 @@ import json
 from pathlib import Path
 
 from autopilot.cli.common import EXIT_FAILED, EXIT_OK, Command, add_set_option
+from autopilot.vehicle_kinds import DRIVER_KINDS
 
 
 def arguments(doctor: argparse.ArgumentParser) -> None:
     doctor.add_argument("--mission", default="follow_ball", metavar="NAME|FILE",
                         help="the mission whose cameras and settings to check (default "
                         "follow_ball)")
-    doctor.add_argument("--driver", choices=("mavsdk", "pymavlink"),
-                        help="the MAVLink driver (default: the configuration's, else pymavlink)")
-    doctor.add_argument("--connect", metavar="URL", help="MAVLink connection (as for run)")
+    doctor.add_argument("--driver", choices=[k.name for k in DRIVER_KINDS.values()
+                                             if k.doctor is not None],
+                        help="the vehicle's driver (default: the configuration's, else "
+                        "pymavlink); ardrone: a Parrot AR.Drone 2.0")
+    doctor.add_argument("--connect", metavar="URL",
+                        help="the vehicle's address (as for run: MAVLink, or ardrone://HOST)")
     doctor.add_argument("--video", action="append", metavar="[CAMERA=]URL",
                         help="a camera's stream (as for run)")
     doctor.add_argument("--calibration", action="append", metavar="[CAMERA=]FILE",
@@ -53,7 +57,8 @@ def run(args: argparse.Namespace) -> int:
 
 COMMAND = Command(
     "doctor", "preflight check of a companion computer: MAVLink link (heartbeat, rates, time "
-    "sync), cameras (frames, rate, calibration), clock, disk", arguments, run, flight=True,
+    "sync) or an AR.Drone's (navdata, firmware, battery), cameras (frames, rate, "
+    "calibration), clock, disk", arguments, run, flight=True,
     description="Preflight check of a companion computer against its vehicle: the MAVLink "
     "link (heartbeat, message rates, time sync), each camera the mission uses (frames, rate, "
     "calibration), the clock and the disk. Exit code 1 if any check fails.")

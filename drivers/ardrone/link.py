@@ -73,6 +73,8 @@ class UdpLink:
         self._at: asyncio.DatagramTransport | None = None
         self._wake: asyncio.Task | None = None
         self.last_navdata_s: float | None = None
+        #: the drone's configuration as it last sent it (empty: not read)
+        self.config_text = b""
         #: counts, for statistics
         self.bad_packets = 0
         self.foreign_datagrams = 0
@@ -174,6 +176,7 @@ class UdpLink:
             log.warning("AR.Drone at %s: configuration read failed (%s)", self.host, exc)
         finally:
             writer.close()
+        self.config_text = text
         return text
 
     async def open_video(self) -> tuple[asyncio.StreamReader, asyncio.StreamWriter]:
