@@ -25,14 +25,12 @@ from pathlib import Path
 from autopilot.config import AppConfig
 from autopilot.mission import Scenario
 from autopilot.scenario import build_world
-from drivers.ardrone.config import DroneConfig
 from drivers.ardrone.urls import ArdronePorts
 from drivers.ardrone.video import PaveEncoder
 from drivers.base import VehicleError
 from drivers.mavlink.common import cancel_all
-from drivers.sim.ardrone_face import ArdroneFace
+from drivers.sim.ardrone_engine import SimulatedArdrone
 from drivers.sim.driver import SimDriver
-from drivers.sim.flight.commander import CommandRejected
 from drivers.sim.link_impairment import LinkImpairment
 
 SLOW_WARNING_EVERY_S = 10.0
@@ -60,7 +58,6 @@ class ServerStats:
 
     datagrams: int = 0
     ignored: int = 0  # datagrams and connections from hosts other than the client's
-    rejected: int = 0  # commands the firmware refused
     link_dropped: int = 0  # lost to a link_loss fault (commands, navdata, video frames)
 
 
@@ -78,10 +75,9 @@ class ArdroneServer:
         self.video = video
         sim = vehicle.simulator
         self._sim = sim
-        self.face = ArdroneFace(command=self._queue, limits=sim.flight.limits,
-                                config=DroneConfig())
-        self.face.apply_all()
-        self._pending: list[tuple] = []
+        #: the drone's protocol engine on the simulator
+        self.drone = SimulatedArdrone(vehicle)
+        self.face = self.drone.face
         self._client_host: str | None = None
         self._navdata_addr: tuple | None = None
         self.stats = ServerStats()
@@ -93,7 +89,6 @@ class ArdroneServer:
         self._tasks: list[asyncio.Task] = []
         self._servers: list[asyncio.base_events.Server] = []
         self._config_writers: set[asyncio.StreamWriter] = set()
-        self._commands = asyncio.Queue()
 
     # -- lifecycle ---------------------------------------------------------------------------
 
@@ -108,11 +103,12 @@ class ArdroneServer:
         if self.video:
             self._servers.append(await asyncio.start_server(self._on_video_client, self.host,
                                                             self.ports.video))
-        self._tasks += [loop.create_task(self._run_commands(), name="ardrone-at"),
-                        loop.create_task(self._send_navdata(), name="ardrone-navdata")]
+        self.drone.start()
+        self._tasks.append(loop.create_task(self._send_navdata(), name="ardrone-navdata"))
 
     async def close(self) -> None:
         await cancel_all(self._tasks)
+        await self.drone.close()
         for server in self._servers:
             server.close()
         for writer in list(self._config_writers):
@@ -143,34 +139,9 @@ class ArdroneServer:
             self._take_at(data)
 
     def _take_at(self, data: bytes) -> None:
-        self.face.on_datagram(data)
+        self.drone.take(data)
         if self.face.take_config_request():
             self._write_config()
-        if self._pending:
-            self._commands.put_nowait(tuple(self._pending))
-            self._pending.clear()
-
-    def _queue(self, name: str, *args) -> None:
-        self._pending.append((name, *args))
-
-    async def _run_commands(self) -> None:
-        runner, sim = self.vehicle.runner, self._sim
-        while True:
-            batch = await self._commands.get()
-
-            def run(batch=batch) -> int:
-                refused = 0
-                for name, *args in batch:
-                    try:
-                        sim.command(name, *args)
-                    except CommandRejected:
-                        refused += 1
-                return refused
-
-            try:
-                self.stats.rejected += await runner.call(run)
-            except VehicleError:
-                return
 
     # -- navdata ----------------------------------------------------------------------------
 
@@ -179,21 +150,17 @@ class ArdroneServer:
             self._navdata_addr = addr
 
     async def _send_navdata(self) -> None:
-        vehicle, firmware = self.vehicle, self._sim.flight
-        async with contextlib.aclosing(vehicle.telemetry()) as states:
-            async for state in states:
-                addr = self._navdata_addr
-                if addr is None or self._navdata is None or self._navdata.transport is None:
-                    continue
-                status = await vehicle.runner.call(firmware.status)
-                packet = self.face.navdata(state, status)
-                transport = self._navdata.transport
-                fault = self.impairment.fault()
-                if fault is not None:
-                    self.impairment.carry(fault, lambda p=packet, a=addr, t=transport:
-                                          t.sendto(p, a))
-                else:
-                    transport.sendto(packet, addr)
+        async for packet in self.drone.navdata():
+            addr = self._navdata_addr
+            if addr is None or self._navdata is None or self._navdata.transport is None:
+                continue
+            transport = self._navdata.transport
+            fault = self.impairment.fault()
+            if fault is not None:
+                self.impairment.carry(fault, lambda p=packet, a=addr, t=transport:
+                                      t.sendto(p, a))
+            else:
+                transport.sendto(packet, addr)
 
     # -- configuration ----------------------------------------------------------------------
 

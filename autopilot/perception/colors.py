@@ -7,6 +7,11 @@ narrow in hue.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
+import cv2
+import numpy as np
+
 HsvRange = tuple[tuple[int, int, int], tuple[int, int, int]]
 
 #: name → (RGBA used to render it, HSV ranges that detect it)
@@ -25,3 +30,15 @@ ORANGEISH_RGBA = (
     (1.0, 0.17, 0.0, 1.0),  # red-orange
     (1.0, 0.75, 0.05, 1.0),  # amber
 )
+
+
+def color_mask(image_bgr: np.ndarray, hsv_ranges: Sequence[HsvRange], opening: np.ndarray,
+               closing: np.ndarray) -> np.ndarray:
+    """The pixels within any of ``hsv_ranges`` (255), opened then closed by the structuring
+    elements ``opening`` and ``closing`` (specks removed, holes filled)."""
+    hsv = cv2.cvtColor(image_bgr, cv2.COLOR_BGR2HSV)
+    mask = np.zeros(hsv.shape[:2], np.uint8)
+    for lo, hi in hsv_ranges:
+        mask |= cv2.inRange(hsv, np.array(lo, np.uint8), np.array(hi, np.uint8))
+    mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, opening)
+    return cv2.morphologyEx(mask, cv2.MORPH_CLOSE, closing)

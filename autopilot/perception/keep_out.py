@@ -28,7 +28,7 @@ import cv2
 import numpy as np
 
 from autopilot.estimation.pose_history import Pose
-from autopilot.perception.colors import HsvRange
+from autopilot.perception.colors import HsvRange, color_mask
 from autopilot.perception.pad import fit_circle
 from drivers.base import CameraInfo
 from drivers.camera_model import undistort_points
@@ -76,12 +76,7 @@ class DiscDetector:
         self._close = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (s.close_kernel_px,) * 2)
 
     def mask(self, image_bgr: np.ndarray) -> np.ndarray:
-        hsv = cv2.cvtColor(image_bgr, cv2.COLOR_BGR2HSV)
-        mask = np.zeros(hsv.shape[:2], np.uint8)
-        for lo, hi in self.settings.hsv_ranges:
-            mask |= cv2.inRange(hsv, np.array(lo, np.uint8), np.array(hi, np.uint8))
-        mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, self._open)
-        return cv2.morphologyEx(mask, cv2.MORPH_CLOSE, self._close)
+        return color_mask(image_bgr, self.settings.hsv_ranges, self._open, self._close)
 
     def detect(self, image_bgr: np.ndarray, camera: CameraInfo,
                time_s: float) -> DiscDetection | None:

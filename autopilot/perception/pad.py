@@ -29,7 +29,7 @@ from typing import Literal
 import cv2
 import numpy as np
 
-from autopilot.perception.colors import COLORS, HsvRange
+from autopilot.perception.colors import COLORS, HsvRange, color_mask
 from autopilot.perception.image_target import planar_pose
 from autopilot.perception.marker import MarkerDetector, MarkerDetectorSettings
 from drivers.base import CameraInfo
@@ -203,12 +203,7 @@ class CirclePadDetector:
         self._close = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))
 
     def mask(self, image_bgr: np.ndarray) -> np.ndarray:
-        hsv = cv2.cvtColor(image_bgr, cv2.COLOR_BGR2HSV)
-        mask = np.zeros(hsv.shape[:2], np.uint8)
-        for lo, hi in self.settings.hsv_ranges:
-            mask |= cv2.inRange(hsv, np.array(lo, np.uint8), np.array(hi, np.uint8))
-        mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, self._open)
-        return cv2.morphologyEx(mask, cv2.MORPH_CLOSE, self._close)
+        return color_mask(image_bgr, self.settings.hsv_ranges, self._open, self._close)
 
     def detect(self, image_bgr: np.ndarray, camera: CameraInfo,
                time_s: float) -> PadDetection | None:

@@ -23,14 +23,12 @@ from collections.abc import AsyncIterator, Callable, Mapping, Sequence
 from drivers.ardrone import at
 from drivers.ardrone import navdata as nav
 from drivers.ardrone.cameras import VideoClock
-from drivers.ardrone.config import DroneConfig
 from drivers.ardrone.driver import ArdroneDriver
 from drivers.ardrone.video_feed import VideoFeed
-from drivers.base import CameraInfo, Frame, VehicleError
-from drivers.sim.ardrone_face import ArdroneFace
+from drivers.base import CameraInfo, Frame
+from drivers.sim.ardrone_engine import SimulatedArdrone
 from drivers.sim.config import SimConfig
 from drivers.sim.driver import SimDriver
-from drivers.sim.flight.commander import CommandRejected
 from drivers.sim.link_impairment import LinkImpairment
 from drivers.sim.scenario import ScenarioObject
 
@@ -38,47 +36,48 @@ _HOST = "127.0.0.1"
 
 
 class SimLink:
-    """The in-process link: AT datagrams into the simulated drone's engine (its commands run
-    on the simulator between physics batches, in order), its navdata out of the simulator's
-    telemetry, a packet per sample (while a wake-up has come, as on the network)."""
+    """The in-process link: AT datagrams into the simulated drone
+    (:class:`~drivers.sim.ardrone_engine.SimulatedArdrone`), its navdata out, a packet per
+    telemetry sample (the wake-up is not needed: nothing else listens)."""
 
     def __init__(self, sim: SimDriver, on_navdata: Callable[[nav.Navdata, float], None]) -> None:
         self.sim = sim
         self._on_navdata = on_navdata
-        self.face: ArdroneFace | None = None
-        self._commands: asyncio.Queue = asyncio.Queue()
-        self._pending: list[tuple] = []
-        self._tasks: list[asyncio.Task] = []
+        self.drone: SimulatedArdrone | None = None
+        self._task: asyncio.Task | None = None
         self._impairment: LinkImpairment | None = None
         self.last_navdata_s: float | None = None
         self.navdata_address = (_HOST, 0)
+        self.config_text = b""
         self.bad_packets = 0
         self.foreign_datagrams = 0
 
     class _Stats:
         link_dropped = 0
 
+    @property
+    def face(self):
+        return self.drone.face if self.drone is not None else None
+
     async def open(self) -> None:
-        if self.face is not None:
+        if self.drone is not None:
             return
         await self.sim.connect()
-        simulator = self.sim.simulator
-        self.face = ArdroneFace(command=lambda *c: self._pending.append(c),
-                                limits=simulator.flight.limits, config=DroneConfig())
-        self.face.apply_all()
+        self.drone = SimulatedArdrone(self.sim)
+        self.drone.start()
         self._impairment = LinkImpairment(self.sim, self._Stats())
-        simulator.link_faults_in_face = True
-        loop = asyncio.get_running_loop()
-        self._tasks = [loop.create_task(self._run_commands(), name="ardrone-commands"),
-                       loop.create_task(self._send_navdata(), name="ardrone-navdata")]
+        self.sim.simulator.link_faults_in_face = True
+        self._task = asyncio.get_running_loop().create_task(self._send_navdata(),
+                                                            name="ardrone-navdata")
 
     async def close(self) -> None:
-        for task in self._tasks:
-            task.cancel()
-        for task in self._tasks:
+        if self._task is not None:
+            self._task.cancel()
             with contextlib.suppress(asyncio.CancelledError, Exception):
-                await task
-        self._tasks = []
+                await self._task
+            self._task = None
+        if self.drone is not None:
+            await self.drone.close()
         if self._impairment is not None:
             self._impairment.close()
 
@@ -95,46 +94,24 @@ class SimLink:
             self._impairment.carry(fault, deliver)
 
     def send(self, commands: list[bytes]) -> None:
-        if self.face is None or not commands:
+        if self.drone is None or not commands:
             return
         for datagram in at.datagrams(commands):
-            self._carry(lambda d=datagram: self._take(d))
-
-    def _take(self, datagram: bytes) -> None:
-        self.face.on_datagram(datagram)
-        if self._pending:
-            self._commands.put_nowait(tuple(self._pending))
-            self._pending.clear()
-
-    async def _run_commands(self) -> None:
-        simulator = self.sim.simulator
-
-        def run(batch) -> None:
-            for name, *args in batch:
-                with contextlib.suppress(CommandRejected):
-                    simulator.command(name, *args)
-
-        while True:
-            batch = await self._commands.get()
-            try:
-                await self.sim.runner.call(run, batch)
-            except VehicleError:
-                return
+            self._carry(lambda d=datagram: self.drone.take(d))
 
     async def _send_navdata(self) -> None:
-        firmware, clock = self.sim.simulator.flight, self.sim.clock
-        async with contextlib.aclosing(self.sim.telemetry()) as states:
-            async for state in states:
-                status = await self.sim.runner.call(firmware.status)
-                packet = nav.parse(self.face.navdata(state, status))
-                self._carry(lambda p=packet: self._deliver(p, clock.now()))
+        clock = self.sim.clock
+        async for packet in self.drone.navdata():
+            parsed = nav.parse(packet)
+            self._carry(lambda p=parsed: self._deliver(p, clock.now()))
 
     def _deliver(self, packet: nav.Navdata, now: float) -> None:
         self.last_navdata_s = now
         self._on_navdata(packet, now)
 
     async def read_config(self, ask: Callable[[], bytes]) -> bytes:
-        return self.face.config_text() if self.face is not None else b""
+        self.config_text = self.face.config_text() if self.face is not None else b""
+        return self.config_text
 
     def frames(self) -> AsyncIterator[Frame]:
         """The camera the drone streams, as the simulator renders it, until it switches."""
