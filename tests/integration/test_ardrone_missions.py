@@ -57,3 +57,19 @@ def test_a_survey_is_refused_before_takeoff() -> None:
     assert vehicle.has_global_position is False
     with pytest.raises(ConfigError, match=r"steps\[1\]\.survey.*global_position"):
         asyncio.run(fly(plan, None))
+
+
+def test_blue_discs_on_the_balls_path_are_kept_out_of(tmp_path) -> None:
+    """Seed 001's blue discs as keep-out zones on the AR.Drone too: its true path never
+    enters them (closest approach measured from the truth), and the mission completes."""
+    from autopilot.flightlog.log import read_log
+
+    from .test_keep_out import BALL_PATH_DISCS, _clearances
+
+    plan = load_mission("follow_ball", [*ARDRONE, "steps.1.follow_ball.duration_s=25",
+                                        f"scenario.keep_out.discs={BALL_PATH_DISCS}"])
+    summary = asyncio.run(fly(plan, tmp_path))
+    assert summary["status"] == "completed", summary.get("reason")
+    clearance = _clearances(plan, read_log(tmp_path / "flight.mcap"))
+    assert min(clearance.values()) > 0.1, clearance
+    assert summary["stats"]["guard_interventions"] >= 1
