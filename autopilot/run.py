@@ -29,7 +29,7 @@ from autopilot.process import StealMeter, release_freed_memory
 from autopilot.runtime import Runtime
 from autopilot.steps.metrics import mission_metrics
 from drivers.base import CameraUnavailable, Vehicle
-from drivers.capabilities import LinkTimeSync, SimulatorTruth, VideoInput
+from drivers.capabilities import DeadReckoning, LinkTimeSync, SimulatorTruth, VideoInput
 from drivers.threads import set_background_nice
 
 
@@ -437,6 +437,8 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
         "warnings": warnings,
         "log": "flight.mcap" if out_dir is not None else None,
     }
+    if isinstance(vehicle, DeadReckoning):  # (no GNSS) how far off its position may be
+        summary["dead_reckoning"] = {"drift_m": vehicle.drift_m, "path_m": vehicle.path_m}
     sources = vehicle.video_sources if isinstance(vehicle, VideoInput) else {}
     if sources:  # how each network camera's capture times were known, and what arrived
         summary["video"] = {name: {"timing": source.timing.as_dict(),

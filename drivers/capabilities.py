@@ -13,6 +13,8 @@ VideoInput          MAVLink drivers: cameras that are network video streams
 MavlinkIdentity     MAVLink drivers: the autopilot locked onto (ids, MAV_AUTOPILOT)
 LinkTimeSync        MAVLink drivers: the vehicle's clock mapped onto ours (TIMESYNC)
 OnDemandCameras     the simulator: cameras rendered only while someone reads them
+DeadReckoning       the AR.Drone: a position integrated from velocities, and how far off it
+                    may be by now
 SimulatorTruth      the simulator: ground truth and the cameras as they really are
                     (for scoring and the log only, never for the autopilot's decisions)
 ==================  ======================================================================
@@ -92,6 +94,15 @@ class OnDemandCameras(Protocol):
     #: cameras rendered only while someone reads them (a photo keeps its camera running only
     #: while one is near)
     renders_on_demand: bool
+
+
+@runtime_checkable
+class DeadReckoning(Protocol):
+    #: how far off the reported position may be by now (m): the vehicle integrates it from
+    #: its velocities (no GNSS), so its error grows with the distance flown
+    drift_m: float
+    #: the distance it has been integrated over (m)
+    path_m: float
 
 
 @runtime_checkable

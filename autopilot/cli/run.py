@@ -287,6 +287,10 @@ def summary_lines(summary: dict, out: Path) -> list[str]:
     if lat.get("samples"):
         lines.append(f"latency (frame capture to setpoint): p50 {lat['p50']:.1f} ms, "
                      f"p95 {lat['p95']:.1f} ms")
+    reckoned = summary.get("dead_reckoning")
+    if reckoned:
+        lines.append(f"position dead-reckoned over {reckoned['path_m']:.1f} m: it may be off by "
+                     f"{reckoned['drift_m']:.2f} m by the end (no GNSS)")
     lines.append(f"wrote {out / 'summary.json'} and {out / 'flight.mcap'}")
     return lines
 

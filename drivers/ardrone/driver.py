@@ -151,10 +151,10 @@ class ArdroneDriver(Vehicle):
         """What PCMD's fractions are fractions of (the drone's configuration, once read)."""
         return self._loop.limits
 
-    @property
-    def drift_m(self) -> float:
-        """How far off the dead-reckoned position may be by now (an estimate)."""
-        return self._telemetry.drift_m
+    #: how far off the dead-reckoned position may be by now (an estimate), and the path it
+    #: was integrated over (:class:`~drivers.capabilities.DeadReckoning`)
+    drift_m = property(lambda self: self._telemetry.drift_m)
+    path_m = property(lambda self: self._telemetry.path_m)
 
     @property
     def home_ned_m(self) -> np.ndarray | None:
