@@ -42,3 +42,18 @@ def color_mask(image_bgr: np.ndarray, hsv_ranges: Sequence[HsvRange], opening: n
         mask |= cv2.inRange(hsv, np.array(lo, np.uint8), np.array(hi, np.uint8))
     mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, opening)
     return cv2.morphologyEx(mask, cv2.MORPH_CLOSE, closing)
+
+
+def inner_outline(contour: np.ndarray, width_px: int, height_px: int, border_px: int,
+                  max_points: int) -> tuple[np.ndarray, bool]:
+    """A contour's points (float, N×2) without those within ``border_px`` of the frame's
+    edge (where the frame cuts a blob, its outline is the border's, not its own), thinned
+    evenly to at most ``max_points``; and whether the frame's edge cut any off."""
+    pts = contour.reshape(-1, 2).astype(np.float64)
+    b = border_px
+    inner = (pts[:, 0] > b) & (pts[:, 0] < width_px - 1 - b) & (pts[:, 1] > b) \
+        & (pts[:, 1] < height_px - 1 - b)
+    arc = pts[inner]
+    if len(arc) > max_points:
+        arc = arc[np.linspace(0, len(arc) - 1, max_points).astype(int)]
+    return arc, not bool(inner.all())

@@ -28,7 +28,7 @@ import cv2
 import numpy as np
 
 from autopilot.estimation.pose_history import Pose
-from autopilot.perception.colors import HsvRange, color_mask
+from autopilot.perception.colors import HsvRange, color_mask, inner_outline
 from autopilot.perception.pad import fit_circle
 from drivers.base import CameraInfo
 from drivers.camera_model import undistort_points
@@ -93,20 +93,15 @@ class DiscDetector:
             if hull <= 0 or area / hull < s.min_solidity:
                 continue
             pts = contour.reshape(-1, 2).astype(np.float64)
-            b = s.border_px
-            inner = (pts[:, 0] > b) & (pts[:, 0] < w - 1 - b) & (pts[:, 1] > b) \
-                & (pts[:, 1] < h - 1 - b)
-            arc = pts[inner]
+            arc, clipped = inner_outline(contour, w, h, s.border_px, 300)
             if len(arc) < s.min_arc_points:
                 continue
-            if len(arc) > 300:
-                arc = arc[np.linspace(0, len(arc) - 1, 300).astype(int)]
             m = cv2.moments(contour)
             centre = (m["m10"] / m["m00"], m["m01"] / m["m00"]) if m["m00"] > 0 \
                 else tuple(pts.mean(axis=0))
             found.append(DiscBlob((float(centre[0]), float(centre[1])), float(area),
                                   undistort_points(camera.intrinsics, arc),
-                                  not bool(inner.all())))
+                                  clipped))
         if not found:
             return None
         found.sort(key=lambda blob: -blob.area_px)

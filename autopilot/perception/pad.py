@@ -29,7 +29,7 @@ from typing import Literal
 import cv2
 import numpy as np
 
-from autopilot.perception.colors import COLORS, HsvRange, color_mask
+from autopilot.perception.colors import COLORS, HsvRange, color_mask, inner_outline
 from autopilot.perception.image_target import planar_pose
 from autopilot.perception.marker import MarkerDetector, MarkerDetectorSettings
 from drivers.base import CameraInfo
@@ -217,15 +217,9 @@ class CirclePadDetector:
             area = cv2.contourArea(contour)
             if area < math.pi * s.min_radius_px ** 2 * 0.5:
                 continue
-            pts = contour.reshape(-1, 2).astype(np.float64)
-            b = s.border_px
-            inner = (pts[:, 0] > b) & (pts[:, 0] < w - 1 - b) & (pts[:, 1] > b) \
-                & (pts[:, 1] < h - 1 - b)
-            arc = pts[inner]
+            arc, clipped = inner_outline(contour, w, h, s.border_px, 400)
             if len(arc) < s.min_arc_points:
                 continue
-            if len(arc) > 400:
-                arc = arc[np.linspace(0, len(arc) - 1, 400).astype(int)]
             norm = undistort_points(intr, arc)
             centre_n, radius_n, rms = fit_circle(norm)
             # the outline runs through the blob's edge pixels' centres, half a pixel inside
@@ -233,7 +227,6 @@ class CirclePadDetector:
             radius_px = radius_n * intr.fx
             if radius_px < s.min_radius_px or rms > s.max_fit_error * radius_n:
                 continue
-            clipped = not bool(inner.all())
             if not clipped and area < s.min_fill * math.pi * (radius_px ** 2):
                 continue
             if clipped:  # the arc must bulge the way a disc does: the blob inside the circle

@@ -213,18 +213,12 @@ class ArdroneFace:
         self._sequence += 1
         bits = State.NAVDATA_THREAD_ON | State.ATCODEC_THREAD_ON | State.VIDEO_THREAD_ON | \
             State.ACQ_THREAD_ON | State.VIDEO | State.ALTITUDE
-        if status.motors_on:
-            bits |= State.FLY
-        if self.ack:
-            bits |= State.COMMAND
-        if status.emergency:
-            bits |= State.EMERGENCY
-        if status.com_watchdog:
-            bits |= State.COM_WATCHDOG
-        if status.com_lost:
-            bits |= State.COM_LOST
-        if status.battery_low:
-            bits |= State.VBAT_LOW
+        for flag, on in ((State.FLY, status.motors_on), (State.COMMAND, self.ack),
+                         (State.EMERGENCY, status.emergency),
+                         (State.COM_WATCHDOG, status.com_watchdog),
+                         (State.COM_LOST, status.com_lost), (State.VBAT_LOW, status.battery_low)):
+            if on:
+                bits |= flag
         if self.bootstrap:
             return nav.build(bits | State.NAVDATA_BOOTSTRAP, self._sequence)
         if self.config.get_bool("general:navdata_demo"):
