@@ -113,8 +113,11 @@ async def ardrone_checks(vehicle, plan: MissionPlan, url: str, duration_s: float
         "firmware unknown, its default limits assumed)")
     samples = await _samples(vehicle, duration_s)
     rate = len(samples) / duration_s
-    add("navdata", "PASS" if rate >= 12.0 else "WARN" if rate >= 5.0 else "FAIL",
-        f"{rate:.0f} Hz (demo navdata: 15 Hz); {vehicle.link.bad_packets} bad packets")
+    mode = getattr(vehicle, "navdata_mode", "demo")
+    expected = {"demo": 15.0, "full": 200.0}[mode]
+    add("navdata", "PASS" if rate >= 0.8 * expected else "WARN" if rate >= expected / 3
+        else "FAIL", f"{rate:.0f} Hz ({mode} navdata: {expected:.0f} Hz); "
+        f"{vehicle.link.bad_packets} bad packets")
     if samples:
         s = samples[-1]
         battery = s.battery.remaining_fraction

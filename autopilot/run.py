@@ -78,24 +78,26 @@ def make_sim_vehicle(plan: MissionPlan, *, realtime: bool = False, calibration=N
 
     sim = with_calibrations(plan, calibration) if calibration else plan.config.sim
     sim_config, objects = build_world(plan.mission.scenario, sim, plan.config)
-    vehicle_class = SIM_VEHICLES[sim_config.firmware]()
-    return vehicle_class(sim_config, scenario=objects, lockstep=not realtime), sim_config.seed
+    vehicle_class, options = SIM_VEHICLES[sim_config.firmware](plan)
+    return vehicle_class(sim_config, scenario=objects, lockstep=not realtime,
+                         **options), sim_config.seed
 
 
-def _px4_sim_vehicle():
+def _px4_sim_vehicle(plan: MissionPlan) -> tuple[type, dict]:
     from drivers.sim.driver import SimDriver
 
-    return SimDriver
+    return SimDriver, {}
 
 
-def _ardrone_sim_vehicle():
+def _ardrone_sim_vehicle(plan: MissionPlan) -> tuple[type, dict]:
     from drivers.sim.ardrone_driver import SimArdroneDriver
 
-    return SimArdroneDriver
+    return SimArdroneDriver, {"navdata": plan.config.link.navdata}
 
 
-#: the in-process simulator's vehicle by firmware (``sim.firmware``): the PX4-like one is the
-#: simulator's own driver; an AR.Drone is flown by the AR.Drone driver, in process
+#: the in-process simulator's vehicle by firmware (``sim.firmware``), with its options: the
+#: PX4-like one is the simulator's own driver; an AR.Drone is flown by the AR.Drone driver, in
+#: process
 SIM_VEHICLES = {"px4": _px4_sim_vehicle, "ardrone": _ardrone_sim_vehicle}
 
 
@@ -198,7 +200,7 @@ def make_ardrone_vehicle(plan: MissionPlan, *, connect: str | None = None,
         if name not in files and warn is not None:
             warn(f"camera {name}: uncalibrated: the nominal pinhole of vehicle.cameras.{name} "
                  f"(calibrate it: autopilot calibrate, then --calibration {name}=FILE)")
-    return ArdroneDriver(url, cameras=cameras), None
+    return ArdroneDriver(url, cameras=cameras, navdata=plan.config.link.navdata), None
 
 
 def check_vehicle_can_fly(plan: MissionPlan, vehicle: Vehicle) -> None:

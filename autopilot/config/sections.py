@@ -217,6 +217,9 @@ class LinkConfig(ConfigModel):
     #: long its reports take to arrive (the pymavlink driver)
     rover_system_id: Annotated[int, Field(ge=1, le=255)] | None = None
     rover_latency_s: Annotated[float, Field(ge=0, le=2)] = 0.1
+    #: the AR.Drone's navdata (driver ardrone): demo at 15 Hz, or full at 200 Hz (the demo,
+    #: time, physical measures, angles, altitude and magnetometer options)
+    navdata: Literal["demo", "full"] = "demo"
 
 
 class VehicleCameraConfig(CameraConfig):

@@ -67,6 +67,15 @@ def ardrone_cameras() -> dict[str, CameraInfo]:
     return out
 
 
+def streamed_cameras(cameras: Mapping[str, CameraInfo]) -> dict[str, CameraInfo]:
+    """``cameras``, checked to be ones the drone streams (ValueError otherwise)."""
+    unknown = set(cameras) - set(VIDEO_CHANNELS)
+    if unknown:
+        raise ValueError(f"the AR.Drone streams the cameras {sorted(VIDEO_CHANNELS)}, "
+                         f"not {sorted(unknown)}")
+    return dict(cameras)
+
+
 def camera_of_frame(width_px: int, height_px: int, cameras: Mapping[str, CameraInfo],
                     channel_camera: str) -> str:
     """Which camera a decoded frame of this size came from: the one selected, unless only

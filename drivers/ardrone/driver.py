@@ -38,7 +38,7 @@ import numpy as np
 
 from drivers.ardrone import at
 from drivers.ardrone import navdata as nav
-from drivers.ardrone.cameras import VIDEO_CHANNELS, ardrone_cameras
+from drivers.ardrone.cameras import VIDEO_CHANNELS, ardrone_cameras, streamed_cameras
 from drivers.ardrone.commander import Commander
 from drivers.ardrone.config import parse_config_text
 from drivers.ardrone.link import UdpLink
@@ -79,8 +79,8 @@ class ArdroneDriver(Vehicle):
     configuration at connect, its defaults if that fails); ``offboard_timeout_s``: a setpoint
     flies this long, then the drone hovers and offboard is left (PX4's COM_OF_LOSS_T);
     ``command_timeout_s``: how long takeoff, land and disarm wait for the navdata to show the
-    drone took them. Statistics: ``link.bad_packets``, ``link.foreign_datagrams``,
-    :attr:`frames_decoded`.
+    drone took them; ``navdata``: ``demo`` (15 Hz) or ``full`` (200 Hz). Statistics:
+    ``link.bad_packets``, ``link.foreign_datagrams``, :attr:`frames_decoded`.
     """
 
     has_global_position = False  # no GNSS: optical flow and the sonar
@@ -96,21 +96,19 @@ class ArdroneDriver(Vehicle):
                  clock: Clock | None = None, cameras: Mapping[str, CameraInfo] | None = None,
                  limits: DroneLimits | None = None, gains: OuterLoopGains | None = None,
                  offboard_timeout_s: float = 0.5, command_timeout_s: float = 5.0,
-                 navdata_latency_s: float = 0.03, video_latency_s: float = 0.05) -> None:
+                 navdata_latency_s: float = 0.03, video_latency_s: float = 0.05,
+                 navdata: str = "demo") -> None:
         address = parse_ardrone_url(url)
         self.url = url
         self.host = address.host
         self.ports = ports if ports is not None else address.ports
         self._clock = clock or MonotonicClock()
-        self._cameras = dict(cameras) if cameras is not None else ardrone_cameras()
-        unknown = set(self._cameras) - set(VIDEO_CHANNELS)
-        if unknown:
-            raise ValueError(f"the AR.Drone streams the cameras {sorted(VIDEO_CHANNELS)}, "
-                             f"not {sorted(unknown)}")
+        self._cameras = streamed_cameras(cameras) if cameras is not None else ardrone_cameras()
         self._read_limits = limits is None
         self.command_timeout_s = command_timeout_s
         self._at = at.AtCommands()
-        self._session = NavdataSession(self._at)
+        self._session = NavdataSession(self._at, mode=navdata)
+        self.navdata_mode = navdata
         self._telemetry = NavdataTelemetry(navdata_latency_s)
         self._loop = OuterLoop(limits, gains)
         self._commander = Commander(self._at, self._loop, offboard_timeout_s)

@@ -7,7 +7,9 @@ with navdata in *bootstrap* mode (``State.NAVDATA_BOOTSTRAP``: the header alone)
 asks for demo navdata (``CONFIG general:navdata_demo TRUE``, after ``CONFIG_IDS``: AR.Drone
 2.0 applies a CONFIG under the session, user and application ids of the ``CONFIG_IDS`` before
 it); the drone acknowledges (``State.COMMAND``); the client clears the acknowledgement
-(``CTRL 5``); demo navdata follows at 15 Hz.
+(``CTRL 5``); demo navdata follows at 15 Hz. In full mode (``mode="full"``) the client asks
+instead for the options it reads (``general:navdata_options``: :data:`FULL_OPTIONS`) and
+``navdata_demo FALSE``, and navdata follows at 200 Hz.
 
 Upkeep: packets older than the newest (UDP reorders) are dropped, except that a sequence
 number of 1 or below the newest by more than :data:`RESTART_GAP` means the drone restarted its
@@ -21,7 +23,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from drivers.ardrone.at import AtCommands, config_value
-from drivers.ardrone.navdata import Navdata, State
+from drivers.ardrone.navdata import Navdata, State, Tag, option_mask
 
 #: what the client sends to UDP 5554 to start (and keep) the navdata coming
 WAKE_UP = b"\x01\x00\x00\x00"
@@ -33,6 +35,9 @@ CONFIG_RETRY_S = 0.5
 CTRL_ACK = 5
 #: the ids AR.Drone 2.0's default session runs under
 DEFAULT_IDS = ("00000000", "00000000", "00000000")
+#: the options the driver reads in full mode
+FULL_OPTIONS = option_mask(Tag.DEMO, Tag.TIME, Tag.PHYS_MEASURES, Tag.EULER_ANGLES,
+                           Tag.ALTITUDE, Tag.MAGNETO)
 
 
 @dataclass(frozen=True, slots=True)
@@ -52,8 +57,12 @@ class _Pending:
 
 
 class NavdataSession:
-    def __init__(self, commands: AtCommands, ids: tuple[str, str, str] = DEFAULT_IDS) -> None:
+    def __init__(self, commands: AtCommands, ids: tuple[str, str, str] = DEFAULT_IDS, *,
+                 mode: str = "demo") -> None:
+        if mode not in ("demo", "full"):
+            raise ValueError(f"navdata {mode!r}: expected 'demo' (15 Hz) or 'full' (200 Hz)")
         self._at = commands
+        self.full = mode == "full"
         self._ids = ids
         self._newest: int | None = None
         self._configs: list[_Pending] = []
@@ -66,7 +75,7 @@ class NavdataSession:
 
     @property
     def demo(self) -> bool:
-        """Is the drone sending demo navdata (the handshake done)?"""
+        """Is the drone sending navdata past the bootstrap (the handshake done)?"""
         return self._newest is not None and not self._bootstrap
 
     def configure(self, key: str, value: str | int | float | bool) -> None:
@@ -86,7 +95,11 @@ class NavdataSession:
             self.watchdog_resets += 1
             out.append(self._at.comwdg())
         if self._bootstrap and not any(p.key == "general:navdata_demo" for p in self._configs):
-            self._configs.insert(0, _Pending("general:navdata_demo", "TRUE"))
+            self._configs.insert(0, _Pending("general:navdata_demo",
+                                             "FALSE" if self.full else "TRUE"))
+            if self.full:  # (read while still in bootstrap: the options, then the mode)
+                self._configs.insert(0, _Pending("general:navdata_options",
+                                                 str(FULL_OPTIONS)))
         if State.COMMAND in state:
             if self._awaiting_ack and self._configs:
                 self._configs.pop(0)  # acknowledged

@@ -22,9 +22,17 @@ What the drone does with the commands (the SDK 2.0 developer guide, chapters 6�
 * ``CTRL 4``: the configuration is sent over TCP 5559 (:meth:`ArdroneFace.config_text`).
 * Any command feeds the communication watchdog (no command for 50 ms sets its navdata bit).
 
-The navdata (:meth:`ArdroneFace.navdata`): in bootstrap mode the header alone; then the demo
-option at the telemetry rate, with the state bits, from the vehicle's telemetry (attitude,
-its fused height, velocities in the heading frame) and the firmware's status.
+The navdata (:meth:`ArdroneFace.navdata`): in bootstrap mode the header alone, at
+:data:`DEMO_RATE_HZ`; in demo mode (``general:navdata_demo`` TRUE) at that rate the demo option
+and the options ``general:navdata_options`` adds; in full mode (FALSE) at :data:`FULL_RATE_HZ`
+the options it selects (:attr:`ArdroneFace.navdata_rate_hz` says which rate is due). The state
+bits, and the demo option from the vehicle's telemetry (attitude, its fused height, velocities
+in the heading frame) and the firmware's status. Of the other options the simulated drone fills
+the time (its clock), the physical measures (gravity's specific force on the accelerometers,
+the gyros), the accelerometers' angles, the altitude (the fused height as vision, reference
+and raw sonar; its rate) and the magnetometer's headings; the rest — raw ADC words, vision
+internals, PWM, pressure, wind — go zeros at their sizes (:data:`~drivers.ardrone.navdata.
+OPTION_SIZES`), as no model of them exists here.
 """
 
 from __future__ import annotations
@@ -42,6 +50,9 @@ from drivers.sim.flight.ardrone import FirmwareStatus, Progressive
 
 #: video:video_channel values (ZAP_CHANNEL_HORI, ZAP_CHANNEL_VERT) → our camera names
 VIDEO_CHANNELS = {0: "front", 1: "down"}
+#: navdata rates (the SDK 2.0 developer guide, 7.1.2): bootstrap and demo; full
+DEMO_RATE_HZ = 15.0
+FULL_RATE_HZ = 200.0
 CTRL_GET_CONFIG = 4
 CTRL_ACK = 5
 #: the id a default session, user and application run under (CONFIG_IDS)
@@ -208,6 +219,12 @@ class ArdroneFace:
 
     # -- navdata ----------------------------------------------------------------------------
 
+    @property
+    def navdata_rate_hz(self) -> float:
+        """The rate the navdata is due at: 200 Hz in full mode, 15 Hz otherwise."""
+        full = not self.bootstrap and not self.config.get_bool("general:navdata_demo")
+        return FULL_RATE_HZ if full else DEMO_RATE_HZ
+
     def navdata(self, state: VehicleState, status: FirmwareStatus) -> bytes:
         """The navdata packet for one telemetry sample (bootstrap: the header alone)."""
         self._sequence += 1
@@ -221,21 +238,51 @@ class ArdroneFace:
                 bits |= flag
         if self.bootstrap:
             return nav.build(bits | State.NAVDATA_BOOTSTRAP, self._sequence)
-        if self.config.get_bool("general:navdata_demo"):
+        demo_mode = self.config.get_bool("general:navdata_demo")
+        if demo_mode:
             bits |= State.NAVDATA_DEMO
+        tags = set(nav.masked_tags(self.config.get_int("general:navdata_options")))
+        if demo_mode:
+            tags.add(nav.Tag.DEMO)
         roll, pitch, yaw = euler_from_quat(state.attitude_q)
         vn, ve, vd = (float(v) for v in state.velocity_ned_m_s)
         c, s = math.cos(yaw), math.sin(yaw)
         self._frame_index += 1
+        theta_mdeg, phi_mdeg = math.degrees(pitch) * 1000.0, math.degrees(roll) * 1000.0
+        altitude_mm = max(0, round(state.altitude_m * 1000.0))
         demo = nav.Demo(
             control_state=int(status.control_state) << 16,
             battery_percent=round(100.0 * max(0.0, min(1.0, state.battery.remaining_fraction))),
-            theta_mdeg=math.degrees(pitch) * 1000.0, phi_mdeg=math.degrees(roll) * 1000.0,
-            psi_mdeg=math.degrees(yaw) * 1000.0,
-            altitude_mm=max(0, round(state.altitude_m * 1000.0)),
+            theta_mdeg=theta_mdeg, phi_mdeg=phi_mdeg, psi_mdeg=math.degrees(yaw) * 1000.0,
+            altitude_mm=altitude_mm,
             vx_mm_s=(c * vn + s * ve) * 1000.0, vy_mm_s=(-s * vn + c * ve) * 1000.0,
             vz_mm_s=vd * 1000.0, frame_index=self._frame_index)
-        return nav.build(bits, self._sequence, demo)
+        options: dict[int, bytes] = {}
+        for tag in tags - {nav.Tag.DEMO}:
+            options[tag] = self._option(tag, state, demo, roll, pitch)
+        return nav.build(bits, self._sequence, demo if nav.Tag.DEMO in tags else None,
+                         options=options)
+
+    @staticmethod
+    def _option(tag: int, state: VehicleState, demo: nav.Demo, roll: float,
+                pitch: float) -> bytes:
+        """A full-mode option's data (zeros for the ones with no model here)."""
+        if tag == nav.Tag.TIME:
+            return nav.time_data(state.time_s)
+        if tag == nav.Tag.PHYS_MEASURES:
+            g = 1000.0  # mg: gravity's specific force on the body axes (FRD)
+            accs = (g * math.sin(pitch), -g * math.sin(roll) * math.cos(pitch),
+                    -g * math.cos(roll) * math.cos(pitch))
+            gyros = tuple(math.degrees(float(w)) for w in state.angular_velocity_frd_rad_s)
+            return nav.phys_measures_data(accs, gyros)
+        if tag == nav.Tag.EULER_ANGLES:
+            return nav.euler_angles_data(demo.theta_mdeg, demo.phi_mdeg)
+        if tag == nav.Tag.ALTITUDE:
+            return nav.altitude_data(demo.altitude_mm, demo.vz_mm_s, demo.altitude_mm,
+                                     demo.altitude_mm)
+        if tag == nav.Tag.MAGNETO:
+            return nav.magneto_heading_data(demo.psi_mdeg / 1000.0)
+        return b""
 
 
 def _clamp(value: float) -> float:

@@ -347,6 +347,10 @@ class Simulator:
             return  # a link_loss fault lost it on the way
         self.flight.push_setpoint(setpoint, self.time_s)
 
+    def set_telemetry_rate(self, rate_hz: float) -> None:
+        """Telemetry at ``rate_hz`` from now on (the AR.Drone's navdata: demo 15, full 200 Hz)."""
+        self._tel.retime(max(1.0, self.cfg.physics_rate_hz / rate_hz), self._step)
+
     def set_camera_active(self, name: str, active: bool) -> None:
         self.cameras[name].active = active
 

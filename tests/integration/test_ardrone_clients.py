@@ -124,6 +124,45 @@ def test_pyardrone_flies_it_unmodified(drone) -> None:
     assert seen["altitude_landed_mm"] < 200
 
 
+PYARDRONE_FULL = f"""
+import json, time
+from pyardrone import ARDrone, at
+
+seen = {{}}
+drone = ARDrone(host="127.0.0.1", at_port={PORTS.at}, navdata_port={PORTS.navdata},
+                video_port={PORTS.video})
+try:
+    assert drone.navdata_ready.wait(30), "no navdata"
+    drone.send(at.CONFIG("general:navdata_options", (1 << 28) - 1))  # every option
+    drone.send(at.CONFIG("general:navdata_demo", False))
+    end = time.monotonic() + 30
+    while not hasattr(drone.navdata, "altitude") and time.monotonic() < end:
+        time.sleep(0.02)
+    assert hasattr(drone.navdata, "altitude"), "no full navdata"
+    first, t0 = drone.navdata.metadata.sequence_number, time.monotonic()
+    time.sleep(2.0)
+    last, t1 = drone.navdata.metadata.sequence_number, time.monotonic()
+    seen["rate_hz"] = (last - first) / (t1 - t0)
+    seen["options"] = sorted(k for k in vars(drone.navdata) if k not in ("checksum",))
+    seen["demo_bit"] = bool(drone.state.navdata_demo_mask)
+    drone.send(at.CONFIG("general:navdata_demo", True))  # back to demo for the next client
+    time.sleep(0.5)
+finally:
+    drone.close()
+print(json.dumps(seen))
+"""
+
+
+def test_pyardrone_reads_full_navdata_at_200_hz(drone) -> None:
+    seen = _run(PYARDRONE_FULL)
+    assert not seen["demo_bit"]
+    # every option pyardrone knows, each at the size it checks
+    for name in ("demo", "time", "raw_measures", "phys_measures", "altitude", "magneto",
+                 "vision_detect", "wifi", "cks"):
+        assert name in seen["options"]
+    assert 120 < seen["rate_hz"] < 230  # 200 Hz, real time on a shared machine
+
+
 ARDRONE_SDK = f"""
 import json, sys, time
 import ardrone

@@ -73,3 +73,27 @@ def test_blue_discs_on_the_balls_path_are_kept_out_of(tmp_path) -> None:
     clearance = _clearances(plan, read_log(tmp_path / "flight.mcap"))
     assert min(clearance.values()) > 0.1, clearance
     assert summary["stats"]["guard_interventions"] >= 1
+
+
+@pytest.mark.parametrize(("mode", "rate_hz"), [("demo", 15.0), ("full", 200.0)])
+def test_in_process_navdata_comes_at_its_modes_rate(mode, rate_hz) -> None:
+    from drivers.sim.ardrone_driver import SimArdroneDriver
+
+    plan = load_mission("follow_ball", [*ARDRONE, f"link.navdata={mode}"])
+    vehicle, _ = make_vehicle(plan)
+    assert isinstance(vehicle, SimArdroneDriver)
+    assert vehicle.navdata_mode == mode
+
+    async def main() -> list[float]:
+        await vehicle.connect()
+        try:
+            times = []
+            async for state in vehicle.telemetry(buffer=512):
+                times.append(state.time_s)
+                if times[-1] - times[0] >= 2.0:
+                    return times
+        finally:
+            await vehicle.close()
+
+    times = asyncio.run(main())
+    assert (len(times) - 1) / (times[-1] - times[0]) == pytest.approx(rate_hz, rel=0.1)
