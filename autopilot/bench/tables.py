@@ -108,13 +108,26 @@ MERGERS: dict[str, Callable[[list[dict]], dict]] = {
 }
 
 
-def profile_of(result: dict) -> str | None:
-    """The simulated world a result was flown in, when its overrides name it."""
+def _override(result: dict, name: str) -> str | None:
     for item in result.get("overrides") or ():
         key, _, value = item.partition("=")
-        if key.strip() == "sim.profile":
+        if key.strip() == name:
             return value.strip()
     return None
+
+
+def profile_of(result: dict) -> str | None:
+    """The simulated world a result was flown in, when its overrides name it."""
+    return _override(result, "sim.profile")
+
+
+def vehicle_of(result: dict) -> str | None:
+    """The simulated vehicle a result was flown on, when its overrides name another firmware
+    than the default's."""
+    from drivers.sim.firmwares import FIRMWARE_TITLES
+
+    firmware = _override(result, "sim.firmware")
+    return None if firmware in (None, "px4") else FIRMWARE_TITLES.get(firmware, firmware)
 
 
 def _flown(result: dict) -> set[tuple[str, str, int]]:
@@ -151,9 +164,10 @@ def render(results: list[dict], note: str = "") -> str:
     for (bench, _, _), group in by_bench.items():
         result = MERGERS[bench](group) if len(group) > 1 else group[0]
         table = FORMATTERS[bench](result)
-        world = profile_of(result)
-        if world and table and table[0].startswith("### "):
-            table = [f"{table[0]} — {world} world", *table[1:]]
+        world, vehicle = profile_of(result), vehicle_of(result)
+        label = ", ".join(x for x in (world and f"{world} world", vehicle) if x)
+        if label and table and table[0].startswith("### "):
+            table = [f"{table[0]} — {label}", *table[1:]]
         lines += table
         lines += [f"Command: `{command_of(result)}`"
                   + (f" (flown as {len(group)} processes, pooled)"

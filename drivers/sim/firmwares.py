@@ -45,6 +45,10 @@ FIRMWARES: dict[str, Callable[[SimConfig, Airframe, Parameters, GlobalOrigin], A
 }
 
 
+#: firmware name → the vehicle it makes, as tables and reports name it
+FIRMWARE_TITLES = {"px4": "PX4-like vehicle", "ardrone": "AR.Drone 2.0"}
+
+
 def make_firmware(config: SimConfig, airframe: Airframe, params: Parameters,
                   origin: GlobalOrigin):
     """The autopilot ``config.firmware`` names, for this airframe."""

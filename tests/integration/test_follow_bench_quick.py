@@ -1,6 +1,7 @@
 """The quick follow benches (``autopilot bench follow_ball|follow_marker --quick``): every
 seed rule still flies — takes off, follows the whole step without losing the target, lands —
-and ours keeps a smaller RMS range error than each of them. One seed, a 10 s step, lockstep."""
+and ours keeps a smaller RMS range error than each of them, on the PX4-like vehicle and (the
+ball) on the AR.Drone. One seed, a 10 s step, lockstep."""
 
 import json
 
@@ -10,9 +11,13 @@ from autopilot.bench.follow import BENCHES, QUICK_DURATION_S, run_bench
 from autopilot.cli import main
 
 
-@pytest.mark.parametrize("bench", ["follow_ball", "follow_marker"])
-def test_quick_bench_baselines_fly_and_ours_is_better(bench):
-    result = run_bench(bench, quick=True)
+@pytest.mark.parametrize(("bench", "overrides"), [
+    ("follow_ball", []), ("follow_marker", []),
+    # the seed rules on the drone they were written for, their commands as its tilt fractions
+    ("follow_ball", ["sim.firmware=ardrone"]),
+], ids=["follow_ball", "follow_marker", "follow_ball_ardrone"])
+def test_quick_bench_baselines_fly_and_ours_is_better(bench, overrides):
+    result = run_bench(bench, overrides=overrides, quick=True)
     assert result["quick"] is True
     assert result["step_duration_s"] == QUICK_DURATION_S
     assert list(result["scenarios"]) == ["default"]

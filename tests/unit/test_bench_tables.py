@@ -196,6 +196,17 @@ def test_follow_seeds_flown_apart_are_pooled_and_profiles_kept_apart():
     assert tables.command_of(ours_only).endswith("--row estimator --json")
 
 
+def test_a_table_flown_on_another_vehicle_says_which():
+    px4 = _follow_result("default", seed=1)
+    px4["overrides"] = ["sim.profile=realistic"]
+    ardrone = _follow_result("default", seed=1)
+    ardrone["overrides"] = ["sim.profile=realistic", "sim.firmware=ardrone"]
+    page = tables.render([px4, ardrone])
+    assert "### `follow_ball` — realistic world\n" in page
+    assert "### `follow_ball` — realistic world, AR.Drone 2.0\n" in page
+    assert "--set sim.firmware=ardrone" in page
+
+
 def test_offboard_and_landing_tables_are_their_own_text_tables():
     from autopilot.bench import landing, offboard
 
