@@ -6,6 +6,9 @@ no figure in them is typed by hand::
     python -m autopilot.bench.tables land_pad.json hover_image.json \\
         --note "2 seeds, on a shared 2-core machine" > docs/benchmarks.md
 
+The page as published: ``python -m autopilot.bench.tables @docs/bench-data/benchmarks.args >
+docs/benchmarks.md`` (the file holds the inputs in order and the note, an argument a line).
+
 Each input is one bench's JSON; its ``bench`` names the formatter (:data:`FORMATTERS`). Several
 inputs of the same bench (its rows or scenarios flown as separate processes, ``--row``,
 ``--scenario``) are pooled into one table (:data:`MERGERS`).
@@ -177,7 +180,8 @@ def render(results: list[dict], note: str = "") -> str:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m autopilot.bench.tables",
-                                     description=__doc__.split("\n\n")[0])
+                                     description=__doc__.split("\n\n")[0],
+                                     fromfile_prefix_chars="@")
     parser.add_argument("files", nargs="+", type=Path, help="bench --json outputs")
     parser.add_argument("--note", default="", help="a paragraph under the title (the "
                         "machine, its load, what was run)")

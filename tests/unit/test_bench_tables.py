@@ -271,3 +271,14 @@ def test_an_older_result_without_the_relative_estimate_shows_its_absolute_mean_m
     s.update(estimate_relative_rms_m_median=0.02, estimate_relative_rms_m_worst=0.05,
              estimate_relative_rms_m_n=1)
     assert down._estimate_cell(s) == "0.020 (0.050) m [1]"
+
+
+def test_the_published_page_is_what_its_inputs_generate(capsys, monkeypatch):
+    """docs/benchmarks.md is generated, never edited: its inputs (docs/bench-data/benchmarks.args)
+    give it byte for byte."""
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    monkeypatch.chdir(root)
+    assert tables.main(["@docs/bench-data/benchmarks.args"]) == 0
+    assert capsys.readouterr().out == (root / "docs" / "benchmarks.md").read_text()
