@@ -47,12 +47,12 @@ from drivers.base import (
 from drivers.geometry import quat_from_euler
 from drivers.mavlink import ardupilot, px4
 from drivers.mavlink.common import MavlinkVehicle, cancel_all
+from drivers.mavlink.firmware import Px4Profile, firmware_profile
 from drivers.mavlink.link import MavlinkLink, TimesyncRequests, unheard
 from drivers.mavlink.signing import Signing
 
 log = logging.getLogger(__name__)
 
-MAV_AUTOPILOT_ARDUPILOTMEGA = 3
 MAV_AUTOPILOT_INVALID = 8
 #: MAV_COMP_ID_AUTOPILOT1: the flight controller (a gimbal or camera heartbeats too)
 AUTOPILOT_COMPONENT = 1
@@ -85,6 +85,7 @@ class PymavlinkDriver(MavlinkVehicle):
         self._ignored_systems: set[tuple[int, int]] = set()
         self._target: tuple[int, int] | None = None  # (system, component) of the autopilot
         self.autopilot: int | None = None  # MAV_AUTOPILOT of the vehicle
+        self._profile: tuple[int | None, Px4Profile] | None = None
         self._acks: dict[int, asyncio.Future] = {}
         self._params: dict[str, asyncio.Future] = {}
         self._statustext: deque[str] = deque(maxlen=8)
@@ -98,12 +99,14 @@ class PymavlinkDriver(MavlinkVehicle):
     # ------------------------------------------------------------------------------------
 
     @property
-    def is_px4(self) -> bool:
-        return self.autopilot == px4.MAV_AUTOPILOT_PX4
-
-    @property
-    def is_ardupilot(self) -> bool:
-        return self.autopilot == MAV_AUTOPILOT_ARDUPILOTMEGA
+    def firmware(self) -> Px4Profile:
+        """What this vehicle's flight stack does its own way (:mod:`drivers.mavlink.firmware`),
+        from its HEARTBEAT's ``autopilot``."""
+        profile = self._profile
+        if profile is None or profile[0] != self.autopilot:
+            profile = self._profile = (self.autopilot,
+                                       firmware_profile(self.autopilot, self.ardupilot_hold))
+        return profile[1]
 
     async def connect(self, timeout_s: float = 10.0) -> None:
         if self._link is not None:
@@ -143,24 +146,13 @@ class PymavlinkDriver(MavlinkVehicle):
 
     async def disarm(self, *, force: bool = False) -> None:
         await self._command("disarm", mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0,
-                            px4.FORCE_DISARM_MAGIC if force else 0)
+                            self.firmware.force_disarm_magic if force else 0)
 
     async def takeoff(self, altitude_m: float | None = None) -> None:
-        if self.is_ardupilot:
-            await self._set_mode(FlightMode.TAKEOFF)
-            alt = 2.5 if altitude_m is None else altitude_m
-            await self._command("takeoff", mavlink.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, math.nan, 0,
-                                0, alt)
-            return
-        if altitude_m is not None:
-            await self.set_param("MIS_TAKEOFF_ALT", altitude_m)
-        await self._command("takeoff", mavlink.MAV_CMD_NAV_TAKEOFF, *[math.nan] * 7)
+        await self.firmware.takeoff(self._command, self._set_mode, self.set_param, altitude_m)
 
     async def land(self) -> None:
-        if self.is_ardupilot:
-            await self._set_mode(FlightMode.LAND)
-        else:
-            await self._command("land", mavlink.MAV_CMD_NAV_LAND, *[math.nan] * 7)
+        await self.firmware.land(self._command, self._set_mode)
 
     async def hold(self) -> None:
         await self._set_mode(FlightMode.HOLD)
@@ -169,16 +161,16 @@ class PymavlinkDriver(MavlinkVehicle):
         await self._set_mode(FlightMode.RETURN)
 
     async def precision_land(self) -> None:
-        if self.is_ardupilot:  # ArduPilot: LAND with PLND_ENABLED lands on the target
-            await self._set_mode(FlightMode.LAND)
-            return
-        await self._set_mode(FlightMode.PRECLAND)
+        await self.firmware.precision_land(self._command, self._set_mode)
 
     async def send_landing_target(self, target: LandingTarget) -> None:
         self._check_alive()
+        report = self.firmware.landing_target(target, self.latest_state)
+        if report is None:
+            return  # (not yet expressible: no telemetry to place it against)
         self._send(self._link.mav.landing_target_encode(
-            int(self._clock.now() * 1e6), target.target_num, px4.MAV_FRAME_LOCAL_NED,
-            0.0, 0.0, 0.0, 0.0, 0.0, *(float(v) for v in target.position_ned_m),
+            int(self._clock.now() * 1e6), target.target_num, report.frame,
+            0.0, 0.0, report.distance_m, 0.0, 0.0, *report.position_m,
             [1.0, 0.0, 0.0, 0.0], 0, 1))
 
     async def start_offboard(self) -> None:
@@ -289,16 +281,8 @@ class PymavlinkDriver(MavlinkVehicle):
                 del self._acks[command]
 
     async def _set_mode(self, mode: FlightMode) -> None:
-        name = f"set mode {mode.value}"
-        if self.is_ardupilot:
-            target = ardupilot.copter_mode(mode, self.ardupilot_hold)
-            await self._command(name, mavlink.MAV_CMD_DO_SET_MODE,
-                                px4.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, int(target))
-            return
-        main, sub = px4.PX4_MODES[mode]
-        base = px4.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (px4.MAV_MODE_FLAG_SAFETY_ARMED
-                                                        if self._armed else 0)
-        await self._command(name, mavlink.MAV_CMD_DO_SET_MODE, base, main, sub)
+        await self._command(f"set mode {mode.value}", mavlink.MAV_CMD_DO_SET_MODE,
+                            *self.firmware.mode_params(mode, self._armed))
 
     async def _heartbeats(self) -> None:
         """A companion computer's heartbeat at 1 Hz (MAV_TYPE_ONBOARD_CONTROLLER)."""
@@ -363,8 +347,7 @@ class PymavlinkDriver(MavlinkVehicle):
                 return
             self._last_heartbeat_s = self._clock.now()
             self._armed = bool(msg.base_mode & px4.MAV_MODE_FLAG_SAFETY_ARMED)
-            self._mode = (ardupilot.flight_mode(msg.custom_mode) if self.is_ardupilot
-                          else px4.px4_flight_mode(msg.custom_mode))
+            self._mode = self.firmware.flight_mode(msg.custom_mode)
             self._failsafe = msg.system_status == px4.MAV_STATE_CRITICAL
             self._heard.set()
             return
@@ -420,8 +403,8 @@ class PymavlinkDriver(MavlinkVehicle):
         self._attitude_vehicle_s = msg.time_boot_ms / 1000.0
 
     def _on_attitude(self, msg) -> None:
-        if self.is_px4:
-            return  # PX4 sends the quaternion; ATTITUDE is derived from it
+        if not self.firmware.attitude_from_euler:
+            return  # (PX4 sends the quaternion; its ATTITUDE is derived from it)
         if not self._newer("attitude", msg.time_boot_ms / 1000.0):
             return
         self._q = quat_from_euler(msg.roll, msg.pitch, msg.yaw)

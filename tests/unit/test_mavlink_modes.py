@@ -10,7 +10,8 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from drivers.base import CommandDenied, CommandTimeout, FlightMode
 from drivers.mavlink import ardupilot
-from drivers.mavlink.pymavlink_driver import MAV_AUTOPILOT_ARDUPILOTMEGA, PymavlinkDriver
+from drivers.mavlink.firmware import MAV_AUTOPILOT_ARDUPILOTMEGA
+from drivers.mavlink.pymavlink_driver import PymavlinkDriver
 
 PX4 = 12
 
@@ -110,5 +111,65 @@ def test_refused_and_unanswered_commands_raise_typed_errors():
         with pytest.raises(CommandTimeout):
             await driver.arm()
         assert len(link.commands()) == driver.command_retries  # re-sent, then gave up
+
+    asyncio.run(main())
+
+
+def _state_at(position, yaw_rad):
+    import numpy as np
+
+    from drivers.base import Battery, Health, LandedState, VehicleState
+
+    q = (math.cos(yaw_rad / 2), 0.0, 0.0, math.sin(yaw_rad / 2))
+    return VehicleState(time_s=1.0, position_ned_m=np.array(position),
+                        velocity_ned_m_s=np.zeros(3), attitude_q=np.array(q),
+                        angular_velocity_frd_rad_s=np.zeros(3), armed=True,
+                        mode=FlightMode.LAND, landed_state=LandedState.IN_AIR,
+                        distance_to_ground_m=-position[2], battery=Battery(16.0, 1.0, 0.9),
+                        health=Health())
+
+
+def test_each_firmware_gets_the_landing_target_in_the_frame_it_takes():
+    import numpy as np
+
+    from drivers.base import LandingTarget
+
+    async def main():
+        target = LandingTarget(time_s=1.0, position_ned_m=np.array([3.0, 1.0, 0.0]))
+        sent = {}
+        for autopilot in (PX4, MAV_AUTOPILOT_ARDUPILOTMEGA):
+            driver, link = _driver(autopilot)
+            driver.latest_state = _state_at((1.0, 1.0, -4.0), math.pi / 2)  # facing east
+            await driver.send_landing_target(target)
+            (msg,) = [m for m in link.sent if m.get_type() == "LANDING_TARGET"]
+            sent[autopilot] = msg
+        px4_msg, ap = sent[PX4], sent[MAV_AUTOPILOT_ARDUPILOTMEGA]
+        assert px4_msg.frame == 1  # LOCAL_NED, the target where it is
+        assert (px4_msg.x, px4_msg.y, px4_msg.z) == (3.0, 1.0, 0.0)
+        # ArduPilot: LOCAL_FRD from the vehicle (2 m north of it, 4 m below: facing east,
+        # that is 2 m to its left), with the distance it needs without a rangefinder
+        assert ap.frame == 20
+        assert (ap.x, ap.y, ap.z) == pytest.approx((0.0, -2.0, 4.0), abs=1e-6)
+        assert ap.distance == pytest.approx(math.hypot(2.0, 4.0))
+        assert ap.position_valid == 1
+
+    asyncio.run(main())
+
+
+def test_force_disarm_and_profiles_by_autopilot():
+    from drivers.mavlink.firmware import ArduCopterProfile, Px4Profile, firmware_profile
+
+    assert type(firmware_profile(PX4)) is Px4Profile
+    assert type(firmware_profile(None)) is Px4Profile  # (before any heartbeat; or generic)
+    ap = firmware_profile(MAV_AUTOPILOT_ARDUPILOTMEGA)
+    assert isinstance(ap, ArduCopterProfile)
+    assert (ap.force_arm_magic, ap.force_disarm_magic) == (2989, 21196)
+    assert ap.attitude_from_euler
+    assert not Px4Profile.attitude_from_euler
+
+    async def main():
+        driver, link = _driver(MAV_AUTOPILOT_ARDUPILOTMEGA)
+        await driver.disarm(force=True)
+        assert link.commands()[-1][:3] == (400, 0, 21196)
 
     asyncio.run(main())

@@ -1,0 +1,141 @@
+"""What differs between the flight stacks a MAVLink driver meets, one profile per firmware,
+chosen from the vehicle's HEARTBEAT ``autopilot`` and registered in :data:`FIRMWARE_PROFILES`
+(here and nowhere else): how its modes are read and asked for, how it takes off, lands and
+lands on a target, which frame its LANDING_TARGET takes, the force magic numbers of
+COMPONENT_ARM_DISARM, and which attitude message it sends.
+
+* **PX4** (``MAV_AUTOPILOT_PX4``; also any autopilot without a profile of its own): custom
+  modes as (main, sub) pairs with the armed flag in base mode; takeoff to MIS_TAKEOFF_ALT with
+  NAV_TAKEOFF; NAV_LAND; the PRECLAND mode; LANDING_TARGET in LOCAL_NED; 21196 forces both ways;
+  ATTITUDE_QUATERNION.
+* **ArduCopter** (``MAV_AUTOPILOT_ARDUPILOTMEGA``): Copter mode numbers (DO_SET_MODE param1 = the
+  custom-mode flag, param2 = the number); offboard is GUIDED and hold BRAKE or LOITER; takeoff
+  is GUIDED then NAV_TAKEOFF with the altitude above home in param7; landing is the LAND mode,
+  which with PLND_ENABLED lands on the target; LANDING_TARGET only in BODY_FRD or LOCAL_FRD, the
+  target as a position relative to the vehicle (``position_valid``, its distance > 0); 2989
+  forces an arming, 21196 a disarm; ATTITUDE (Euler angles). (ArduPilot's GCS_Common.cpp,
+  mode.cpp, AC_PrecLand: ``docs/reference/ardupilot-mavlink.md``.)
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from drivers.base import FlightMode, LandingTarget, VehicleState
+from drivers.mavlink import ardupilot, px4
+
+MAV_AUTOPILOT_ARDUPILOTMEGA = 3
+MAV_CMD_NAV_TAKEOFF = 22
+MAV_CMD_NAV_LAND = 21
+MAV_FRAME_BODY_FRD = 12
+MAV_FRAME_LOCAL_FRD = 20
+
+#: (name, MAV_CMD, *params) → the command sent and its answer awaited
+Command = Callable[..., Awaitable[None]]
+SetMode = Callable[[FlightMode], Awaitable[None]]
+SetParam = Callable[[str, float], Awaitable[object]]
+
+
+@dataclass(frozen=True, slots=True)
+class TargetReport:
+    """LANDING_TARGET's frame and fields as a firmware takes them."""
+
+    frame: int
+    position_m: tuple[float, float, float]
+    distance_m: float
+
+
+class Px4Profile:
+    name = "px4"
+    force_arm_magic = px4.FORCE_DISARM_MAGIC
+    force_disarm_magic = px4.FORCE_DISARM_MAGIC
+    #: it sends ATTITUDE_QUATERNION (ATTITUDE is derived from it: ignored)
+    attitude_from_euler = False
+
+    def flight_mode(self, custom_mode: int) -> FlightMode:
+        return px4.px4_flight_mode(custom_mode)
+
+    def mode_params(self, mode: FlightMode, armed: bool) -> tuple[float, ...]:
+        """DO_SET_MODE's params for ``mode``."""
+        main, sub = px4.PX4_MODES[mode]
+        base = px4.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (px4.MAV_MODE_FLAG_SAFETY_ARMED
+                                                        if armed else 0)
+        return (base, main, sub)
+
+    async def takeoff(self, command: Command, set_mode: SetMode, set_param: SetParam,
+                      altitude_m: float | None) -> None:
+        if altitude_m is not None:
+            await set_param("MIS_TAKEOFF_ALT", altitude_m)
+        await command("takeoff", MAV_CMD_NAV_TAKEOFF, *[math.nan] * 7)
+
+    async def land(self, command: Command, set_mode: SetMode) -> None:
+        await command("land", MAV_CMD_NAV_LAND, *[math.nan] * 7)
+
+    async def precision_land(self, command: Command, set_mode: SetMode) -> None:
+        await set_mode(FlightMode.PRECLAND)
+
+    def landing_target(self, target: LandingTarget,
+                       state: VehicleState | None) -> TargetReport | None:
+        p = tuple(float(v) for v in target.position_ned_m)
+        return TargetReport(px4.MAV_FRAME_LOCAL_NED, p, 0.0)
+
+
+class ArduCopterProfile(Px4Profile):
+    name = "ardupilot"
+    force_arm_magic = 2989
+    force_disarm_magic = 21196
+    attitude_from_euler = True
+    #: NAV_TAKEOFF's altitude when none is asked (MAVSDK's default)
+    default_takeoff_m = 2.5
+
+    def __init__(self, hold: ardupilot.CopterMode = ardupilot.CopterMode.BRAKE) -> None:
+        self.hold = hold
+        ardupilot.copter_mode(FlightMode.HOLD, hold)  # (BRAKE or LOITER, else ValueError)
+
+    def flight_mode(self, custom_mode: int) -> FlightMode:
+        return ardupilot.flight_mode(custom_mode)
+
+    def mode_params(self, mode: FlightMode, armed: bool) -> tuple[float, ...]:
+        return (px4.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, int(ardupilot.copter_mode(mode, self.hold)))
+
+    async def takeoff(self, command: Command, set_mode: SetMode, set_param: SetParam,
+                      altitude_m: float | None) -> None:
+        await set_mode(FlightMode.TAKEOFF)  # GUIDED
+        alt = self.default_takeoff_m if altitude_m is None else altitude_m
+        await command("takeoff", MAV_CMD_NAV_TAKEOFF, 0, 0, 0, math.nan, 0, 0, alt)
+
+    async def land(self, command: Command, set_mode: SetMode) -> None:
+        await set_mode(FlightMode.LAND)
+
+    async def precision_land(self, command: Command, set_mode: SetMode) -> None:
+        await set_mode(FlightMode.LAND)  # LAND with PLND_ENABLED lands on the target
+
+    def landing_target(self, target: LandingTarget,
+                       state: VehicleState | None) -> TargetReport | None:
+        """The target relative to the vehicle in LOCAL_FRD (forward and right along its
+        heading, down): ArduPilot takes no world frame here. None before any telemetry."""
+        if state is None:
+            return None
+        rel = np.asarray(target.position_ned_m, float) - np.asarray(state.position_ned_m, float)
+        c, s = math.cos(state.yaw_rad), math.sin(state.yaw_rad)
+        frd = (c * rel[0] + s * rel[1], -s * rel[0] + c * rel[1], float(rel[2]))
+        distance = float(np.linalg.norm(frd))
+        return TargetReport(MAV_FRAME_LOCAL_FRD, frd, distance) if distance > 0 else None
+
+
+#: HEARTBEAT autopilot → its profile (the hold mode is ArduCopter's choice of BRAKE or LOITER)
+FIRMWARE_PROFILES: dict[int, Callable[[ardupilot.CopterMode], Px4Profile]] = {
+    px4.MAV_AUTOPILOT_PX4: lambda hold: Px4Profile(),
+    MAV_AUTOPILOT_ARDUPILOTMEGA: ArduCopterProfile,
+}
+
+
+def firmware_profile(autopilot: int | None,
+                     hold: ardupilot.CopterMode = ardupilot.CopterMode.BRAKE) -> Px4Profile:
+    """The profile of a vehicle whose HEARTBEAT says ``autopilot`` (PX4's when it has none)."""
+    make = FIRMWARE_PROFILES.get(autopilot, FIRMWARE_PROFILES[px4.MAV_AUTOPILOT_PX4])
+    return make(hold)
