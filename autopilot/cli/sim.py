@@ -10,12 +10,13 @@ from pathlib import Path
 from autopilot.cli.common import EXIT_OK, Command, add_config_options, add_fault_option
 from autopilot.cli.run import check_network_exposure, listen_token, prepare_out_dir
 from autopilot.config import ConfigError, InputError, Problem, load_config
+from drivers.sim.config import FIRMWARE_NAMES
 
 
 def arguments(sim: argparse.ArgumentParser) -> None:
     sim.add_argument("--mission", metavar="NAME|FILE",
                      help="put this mission's scenario (e.g. the moving ball) in the world")
-    sim.add_argument("--firmware", choices=("px4", "ardrone"), default=None,
+    sim.add_argument("--firmware", choices=FIRMWARE_NAMES, default=None,
                      help="the vehicle it is: px4 (default: a PX4 SITL vehicle over MAVLink) "
                      "or ardrone (a Parrot AR.Drone 2.0 over its SDK protocol: AT commands "
                      "udp 5556, navdata udp 5554, video tcp 5555, configuration tcp 5559); "
@@ -50,8 +51,6 @@ def arguments(sim: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from autopilot.sim_server import serve
-
     if args.firmware is not None:
         args.overrides = [*(args.overrides or []), f"sim.firmware={args.firmware}"]
     if args.mission:
@@ -74,8 +73,14 @@ def run(args: argparse.Namespace) -> int:
                                        str(exc))]) from None
     check_network_exposure("--bind", f"udpin://{args.bind}:14580", args.signing_key,
                            args.insecure)
-    if config.sim.firmware == "ardrone":
-        return _serve_ardrone(args, config, scenario)
+    title = plan.mission.name if args.mission else "empty world"
+    return FACES[config.sim.firmware](args, config, scenario, signing, title)
+
+
+def _serve_px4(args: argparse.Namespace, config, scenario, signing, title: str) -> int:
+    """PX4 SITL's face: MAVLink on its ports, RTP video, the console."""
+    from autopilot.sim_server import serve
+
     if args.out:
         prepare_out_dir(Path(args.out), True, False, ("truth.mcap", "photos"), "a recording")
     from autopilot.logs import route_library_logs
@@ -92,12 +97,12 @@ def run(args: argparse.Namespace) -> int:
                       out_dir=Path(args.out) if args.out else None,
                       log=lambda line: print(line, file=sys.stderr, flush=True),
                       host=args.bind, signing=signing, console=args.console,
-                      console_token=token,
-                      title=plan.mission.name if args.mission else "empty world"))
+                      console_token=token, title=title))
     return EXIT_OK
 
 
-def _serve_ardrone(args: argparse.Namespace, config, scenario) -> int:
+def _serve_ardrone(args: argparse.Namespace, config, scenario, signing, title: str) -> int:
+    """The AR.Drone 2.0's: its SDK protocol's four ports."""
     from autopilot.ardrone_server import ArdronePorts, serve
     from autopilot.logs import route_library_logs
 
@@ -112,6 +117,10 @@ def _serve_ardrone(args: argparse.Namespace, config, scenario) -> int:
                       log=lambda line: print(line, file=sys.stderr, flush=True),
                       video=not args.no_video, out_dir=Path(args.out) if args.out else None))
     return EXIT_OK
+
+
+#: ``autopilot sim``'s server for each firmware (``sim.firmware``)
+FACES = {"px4": _serve_px4, "ardrone": _serve_ardrone}
 
 
 COMMAND = Command("sim", "run the simulator in real time as a MAVLink vehicle (like PX4 SITL)",

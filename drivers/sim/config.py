@@ -328,6 +328,13 @@ class FlightStackConfig(_Model):
         return self
 
 
+#: the firmwares the simulated vehicle can run: each registered once in each of the places that
+#: serve it (drivers/sim/firmwares.py: its flight code; autopilot.run.SIM_VEHICLES: the vehicle
+#: flown in process; autopilot.cli.sim.FACES: ``autopilot sim``'s server); a test checks they
+#: agree
+FIRMWARE_NAMES = ("px4", "ardrone")
+
+
 class SimConfig(_Model):
     #: Which world: ``realistic`` (config.yaml's values) or ``ideal`` (the kind world laid over
     #: them from autopilot/profiles/ideal.yaml); see autopilot.config.PROFILES.
@@ -335,7 +342,7 @@ class SimConfig(_Model):
     #: Which autopilot the simulated vehicle runs (drivers/sim/firmwares.py): ``px4`` (the
     #: PX4-like flight stack, spoken to over MAVLink) or ``ardrone`` (a Parrot AR.Drone 2.0's
     #: firmware, spoken to over its SDK protocol; laid over by autopilot/vehicles/ardrone.yaml).
-    firmware: Literal["px4", "ardrone"] = "px4"
+    firmware: Literal[FIRMWARE_NAMES] = "px4"
     seed: Annotated[int, Field(ge=0)]
     #: Where the local origin (the vehicle's start, PX4's EKF origin and first home) is on
     #: Earth: latitude °, longitude °, altitude above mean sea level m.
