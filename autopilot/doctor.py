@@ -93,6 +93,7 @@ async def mavlink_checks(vehicle, plan: MissionPlan, url: str, duration_s: float
                          signing: bool) -> None:
     """A MAVLink vehicle's link, telemetry, time sync and health, and its cameras' streams."""
     await _link_checks(vehicle, url, duration_s, add, signing=signing)
+    await _param_checks(vehicle, add)
     setups = vehicle.camera_setups if isinstance(vehicle, VideoInput) else {}
     for name, setup in setups.items():
         await _camera_checks(vehicle, name, setup.url, duration_s, setup.calibration, add)
@@ -134,6 +135,22 @@ async def ardrone_checks(vehicle, plan: MissionPlan, url: str, duration_s: float
         "the AR.Drone's protocol has no authentication: anyone on its Wi-Fi can fly it")
 
 
+async def _param_checks(vehicle, add) -> None:
+    """The parameters a companion computer depends on, as its firmware names them (a driver
+    that reads parameters: pymavlink)."""
+    firmware, get = getattr(vehicle, "firmware", None), getattr(vehicle, "get_param", None)
+    if firmware is None or get is None:
+        return
+    for check in firmware.companion_params():
+        try:
+            value = await get(check.name)
+        except (KeyError, OSError) as exc:
+            add(f"param {check.name}", "WARN", f"not read: {exc}")
+            continue
+        status, text = check.judge(value)
+        add(f"param {check.name}", status, f"{value:g}: {text}")
+
+
 async def _samples(vehicle, duration_s: float) -> list:
     samples = []
     async with contextlib.aclosing(vehicle.telemetry(buffer=256)) as stream:
@@ -146,10 +163,11 @@ async def _samples(vehicle, duration_s: float) -> list:
 
 async def _link_checks(vehicle, url: str, duration_s: float, add, *, signing: bool) -> None:
     from drivers.base import FlightMode
+    from drivers.mavlink.firmware import FIRMWARE_PROFILES, firmware_profile
 
     known = isinstance(vehicle, MavlinkIdentity)
-    autopilot = {12: "PX4", 3: "ArduPilot"}.get(vehicle.autopilot if known else None,
-                                                "MAVLink")
+    number = vehicle.autopilot if known else None
+    autopilot = firmware_profile(number).title if number in FIRMWARE_PROFILES else "MAVLink"
     target = vehicle.target_ids if known else None
     ids = f"system {target[0]} component {target[1]}" if target else "ids unknown"
     add("link", "PASS", f"{autopilot} vehicle, {ids}, on {url}")

@@ -20,6 +20,7 @@ COMPONENT_ARM_DISARM, and which attitude message it sends.
 from __future__ import annotations
 
 import math
+import struct
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 
@@ -33,6 +34,17 @@ MAV_CMD_NAV_TAKEOFF = 22
 MAV_CMD_NAV_LAND = 21
 MAV_FRAME_BODY_FRD = 12
 MAV_FRAME_LOCAL_FRD = 20
+#: MAV_PARAM_TYPE values carried as integers
+_INT_TYPES = frozenset({1, 2, 3, 4, 5, 6})  # UINT8 … INT32
+
+
+@dataclass(frozen=True, slots=True)
+class ParamCheck:
+    """A parameter a companion computer depends on: ``judge(value)`` gives (status, what it
+    means) with status PASS, WARN or FAIL."""
+
+    name: str
+    judge: Callable[[float], tuple[str, str]]
 
 #: (name, MAV_CMD, *params) → the command sent and its answer awaited
 Command = Callable[..., Awaitable[None]]
@@ -56,8 +68,30 @@ class Px4Profile:
     #: it sends ATTITUDE_QUATERNION (ATTITUDE is derived from it: ignored)
     attitude_from_euler = False
 
+    title = "PX4"
+
     def flight_mode(self, custom_mode: int) -> FlightMode:
         return px4.px4_flight_mode(custom_mode)
+
+    def param_value(self, raw: float, param_type: int) -> float:
+        """A PARAM_VALUE's value: PX4 sends integer parameters bytewise (the int's bits)."""
+        if param_type in _INT_TYPES:
+            return float(struct.unpack("<i", struct.pack("<f", raw))[0])
+        return float(raw)
+
+    def companion_params(self) -> tuple[ParamCheck, ...]:
+        """What ``autopilot doctor`` reads: how the vehicle reacts when the companion's
+        setpoints or the ground station stop."""
+        return (
+            ParamCheck("COM_OF_LOSS_T", lambda v: (
+                ("PASS" if v <= 1.0 else "WARN"),
+                f"offboard setpoints lost for {v:g} s: the failsafe acts (the autopilot streams "
+                "at 20 Hz or more; ≤ 1 s keeps a stopped companion's vehicle short)")),
+            ParamCheck("NAV_DLL_ACT", lambda v: (
+                "PASS", "data-link loss: " + {0: "no action (the ground station may go)",
+                                              1: "hold", 2: "return", 3: "land"}.get(
+                    int(v), f"action {int(v)}"))),
+        )
 
     def mode_params(self, mode: FlightMode, armed: bool) -> tuple[float, ...]:
         """DO_SET_MODE's params for ``mode``."""
@@ -96,8 +130,34 @@ class ArduCopterProfile(Px4Profile):
         self.hold = hold
         ardupilot.copter_mode(FlightMode.HOLD, hold)  # (BRAKE or LOITER, else ValueError)
 
+    title = "ArduPilot"
+
     def flight_mode(self, custom_mode: int) -> FlightMode:
         return ardupilot.flight_mode(custom_mode)
+
+    def param_value(self, raw: float, param_type: int) -> float:
+        return float(raw)  # ArduPilot casts every parameter to float
+
+    def companion_params(self) -> tuple[ParamCheck, ...]:
+        return (
+            ParamCheck("GUID_TIMEOUT", lambda v: (
+                "PASS" if v <= 3.0 else "WARN",
+                f"GUIDED velocity targets kept {v:g} s without news, then the vehicle stops "
+                "(the autopilot streams at 20 Hz or more)")),
+            ParamCheck("FS_GCS_ENABLE", lambda v: (
+                "PASS" if int(v) != 0 else "WARN",
+                "ground station loss: " + {0: "no action — a lost companion leaves the vehicle "
+                                              "in GUIDED until GUID_TIMEOUT stops it; consider 1 "
+                                              "(RTL) or 5 (Land)", 1: "RTL",
+                                           3: "SmartRTL or RTL", 4: "SmartRTL or Land",
+                                           5: "Land", 6: "Auto DO_LAND_START or RTL",
+                                           7: "Brake or Land"}.get(int(v), f"action {int(v)}"))),
+            ParamCheck("FS_GCS_TIMEOUT", lambda v: (
+                "PASS" if v <= 5.0 else "WARN", f"counts as lost after {v:g} s of silence")),
+            ParamCheck("SYSID_MYGCS", lambda v: (
+                "PASS", f"the failsafe listens to system {int(v)}'s heartbeats (the autopilot "
+                "sends its own; a companion meant to count must use this id)")),
+        )
 
     def mode_params(self, mode: FlightMode, armed: bool) -> tuple[float, ...]:
         return (px4.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, int(ardupilot.copter_mode(mode, self.hold)))

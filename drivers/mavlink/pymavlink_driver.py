@@ -220,6 +220,21 @@ class PymavlinkDriver(MavlinkVehicle):
             return
         raise CommandTimeout(f"set {name}", timeout_s)
 
+    async def get_param(self, name: str, timeout_s: float = 2.0) -> float:
+        """PARAM_REQUEST_READ by name and the vehicle's PARAM_VALUE (KeyError if it never
+        answers: no such parameter)."""
+        system, component = self._require_target()
+        loop = asyncio.get_running_loop()
+        for _ in range(self.command_retries):
+            future = self._params[name] = loop.create_future()
+            self._send(self._link.mav.param_request_read_encode(system, component,
+                                                                name.encode(), -1))
+            try:
+                return await asyncio.wait_for(future, timeout_s / self.command_retries)
+            except TimeoutError:
+                continue
+        raise KeyError(f"{name}: the vehicle did not answer (no such parameter?)")
+
     # ------------------------------------------------------------------------------------
     # Internals: sending
     # ------------------------------------------------------------------------------------
@@ -381,7 +396,7 @@ class PymavlinkDriver(MavlinkVehicle):
             else msg.param_id.decode(errors="replace").rstrip("\x00")
         future = self._params.get(name)
         if future is not None and not future.done():
-            future.set_result(float(msg.param_value))
+            future.set_result(self.firmware.param_value(msg.param_value, msg.param_type))
 
     def _on_timesync(self, msg) -> None:
         if msg.tc1 == 0:

@@ -46,6 +46,11 @@ def test_doctor_passes_a_healthy_vehicle_and_camera():
                  "capture times"):
         assert checks[item].status == "PASS", checks[item]
     assert "system 9" in checks["link"].detail  # PX4 SITL: instance 8 is system 9
+    assert checks["link"].detail.startswith("PX4 vehicle")
+    # the parameters a companion depends on, read from the vehicle (PX4's names)
+    assert checks["param COM_OF_LOSS_T"].status == "PASS", checks["param COM_OF_LOSS_T"]
+    assert checks["param COM_OF_LOSS_T"].detail.startswith("1: offboard setpoints lost")
+    assert "data-link loss" in checks["param NAV_DLL_ACT"].detail
     assert "vehicle-clock" in checks["capture times"].detail
     assert checks["calibration front"].status == "WARN"  # no --calibration given
     assert "front=FILE" in checks["calibration front"].detail

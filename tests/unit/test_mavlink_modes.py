@@ -173,3 +173,51 @@ def test_force_disarm_and_profiles_by_autopilot():
         assert link.commands()[-1][:3] == (400, 0, 21196)
 
     asyncio.run(main())
+
+
+def test_parameters_read_as_each_firmware_sends_them():
+    import struct
+
+    from drivers.mavlink.firmware import firmware_profile
+
+    bits = struct.unpack("<f", struct.pack("<i", 3))[0]  # PX4: an INT32's bits in the float
+    assert firmware_profile(PX4).param_value(bits, mavlink.MAV_PARAM_TYPE_INT32) == 3.0
+    assert firmware_profile(PX4).param_value(0.5, mavlink.MAV_PARAM_TYPE_REAL32) == 0.5
+    ap = firmware_profile(MAV_AUTOPILOT_ARDUPILOTMEGA)
+    assert ap.param_value(3.0, mavlink.MAV_PARAM_TYPE_INT8) == 3.0  # ArduPilot: a float cast
+
+
+def test_arducopter_companion_parameters_are_judged_by_what_they_do():
+    from drivers.mavlink.firmware import firmware_profile
+
+    checks = {c.name: c for c in firmware_profile(MAV_AUTOPILOT_ARDUPILOTMEGA).companion_params()}
+    assert set(checks) >= {"GUID_TIMEOUT", "FS_GCS_ENABLE", "FS_GCS_TIMEOUT", "SYSID_MYGCS"}
+    assert checks["GUID_TIMEOUT"].judge(3.0)[0] == "PASS"
+    assert checks["GUID_TIMEOUT"].judge(5.0)[0] == "WARN"
+    status, text = checks["FS_GCS_ENABLE"].judge(0.0)  # ArduCopter's default: no action
+    assert status == "WARN"
+    assert "GUID_TIMEOUT" in text
+    assert checks["FS_GCS_ENABLE"].judge(5.0) == ("PASS", "ground station loss: Land")
+
+
+def test_a_parameter_is_read_by_name():
+    async def main():
+        driver, link = _driver(MAV_AUTOPILOT_ARDUPILOTMEGA)
+        original = link.send
+
+        def send(msg):
+            original(msg)
+            if msg.get_type() == "PARAM_REQUEST_READ":
+                answer = link.vehicle.param_value_encode(b"GUID_TIMEOUT", 3.0,
+                                                         mavlink.MAV_PARAM_TYPE_REAL32, 900, 65535)
+                answer.pack(link.vehicle)
+                asyncio.get_running_loop().call_soon(driver._receive, answer,
+                                                     ("127.0.0.1", 5760))
+            return True
+
+        link.send = send
+        assert await driver.get_param("GUID_TIMEOUT") == 3.0
+        with pytest.raises(KeyError, match="NOPE"):
+            await driver.get_param("NOPE", timeout_s=0.06)  # never answered
+
+    asyncio.run(main())
