@@ -29,8 +29,14 @@ INT32_MAX = 2**31 - 1
 
 
 class ParamType(enum.Enum):
+    INT8 = "INT8"  # (ArduPilot's AP_Int8; PX4 has INT32 and FLOAT only)
+    INT16 = "INT16"
     INT32 = "INT32"
     FLOAT = "FLOAT"
+
+    @property
+    def integer(self) -> bool:
+        return self is not ParamType.FLOAT
 
 
 @dataclass(frozen=True, slots=True)
@@ -53,7 +59,7 @@ class ParamSpec:
             raise ParamError(self.name, f"{value!r} is not a number") from None
         if not math.isfinite(value):
             raise ParamError(self.name, f"{value} is not a number")
-        if self.type is ParamType.INT32:
+        if self.type.integer:
             if value != int(value):
                 raise ParamError(self.name, f"{value:g} is not an integer")
             value = int(value)
