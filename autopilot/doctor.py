@@ -105,6 +105,7 @@ async def ardrone_checks(vehicle, plan: MissionPlan, url: str, duration_s: float
     battery and state, and each camera the mission uses (the one video stream switched to
     it: its rate, size and delay)."""
     from drivers.ardrone.config import parse_config_text
+    from drivers.ardrone.navdata import RATES_HZ
 
     config = parse_config_text(getattr(vehicle.link, "config_text", b"") or b"")
     version = config.get("general:num_version_soft")
@@ -115,7 +116,7 @@ async def ardrone_checks(vehicle, plan: MissionPlan, url: str, duration_s: float
     samples = await _samples(vehicle, duration_s)
     rate = len(samples) / duration_s
     mode = getattr(vehicle, "navdata_mode", "demo")
-    expected = {"demo": 15.0, "full": 200.0}[mode]
+    expected = RATES_HZ[mode]
     add("navdata", "PASS" if rate >= 0.8 * expected else "WARN" if rate >= expected / 3
         else "FAIL", f"{rate:.0f} Hz ({mode} navdata: {expected:.0f} Hz); "
         f"{vehicle.link.bad_packets} bad packets")

@@ -29,6 +29,8 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 
 HEADER = 0x55667788
+#: navdata's rate in each mode (the SDK 2.0 developer guide, 7.1.2; bootstrap as demo)
+RATES_HZ = {"demo": 15.0, "full": 200.0}
 TAG_DEMO = 0
 TAG_CHECKSUM = 0xFFFF
 

@@ -23,7 +23,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from drivers.ardrone.at import AtCommands, config_value
-from drivers.ardrone.navdata import Navdata, State, Tag, option_mask
+from drivers.ardrone.navdata import RATES_HZ, Navdata, State, Tag, option_mask
 
 #: what the client sends to UDP 5554 to start (and keep) the navdata coming
 WAKE_UP = b"\x01\x00\x00\x00"
@@ -59,8 +59,9 @@ class _Pending:
 class NavdataSession:
     def __init__(self, commands: AtCommands, ids: tuple[str, str, str] = DEFAULT_IDS, *,
                  mode: str = "demo") -> None:
-        if mode not in ("demo", "full"):
-            raise ValueError(f"navdata {mode!r}: expected 'demo' (15 Hz) or 'full' (200 Hz)")
+        if mode not in RATES_HZ:
+            raise ValueError(f"navdata {mode!r}: expected "
+                             + " or ".join(f"'{m}' ({hz:g} Hz)" for m, hz in RATES_HZ.items()))
         self._at = commands
         self.full = mode == "full"
         self._ids = ids

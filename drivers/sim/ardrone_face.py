@@ -50,9 +50,7 @@ from drivers.sim.flight.ardrone import FirmwareStatus, Progressive
 
 #: video:video_channel values (ZAP_CHANNEL_HORI, ZAP_CHANNEL_VERT) → our camera names
 VIDEO_CHANNELS = {0: "front", 1: "down"}
-#: navdata rates (the SDK 2.0 developer guide, 7.1.2): bootstrap and demo; full
-DEMO_RATE_HZ = 15.0
-FULL_RATE_HZ = 200.0
+DEMO_RATE_HZ, FULL_RATE_HZ = nav.RATES_HZ["demo"], nav.RATES_HZ["full"]
 CTRL_GET_CONFIG = 4
 CTRL_ACK = 5
 #: the id a default session, user and application run under (CONFIG_IDS)
@@ -238,11 +236,9 @@ class ArdroneFace:
                 bits |= flag
         if self.bootstrap:
             return nav.build(bits | State.NAVDATA_BOOTSTRAP, self._sequence)
-        demo_mode = self.config.get_bool("general:navdata_demo")
-        if demo_mode:
-            bits |= State.NAVDATA_DEMO
         tags = set(nav.masked_tags(self.config.get_int("general:navdata_options")))
-        if demo_mode:
+        if self.config.get_bool("general:navdata_demo"):
+            bits |= State.NAVDATA_DEMO
             tags.add(nav.Tag.DEMO)
         roll, pitch, yaw = euler_from_quat(state.attitude_q)
         vn, ve, vd = (float(v) for v in state.velocity_ned_m_s)

@@ -14,7 +14,14 @@ from autopilot.flightlog import records as ch
 from autopilot.flightlog.log import read_log
 from autopilot.mission import load_mission
 
-from .test_console import Socket, _fly_console, _forward, _hold_keys, _settled
+from .test_console import (
+    Socket,
+    _fly_console,
+    _forward,
+    _hold_keys,
+    _settled,
+    emergency_stop,
+)
 from .test_goal_api import Client
 
 pytestmark = pytest.mark.serial  # (as the console's own tests)
@@ -78,14 +85,7 @@ def test_seed_000s_keys_fly_the_ardrone(tmp_path):
         seen["takeoff_height_m"] = _height(_settled(c, "hover after T"))
         assert airborne["armed"]
         # R, confirmed: the emergency bit cuts the motors in the air
-        sock.send({"type": "action", "action": "emergency", "confirm": True})
-        assert "motors stop" in sock.next("answer")["text"]
-        try:
-            while True:
-                sock.next("event", 30)
-        except Exception:  # the run ended: the socket closed
-            pass
-        return sock.events
+        return emergency_stop(sock)
 
     summary, events, _, _ = _fly_console(plan, tmp_path / "run", script)
     assert seen["forward_m"] > 1.0

@@ -91,6 +91,19 @@ def _hold_keys(sock: Socket, c: Client, keys: list[str], until, timeout_s: float
     raise AssertionError(f"holding {keys}: condition not met; last status {status}")
 
 
+def emergency_stop(sock: Socket) -> list[dict]:
+    """R, confirmed: the answer says the motors stop; the events until the run ends (the
+    socket closes)."""
+    sock.send({"type": "action", "action": "emergency", "confirm": True})
+    assert "motors stop" in sock.next("answer")["text"]
+    try:
+        while True:
+            sock.next("event", 30)
+    except Exception:  # the run ended: the socket closed
+        pass
+    return sock.events
+
+
 def _speed(status) -> float:
     return float(np.linalg.norm(status["velocity_ned_m_s"]))
 
@@ -261,14 +274,7 @@ def test_console_manual_land_takeoff_and_emergency_stop(tmp_path):
         sock.send({"type": "action", "action": "autopilot"})
         assert sock.next("answer")["ok"]
         c.wait(lambda s: s["control"] == "autopilot" and s["waiting_for_goals"], 30, "standby")
-        sock.send({"type": "action", "action": "emergency", "confirm": True})
-        assert "motors stop" in sock.next("answer")["text"]
-        try:
-            while True:
-                sock.next("event", 30)
-        except Exception:  # the run ended: the socket closed
-            pass
-        return sock.events
+        return emergency_stop(sock)
 
     summary, events, _, _ = _fly_console(plan, tmp_path / "run", script)
     assert summary["status"] == "aborted"
