@@ -92,7 +92,8 @@ def _px4_sim_vehicle(plan: MissionPlan) -> tuple[type, dict]:
 def _ardrone_sim_vehicle(plan: MissionPlan) -> tuple[type, dict]:
     from drivers.sim.ardrone_driver import SimArdroneDriver
 
-    return SimArdroneDriver, {"navdata": plan.config.link.navdata}
+    return SimArdroneDriver, {"navdata": plan.config.link.navdata,
+                              "drone_config": plan.config.link.ardrone_config}
 
 
 #: the in-process simulator's vehicle by firmware (``sim.firmware``), with its options: the
@@ -200,7 +201,8 @@ def make_ardrone_vehicle(plan: MissionPlan, *, connect: str | None = None,
         if name not in files and warn is not None:
             warn(f"camera {name}: uncalibrated: the nominal pinhole of vehicle.cameras.{name} "
                  f"(calibrate it: autopilot calibrate, then --calibration {name}=FILE)")
-    return ArdroneDriver(url, cameras=cameras, navdata=plan.config.link.navdata), None
+    return ArdroneDriver(url, cameras=cameras, navdata=plan.config.link.navdata,
+                         drone_config=plan.config.link.ardrone_config), None
 
 
 def check_vehicle_can_fly(plan: MissionPlan, vehicle: Vehicle) -> None:

@@ -220,6 +220,29 @@ class LinkConfig(ConfigModel):
     #: the AR.Drone's navdata (driver ardrone): demo at 15 Hz, or full at 200 Hz (the demo,
     #: time, physical measures, angles, altitude and magnetometer options)
     navdata: Literal["demo", "full"] = "demo"
+    #: the AR.Drone's configuration keys to write when the driver connects (driver ardrone;
+    #: as ardrone_autonomy's parameters), e.g. ``control:euler_angle_max: 0.35`` or
+    #: ``control:outdoor: true``; each a key the drone has, a client may write, with a value
+    #: of its type within the SDK's range. The keys the driver sets itself are refused.
+    ardrone_config: dict[str, str | bool | int | float] = Field(default_factory=dict)
+
+    @field_validator("ardrone_config")
+    @classmethod
+    def _drone_keys(cls, keys: dict[str, str | bool | int | float]
+                    ) -> dict[str, str | bool | int | float]:
+        from drivers.ardrone.at import config_value
+        from drivers.ardrone.config import DRIVER_KEYS, ConfigError, DroneConfig
+
+        drone = DroneConfig()
+        for name, value in keys.items():
+            if name.strip().lower() in DRIVER_KEYS:
+                raise ValueError(f"{name}: the driver sets it itself (from "
+                                 f"{DRIVER_KEYS[name.strip().lower()]})")
+            try:
+                drone.set(name, config_value(value))
+            except ConfigError as exc:
+                raise ValueError(f"{exc} (see the AR.Drone SDK 2.0 guide, ch. 8)") from None
+        return keys
 
 
 class VehicleCameraConfig(CameraConfig):

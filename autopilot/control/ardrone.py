@@ -54,11 +54,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from drivers.ardrone.telemetry import GRAVITY_M_S2
+from drivers.ardrone.telemetry import DroneLimits as ArDroneLimits
 from drivers.base import ProgressiveCommand, Setpoint
 
-__all__ = ["ArDroneLimits", "ArDroneTiltModel", "Twist"]
+__all__ = ["GRAVITY_M_S2", "ArDroneLimits", "ArDroneTiltModel", "Twist"]
 
-GRAVITY_M_S2 = 9.80665
 
 
 @dataclass(frozen=True, slots=True)
@@ -93,27 +94,6 @@ class Twist:
         return Twist(*(max(-1.0, min(1.0, v)) for v in (
             self.linear_x, self.linear_y, self.linear_z, self.angular_z, self.angular_x,
             self.angular_y)))
-
-
-@dataclass(frozen=True, slots=True)
-class ArDroneLimits:
-    """The AR.Drone 2.0's configured limits (the SDK's indoor defaults) and its drag."""
-
-    euler_angle_max_rad: float = math.radians(12.0)
-    control_vz_max_m_s: float = 0.7
-    control_yaw_rad_s: float = math.radians(100.0)
-    drag_per_s: float = 0.58  # tum_ardrone's c1
-
-    @property
-    def time_constant_s(self) -> float:
-        return 1.0 / self.drag_per_s
-
-    def acceleration_m_s2(self, tilt_fraction: float) -> float:
-        """Horizontal acceleration from rest at this fraction of the maximum tilt."""
-        return GRAVITY_M_S2 * math.tan(tilt_fraction * self.euler_angle_max_rad)
-
-    def terminal_speed_m_s(self, tilt_fraction: float = 1.0) -> float:
-        return self.acceleration_m_s2(tilt_fraction) / self.drag_per_s
 
 
 class ArDroneTiltModel:

@@ -169,6 +169,12 @@ KEYS: tuple[Key, ...] = (
 # AR.Drone 2.0 take any value, 100000 (config_keys.h's no_altitude_limit) meaning "unlimited";
 # the range here is those two ends.
 KEYS_BY_NAME: dict[str, Key] = {k.name: k for k in KEYS}
+#: the keys the driver writes itself, and what decides them (not for ``link.ardrone_config``)
+DRIVER_KEYS: dict[str, str] = {
+    "general:navdata_demo": "link.navdata",
+    "general:navdata_options": "link.navdata",
+    "video:video_channel": "the camera the active step needs",
+}
 #: what control:outdoor loads: the live key, its indoor and its outdoor profile
 _PROFILES = {live: (f"control:indoor_{live[8:]}", f"control:outdoor_{live[8:]}")
              for live in ("control:euler_angle_max", "control:control_vz_max",

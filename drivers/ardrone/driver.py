@@ -79,7 +79,8 @@ class ArdroneDriver(Vehicle):
     configuration at connect, its defaults if that fails); ``offboard_timeout_s``: a setpoint
     flies this long, then the drone hovers and offboard is left (PX4's COM_OF_LOSS_T);
     ``command_timeout_s``: how long takeoff, land and disarm wait for the navdata to show the
-    drone took them; ``navdata``: ``demo`` (15 Hz) or ``full`` (200 Hz). Statistics:
+    drone took them; ``navdata``: ``demo`` (15 Hz) or ``full`` (200 Hz); ``drone_config``:
+    keys written (and acknowledged) at connect, before the limits are read. Statistics:
     ``link.bad_packets``, ``link.foreign_datagrams``, :attr:`frames_decoded`.
     """
 
@@ -97,7 +98,8 @@ class ArdroneDriver(Vehicle):
                  limits: DroneLimits | None = None, gains: OuterLoopGains | None = None,
                  offboard_timeout_s: float = 0.5, command_timeout_s: float = 5.0,
                  navdata_latency_s: float = 0.03, video_latency_s: float = 0.05,
-                 navdata: str = "demo") -> None:
+                 navdata: str = "demo",
+                 drone_config: Mapping[str, str | int | float | bool] | None = None) -> None:
         address = parse_ardrone_url(url)
         self.url = url
         self.host = address.host
@@ -107,7 +109,7 @@ class ArdroneDriver(Vehicle):
         self._read_limits = limits is None
         self.command_timeout_s = command_timeout_s
         self._at = at.AtCommands()
-        self._session = NavdataSession(self._at, mode=navdata)
+        self._session = NavdataSession(self._at, mode=navdata, configs=drone_config)
         self.navdata_mode = navdata
         self._telemetry = NavdataTelemetry(navdata_latency_s)
         self._loop = OuterLoop(limits, gains)
@@ -183,12 +185,13 @@ class ArdroneDriver(Vehicle):
         self._tasks.append(asyncio.get_running_loop().create_task(self._at_loop(),
                                                                   name="ardrone-at"))
         try:
-            await self._until(lambda s: True, timeout_s, "connect")
+            await self._until(lambda s: self._session.configured, timeout_s, "connect")
         except CommandTimeout:
             await self._stop_link()  # (connect may be tried again)
             raise VehicleNotFound(
                 f"no demo navdata from the AR.Drone at {self.host} (udp {self.ports.navdata}) "
-                f"within {timeout_s:g} s") from None
+                f"within {timeout_s:g} s" if self._state is None else f"the AR.Drone at "
+                f"{self.host} did not acknowledge {self._session.pending_key}") from None
         if self._read_limits:
             text = await self.link.read_config(lambda: self._at.ctrl(4, 0))
             if text:

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from drivers.ardrone.telemetry import HOVER, DroneLimits, clamp_fraction
+from drivers.ardrone.telemetry import GRAVITY_M_S2, HOVER, DroneLimits, clamp_fraction
 from drivers.base import (
     ProgressiveCommand,
     Setpoint,
@@ -19,8 +19,6 @@ from drivers.geometry import (
     euler_from_quat,
     wrap_pi,
 )
-
-GRAVITY_M_S2 = 9.80665
 
 # --------------------------------------------------------------------------------------------
 # The outer loop: setpoints → PCMD
@@ -33,13 +31,18 @@ class OuterLoopGains:
     (lockstep: the firmware, its 15 Hz navdata with its latency and the optical-flow
     estimator, this loop at 30 Hz; see the report in :class:`OuterLoop`)."""
 
-    #: horizontal position error → velocity setpoint (1/s), and its limit
+    #: horizontal position error → velocity setpoint (1/s), and the speed that part may ask
+    #: (a position goal is approached at this speed; a velocity fed forward comes first)
     position_p: float = 1.0
-    max_speed_m_s: float = 1.0
+    position_speed_m_s: float = 1.0
+    #: the share of the drone's terminal speed at ``euler_angle_max`` (``g·tan(θ)/drag``,
+    #: :meth:`~drivers.ardrone.telemetry.DroneLimits.terminal_speed_m_s`) that a velocity
+    #: setpoint may ask, the rest of the tilt left for control (12°, the default: 2.9 m/s)
+    speed_share: float = 0.8
     #: vertical position error → vertical speed (1/s; limited by control_vz_max)
     position_z_p: float = 1.2
     #: horizontal velocity error → acceleration (1/s), its integral (1/s²) and that
-    #: integral's limit (m/s²: what the drag of a steady flight needs)
+    #: integral's limit (m/s²: what the drag's feed-forward leaves — wind, a trim's bias)
     velocity_p: float = 3.0
     velocity_i: float = 0.6
     velocity_i_limit_m_s2: float = 0.6
@@ -48,9 +51,6 @@ class OuterLoopGains:
     #: lead that the tilt's own lag and the navdata's latency take away
     velocity_lead_s: float = 0.2
     velocity_lead_trim_s: float = 1.0
-    #: the drag's share of a steady flight's tilt, as feed-forward: acceleration per m/s of
-    #: the velocity setpoint (1/s)
-    drag_per_s: float = 0.1
     #: heading error → yaw rate (1/s)
     yaw_p: float = 2.0
     #: a velocity setpoint below this (each axis) with nothing else asked is a hover
@@ -59,10 +59,33 @@ class OuterLoopGains:
     hover_yaw_rad: float = 0.05
 
 
+def _limited(v: np.ndarray, limit: float) -> np.ndarray:
+    norm = float(np.hypot(*v))
+    return v * (limit / norm) if norm > limit else v
+
+
+def constrain_xy(toward: np.ndarray, feed: np.ndarray, limit: float) -> np.ndarray:
+    """``toward + feed`` limited to ``limit`` with the feed-forward ``feed`` first, as PX4's
+    ``ControlMath::constrainXY``: the sum if within the limit; else ``feed`` (itself limited)
+    plus as much of ``toward`` as fits, its direction kept."""
+    total = toward + feed
+    if float(np.hypot(*total)) <= limit:
+        return total
+    if float(np.hypot(*feed)) >= limit:
+        return _limited(feed, limit)
+    # |feed + k·toward| = limit, 0 ≤ k < 1
+    a = float(toward @ toward)
+    b = 2.0 * float(feed @ toward)
+    c = float(feed @ feed) - limit * limit
+    k = (-b + math.sqrt(max(0.0, b * b - 4.0 * a * c))) / (2.0 * a)
+    return feed + min(1.0, max(0.0, k)) * toward
+
+
 class OuterLoop:
     """A :class:`~drivers.base.Setpoint` and the newest telemetry to a PCMD, as PX4's
     position controller would do it on a vehicle that takes tilt angles: position P →
-    velocity setpoint (limited to ``max_speed_m_s``) → velocity PI (+ acceleration
+    velocity setpoint (the feed-forward first, as PX4's ``constrainXY``; at most
+    :attr:`max_speed_m_s`) → velocity PI (+ acceleration
     feed-forward) → horizontal acceleration, limited to what ``euler_angle_max`` can give
     (``g·tan``) with its direction kept → tilt ``atan(a/g)`` in the heading frame → fractions
     of ``euler_angle_max``. Vertical: the vertical speed (position P on ``z``, or the
@@ -77,18 +100,20 @@ class OuterLoop:
     (:class:`~drivers.sim.simulator.Simulator` with ``sim.firmware=ardrone``: its navdata
     built by the simulated drone's face at 15 Hz with 30 ± 10 ms latency, read back through
     :class:`NavdataTelemetry`, this loop at 30 Hz), from 1 m after the takeoff, mean (max) of
-    seeds 1–4. The plant is nearly an integrator (the drag's time constant is seconds) behind
-    ~0.3 s of tilt lag and latency: without the tilt lead (``velocity_lead_s`` 0) the
-    velocity step below overshoots 7.3 % (9 %) with a 0.5 s rise, and the 2 m step settles
-    in 4.0 s; the lead trades that rise for damping. With the ``ideal`` profile's navigation
-    (the loop's own dynamics): a velocity step 0 → 0.5 m/s reaches 90 % in 1.0 s, overshoot 2.6 %
-    (4.8 %); a 2 m position step (at the 1 m/s limit) 90 % in 2.7 s, overshoot 0.8 % (1.2 %),
-    within 5 cm after 3.2 s; 1 m up 90 % in 1.7 s, overshoot 0.5 %; a 90° heading step 90 %
-    in 1.1 s, no overshoot. With the optical-flow navigation (the ``realistic`` profile, the
-    AR.Drone's): the 2 m step on the estimate 90 % in 2.7 s, overshoot 1.9 % (2.5 %), within
-    5 cm after 3.7 s (the true position is off by the estimate's drift). With three times
-    the navdata latency (0.1 s) it stays well damped (velocity overshoot 4.7 %, position
-    0.6 %, heading 3.4 %).
+    seeds 1–4. The plant is nearly an integrator (the drag's time constant, 1.7 s, is long)
+    behind ~0.3 s of tilt lag and latency; the lead trades rise for damping, and the drag fed
+    forward (the airframe's own, 0.58 /s) makes a steady speed need no integral. With the
+    ``ideal`` profile's navigation (the loop's own dynamics, true speed): a velocity step
+    0 → 0.5 m/s reaches 90 % in 0.92 s, overshoot 7.2 % (8.0 %); 0 → 2.5 m/s 90 % in 2.0 s,
+    overshoot 1.0 % (1.4 %), steady within 1 %; a 2 m position step (approached at
+    ``position_speed_m_s``) 90 % in 2.5 s, overshoot 0.1 % (1.4 %). With the optical-flow
+    navigation (the ``realistic`` profile, the AR.Drone's): the 2 m step on the estimate 90 %
+    in 2.5 s (2.6 s), overshoot 0.9 % (1.6 %), then 2–4 cm short for as long as the flow's
+    velocity bias lasts (the true position is off by the estimate's drift). Vertical and
+    heading (as before the drag feed-forward): 1 m up 90 % in 1.7 s, overshoot 0.5 %; a 90°
+    heading step 90 % in 1.1 s, no overshoot. (Measured by flying the simulated drone through
+    :class:`~drivers.sim.ardrone_driver.SimArdroneDriver`;
+    ``tests/integration/test_ardrone_outer_loop.py`` checks the fast cruise.)
     """
 
     def __init__(self, limits: DroneLimits | None = None,
@@ -98,6 +123,13 @@ class OuterLoop:
         self._integral = np.zeros(2)
         self._last_s: float | None = None
         self._trim: np.ndarray | None = None
+
+    @property
+    def max_speed_m_s(self) -> float:
+        """The horizontal speed a velocity setpoint may ask: :attr:`OuterLoopGains.speed_share`
+        of the terminal speed at the drone's ``euler_angle_max`` (read from its configuration,
+        so a drone set to tilt further may fly faster)."""
+        return self.gains.speed_share * self.limits.terminal_speed_m_s()
 
     def reset(self) -> None:
         """Forget the integral and the last update's time (a new flight, offboard again)."""
@@ -163,17 +195,13 @@ class OuterLoop:
             sp_vel[0], sp_vel[1] = c * forward - s * right, s * forward + c * right
         position, velocity = self.predicted(state, now_s, dt)
         # horizontal: velocity setpoint, then acceleration
-        v_sp = np.zeros(2)
-        for i in (0, 1):
-            feed = sp_vel[i] if math.isfinite(sp_vel[i]) else 0.0
-            v_sp[i] = g.position_p * (sp_pos[i] - position[i]) + feed \
-                if math.isfinite(sp_pos[i]) else feed
-        speed = float(np.hypot(*v_sp))
-        if speed > g.max_speed_m_s:
-            v_sp *= g.max_speed_m_s / speed
+        feed = np.nan_to_num(sp_vel[:2])
+        toward = np.array([g.position_p * (sp_pos[i] - position[i])
+                           if math.isfinite(sp_pos[i]) else 0.0 for i in (0, 1)])
+        v_sp = constrain_xy(_limited(toward, g.position_speed_m_s), feed, self.max_speed_m_s)
         error = v_sp - velocity[:2]
         feed_acc = np.nan_to_num(np.asarray(setpoint.acceleration_m_s2[:2], dtype=float))
-        accel = g.velocity_p * error + self._integral + feed_acc + g.drag_per_s * v_sp
+        accel = g.velocity_p * error + self._integral + feed_acc + lim.drag_per_s * v_sp
         a_max = GRAVITY_M_S2 * math.tan(lim.euler_angle_max_rad)
         norm = float(np.hypot(*accel))
         if norm > a_max:

@@ -20,6 +20,7 @@ received for a while) is answered with ``COMWDG``; a CONFIG not acknowledged wit
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 from drivers.ardrone.at import AtCommands, config_value
@@ -58,7 +59,8 @@ class _Pending:
 
 class NavdataSession:
     def __init__(self, commands: AtCommands, ids: tuple[str, str, str] = DEFAULT_IDS, *,
-                 mode: str = "demo") -> None:
+                 mode: str = "demo",
+                 configs: Mapping[str, str | int | float | bool] | None = None) -> None:
         if mode not in RATES_HZ:
             raise ValueError(f"navdata {mode!r}: expected "
                              + " or ".join(f"'{m}' ({hz:g} Hz)" for m, hz in RATES_HZ.items()))
@@ -66,7 +68,9 @@ class NavdataSession:
         self.full = mode == "full"
         self._ids = ids
         self._newest: int | None = None
-        self._configs: list[_Pending] = []
+        #: ``configs`` (the user's keys, ``link.ardrone_config``) go after the navdata mode
+        self._configs: list[_Pending] = [_Pending(k, config_value(v))
+                                         for k, v in (configs or {}).items()]
         self._awaiting_ack = False
         self._bootstrap = True
         #: counts, for the driver's statistics
@@ -78,6 +82,16 @@ class NavdataSession:
     def demo(self) -> bool:
         """Is the drone sending navdata past the bootstrap (the handshake done)?"""
         return self._newest is not None and not self._bootstrap
+
+    @property
+    def configured(self) -> bool:
+        """Past the bootstrap, with every queued CONFIG acknowledged?"""
+        return self.demo and not self._configs
+
+    @property
+    def pending_key(self) -> str | None:
+        """The CONFIG key waiting for its acknowledgement, if any."""
+        return self._configs[0].key if self._configs else None
 
     def configure(self, key: str, value: str | int | float | bool) -> None:
         """Queue a CONFIG: sent (with its ids) when the drone can take it, again until it is

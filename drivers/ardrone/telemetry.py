@@ -37,6 +37,7 @@ from drivers.geometry import (
 )
 
 NAN = math.nan
+GRAVITY_M_S2 = 9.80665
 
 # --------------------------------------------------------------------------------------------
 # The drone's limits and PCMD
@@ -53,6 +54,22 @@ class DroneLimits:
     control_vz_max_m_s: float = 0.7
     control_yaw_rad_s: float = 1.7453293
     altitude_max_m: float = 3.0
+    #: the airframe's linear drag (1/s: deceleration per m/s of airspeed), not a setting:
+    #: tum_ardrone's identified c1 for the AR.Drone 2.0 (its simulated one flies the same)
+    drag_per_s: float = 0.58
+
+    @property
+    def time_constant_s(self) -> float:
+        """The drag's time constant: how fast a tilt's speed builds up and dies away."""
+        return 1.0 / self.drag_per_s
+
+    def acceleration_m_s2(self, tilt_fraction: float = 1.0) -> float:
+        """Horizontal acceleration from rest at this fraction of ``euler_angle_max``."""
+        return GRAVITY_M_S2 * math.tan(tilt_fraction * self.euler_angle_max_rad)
+
+    def terminal_speed_m_s(self, tilt_fraction: float = 1.0) -> float:
+        """The speed a steady tilt at this fraction of ``euler_angle_max`` ends at."""
+        return self.acceleration_m_s2(tilt_fraction) / self.drag_per_s
 
     @classmethod
     def from_config(cls, values: Mapping[str, object]) -> DroneLimits:

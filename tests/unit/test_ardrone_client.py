@@ -6,6 +6,7 @@ offboard timeout, the climb after the takeoff, the emergency), the video clock a
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 
 import numpy as np
@@ -17,8 +18,8 @@ from drivers.ardrone.cameras import VideoClock, ardrone_cameras, camera_of_frame
 from drivers.ardrone.commander import Commander
 from drivers.ardrone.config import DroneConfig, parse_config_text
 from drivers.ardrone.navdata import ControlState, Demo, State
-from drivers.ardrone.outer_loop import OuterLoop
-from drivers.ardrone.telemetry import HOVER, DroneLimits, NavdataTelemetry
+from drivers.ardrone.outer_loop import OuterLoop, constrain_xy
+from drivers.ardrone.telemetry import GRAVITY_M_S2, HOVER, DroneLimits, NavdataTelemetry
 from drivers.base import (
     Battery,
     FlightMode,
@@ -222,14 +223,48 @@ def test_saturation_keeps_the_fractions_in_range_and_the_direction() -> None:
     assert tilt == pytest.approx(LIMITS.euler_angle_max_rad, rel=0.05)
 
 
-def test_the_velocity_setpoint_is_limited() -> None:
-    """Far away and already at the speed limit towards it: hardly any more tilt."""
+def _drag_tilt(speed_m_s: float) -> float:
+    """The pitch fraction a steady flight at ``speed_m_s`` needs against the drag."""
+    return math.atan(LIMITS.drag_per_s * speed_m_s / GRAVITY_M_S2) / LIMITS.euler_angle_max_rad
+
+
+def test_a_position_goal_is_approached_at_the_position_speed() -> None:
+    """Far away and already at the position part's speed towards it: only the drag's tilt."""
     loop = OuterLoop()
+    speed = loop.gains.position_speed_m_s
     cruising = loop.update(Setpoint.position(50.0, 0.0, -1.0),
-                           state_at(velocity=(loop.gains.max_speed_m_s, 0.0, 0.0)), 0.0)
+                           state_at(velocity=(speed, 0.0, 0.0)), 0.0)
     slow = OuterLoop().update(Setpoint.position(50.0, 0.0, -1.0),
                               state_at(velocity=(0.2, 0.0, 0.0)), 0.0)
-    assert abs(cruising.pitch) < 0.1 < abs(slow.pitch)
+    assert cruising.pitch == pytest.approx(-_drag_tilt(speed), abs=0.01)
+    assert abs(slow.pitch) > abs(cruising.pitch) + 0.3
+
+
+def test_the_speed_limit_is_the_drones_terminal_speed_share() -> None:
+    """A velocity setpoint is flown up to a share of the speed ``euler_angle_max`` holds
+    against the drag (12°: ~2.9 m/s), beyond it limited; a wider tilt allows more."""
+    loop = OuterLoop()
+    top = loop.max_speed_m_s
+    assert top == pytest.approx(
+        loop.gains.speed_share * GRAVITY_M_S2 * math.tan(math.radians(12.0)) / 0.58, rel=1e-4)
+    assert 2.5 < top < 3.5
+    at_top = loop.update(Setpoint.velocity_ned(10.0, 0.0, 0.0),
+                         state_at(velocity=(top, 0.0, 0.0)), 0.0)
+    assert at_top.pitch == pytest.approx(-_drag_tilt(top), abs=0.01)
+    wider = OuterLoop(DroneLimits(euler_angle_max_rad=math.radians(20.0)))
+    assert wider.max_speed_m_s > 1.5 * top
+
+
+def test_a_velocity_fed_forward_comes_before_the_position_error() -> None:
+    """As PX4's constrainXY: the feed-forward kept whole, the position part what fits."""
+    assert constrain_xy(np.array([0.5, 0.0]), np.array([0.0, 1.0]), 3.0) == \
+        pytest.approx([0.5, 1.0])
+    kept = constrain_xy(np.array([2.0, 0.0]), np.array([0.0, 2.5]), 3.0)
+    assert kept[0] > 0.0
+    assert kept[1] == pytest.approx(2.5)
+    assert float(np.hypot(*kept)) == pytest.approx(3.0)
+    assert constrain_xy(np.array([1.0, 0.0]), np.array([0.0, 4.0]), 3.0) == \
+        pytest.approx([0.0, 3.0])
 
 
 def test_a_zero_velocity_is_the_drones_own_hover() -> None:
@@ -475,3 +510,23 @@ def test_the_limits_come_from_the_drones_configuration() -> None:
     assert limits.control_vz_max_m_s == pytest.approx(1.0)
     assert limits.altitude_max_m == pytest.approx(5.0)
     assert DroneLimits.from_config({"control:control_yaw": "fast"}) == LIMITS
+
+
+@pytest.mark.parametrize(("keys", "expected"), [
+    ({"control:euler_angle_max": 0.9}, "control:euler_angle_max: 0.9 outside 0..0.52"),
+    ({"control:no_such_key": 1}, "no configuration key 'control:no_such_key'"),
+    ({"general:num_version_soft": "3.0"}, "general:num_version_soft is read-only"),
+    ({"control:outdoor": "perhaps"}, "control:outdoor: 'perhaps' is not TRUE or FALSE"),
+    ({"video:video_channel": 1}, "video:video_channel: the driver sets it itself"),
+    ({"general:navdata_demo": False}, "the driver sets it itself (from link.navdata)"),
+])
+def test_the_drones_keys_in_the_configuration_are_checked(keys, expected) -> None:
+    """``link.ardrone_config``: refused before anything connects, naming the key and what
+    was wrong with it."""
+    from autopilot.config import ConfigError, load_config
+
+    with pytest.raises(ConfigError, match=r"link\.ardrone_config") as caught:
+        load_config(None, [f"link.ardrone_config={json.dumps(keys)}"])
+    assert expected in str(caught.value)
+    assert load_config(None, ['link.ardrone_config={"control:outdoor": true}']) \
+        .link.ardrone_config == {"control:outdoor": True}

@@ -100,3 +100,21 @@ def test_the_communication_watchdog_is_answered():
     drone.take(step.commands)
     assert not drone.watchdog
     assert session.watchdog_resets == 1
+
+
+def test_the_users_keys_go_after_the_navdata_mode_and_are_waited_for():
+    """``link.ardrone_config``'s keys: written once the drone is past the bootstrap, in
+    order, each until acknowledged; ``configured`` says when all are."""
+    keys = {"control:outdoor": True, "control:euler_angle_max": 0.3}
+    session, drone = NavdataSession(at.AtCommands(), configs=keys), Drone()
+    assert not session.configured
+    _run(session, drone, 2)
+    assert not session.configured
+    assert session.pending_key in keys
+    _run(session, drone, 12, t0=1.0)
+    assert session.configured
+    assert session.pending_key is None
+    assert list(drone.config) == ["general:navdata_demo", "control:outdoor",
+                                  "control:euler_angle_max"]
+    assert drone.config["control:outdoor"] == "TRUE"
+    assert float(drone.config["control:euler_angle_max"]) == 0.3

@@ -34,8 +34,8 @@ DT = 1.0 / 30.0  # the runtime's control tick
 
 def test_limits_are_the_sdk_indoor_defaults():
     lim = ArDroneLimits()
-    # config_keys.h: MAX_EULER_ANGLES_REF (12000.0f * MDEG_TO_RAD)
-    assert lim.euler_angle_max_rad == pytest.approx(math.radians(12.0))
+    # config_keys.h: MAX_EULER_ANGLES_REF (12000.0f * MDEG_TO_RAD); the SDK's 2.0943999e-01
+    assert lim.euler_angle_max_rad == pytest.approx(math.radians(12.0), rel=1e-5)
     # default_control_vz_max (700.0f), in mm/s
     assert lim.control_vz_max_m_s == pytest.approx(0.700)
     # default_control_yaw (100000.0f * MDEG_TO_RAD), per second
@@ -69,7 +69,8 @@ def test_tilt_response_has_the_drag_time_constant():
     sp = _fly(model, Twist(linear_x=1.0), 0.0)
     # from rest the acceleration is g·tan(12°): fed forward to our vehicle at once
     assert sp.velocity_m_s[0] == 0.0
-    assert sp.acceleration_m_s2[0] == pytest.approx(GRAVITY_M_S2 * math.tan(math.radians(12)))
+    assert sp.acceleration_m_s2[0] == pytest.approx(
+        GRAVITY_M_S2 * math.tan(math.radians(12)), rel=1e-5)
     model = ArDroneTiltModel()
     for k in range(200):
         sp = model.step(Twist(linear_x=1.0), k * DT, 0.0, np.zeros(3))
@@ -204,7 +205,8 @@ def test_seed001_flies_its_last_circle_through_the_tilt_model():
     sp0 = rule.command(_inputs(0.0, det=None, last=ball))
     assert sp0.frame is SetpointFrame.LOCAL_NED
     assert sp0.velocity_m_s[0] == 0.0  # a tilt, not a velocity: it starts from rest
-    assert sp0.acceleration_m_s2[0] == pytest.approx(GRAVITY_M_S2 * math.tan(math.radians(12)))
+    assert sp0.acceleration_m_s2[0] == pytest.approx(
+        GRAVITY_M_S2 * math.tan(math.radians(12)), rel=1e-5)
     sp1 = rule.command(_inputs(1.0, det=None, last=ball))
     assert sp1.velocity_m_s[0] == pytest.approx(
         ArDroneLimits().terminal_speed_m_s() * (1 - math.exp(-0.58)))
