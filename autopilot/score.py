@@ -4,10 +4,11 @@ against the ground truth that ``autopilot sim --out DIR`` recorded.
 The autopilot never sees ground truth; the simulator never sees detections. This joins the
 two logs after the fact: the run's log holds its detections and setpoints on its own clock,
 and the time mapping its driver measured (TIMESYNC: local − vehicle boot time, logged every
-second); the simulator's log holds ground truth on the vehicle's boot clock. Truth is shifted
-onto the run's clock by the mapping of its time (interpolated: a lagging clock moves it), and
-the run's metrics (each step's, as the registry picks them) are computed as for an in-process
-run.
+second); the simulator's log holds ground truth on the vehicle's boot clock, and its cameras
+as they really are (detections are scored against where the target truly appeared in them).
+Truth is shifted onto the run's clock by the mapping of its time (interpolated: a lagging
+clock moves it), and the run's metrics (each step's, as the registry picks them) are computed
+as for an in-process run.
 """
 
 from __future__ import annotations
@@ -42,7 +43,8 @@ def score(run_dir: Path, truth_path: Path) -> dict:
     if not syncs:
         raise ScoreError(f"{log_path}: no time mapping to the vehicle's clock (channel "
                          f"{ch.TIME_SYNC}); was it flown through a MAVLink driver?")
-    truth = read_log(truth_path).get(ch.GROUND_TRUTH, [])
+    recorded = read_log(truth_path)
+    truth = recorded.get(ch.GROUND_TRUTH, [])
     if not truth:
         raise ScoreError(f"{truth_path}: no ground truth (channel {ch.GROUND_TRUTH})")
     # the mapping as it was when each truth sample was taken (it moves when the vehicle's
@@ -54,6 +56,8 @@ def score(run_dir: Path, truth_path: Path) -> dict:
     shifted = np.interp([r["time_s"] for r in truth], vehicle_s[order], offsets[order])
     records[ch.GROUND_TRUTH] = [{**r, "time_s": r["time_s"] + float(off)}
                                 for r, off in zip(truth, shifted, strict=True)]
+    if recorded.get(ch.CAMERA_TRUTH):  # (a recording from before these were kept has none)
+        records[ch.CAMERA_TRUTH] = recorded[ch.CAMERA_TRUTH]
     metrics = ch.clean(mission_metrics(records))
     summary_path = run_dir / "summary.json"
     if summary_path.is_file():

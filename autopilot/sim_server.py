@@ -174,10 +174,16 @@ async def serve(config: AppConfig, scenario: Scenario | None, *, instance: int =
 
 async def record_truth(vehicle: SimDriver, out_dir: Path,
                        log: Callable[[str], None]) -> tuple[FlightLog, asyncio.Task]:
-    """Record the vehicle's ground truth into ``out_dir/truth.mcap`` (on its boot clock, for
-    ``autopilot score``) until the returned task is cancelled; close the log after it."""
+    """Record the vehicle's ground truth and its true cameras into ``out_dir/truth.mcap`` (on
+    its boot clock, for ``autopilot score``) until the returned task is cancelled; close the
+    log after it."""
     await asyncio.to_thread(out_dir.mkdir, parents=True, exist_ok=True)
     truth_log = FlightLog(out_dir / TRUTH_LOG)
+    # the cameras as they really are (the realistic world's calibration and mount errors), so
+    # that a detection is scored where the target truly appeared, not where the nominal
+    # camera the autopilot was given would put it
+    for camera in vehicle.true_cameras().values():
+        truth_log.write(ch.CAMERA_TRUTH, vehicle.sim_time_s, ch.camera_info_record(camera))
 
     async def log_truth() -> None:
         async with contextlib.aclosing(vehicle.ground_truth()) as samples:

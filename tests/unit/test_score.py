@@ -83,3 +83,30 @@ def test_a_truncated_log_reads_up_to_where_it_was_cut(tmp_path):
     got = read_log(path).get(ch.GROUND_TRUTH, [])
     assert 0 < len(got) < 2000
     assert [r["time_s"] for r in got] == pytest.approx([t * 0.1 for t in range(len(got))])
+
+
+def test_detections_are_scored_in_the_cameras_the_simulator_really_had(tmp_path, monkeypatch):
+    """The truth recording's cameras (calibration and mount errors and all) replace the
+    nominal ones the run logged: a detection is judged where the target truly appeared."""
+    import dataclasses
+
+    import numpy as np
+
+    from drivers.ardrone.cameras import ardrone_cameras
+
+    nominal = ardrone_cameras()["front"]
+    true = dataclasses.replace(nominal, position_body_m=np.array([0.19, 0.01, 0.0]))
+    run = tmp_path / "run"
+    run.mkdir()
+    _write(run / "flight.mcap", [
+        (ch.CAMERA_INFO, 100.0, ch.camera_info_record(nominal)),
+        (ch.TIME_SYNC, 110.0, {"time_s": 110.0, "vehicle_to_local_s": 95.5,
+                               "round_trip_s": 0.001})])
+    _write(tmp_path / "truth.mcap", [(ch.CAMERA_TRUTH, 0.0, ch.camera_info_record(true)),
+                                     (ch.GROUND_TRUTH, 4.5, _truth(4.5))])
+    seen = {}
+    monkeypatch.setattr(scoring, "mission_metrics", lambda records: seen.update(records) or {})
+    scoring.score(run, tmp_path / "truth.mcap")
+    assert len(seen[ch.CAMERA_TRUTH]) == 1
+    assert seen[ch.CAMERA_TRUTH][0]["position_body_m"] == pytest.approx([0.19, 0.01, 0.0])
+    assert seen[ch.CAMERA_INFO][0]["position_body_m"] == pytest.approx([0.17, 0.0, 0.0])
