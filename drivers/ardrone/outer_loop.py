@@ -42,15 +42,23 @@ class OuterLoopGains:
     #: vertical position error → vertical speed (1/s; limited by control_vz_max)
     position_z_p: float = 1.2
     #: horizontal velocity error → acceleration (1/s), its integral (1/s²) and that
-    #: integral's limit (m/s²: what the drag's feed-forward leaves — wind, a trim's bias)
+    #: integral's limit (m/s²: what the feed-forward leaves of the drag at the top speed, wind)
     velocity_p: float = 3.0
     velocity_i: float = 0.6
-    velocity_i_limit_m_s2: float = 0.6
+    velocity_i_limit_m_s2: float = 2.0
     #: the velocity fed back is predicted this far ahead of the sample (s), on top of the
     #: sample's age, from the acceleration its attitude gives (``g·tan`` of its tilt): the
     #: lead that the tilt's own lag and the navdata's latency take away
     velocity_lead_s: float = 0.2
     velocity_lead_trim_s: float = 1.0
+    #: the drag's share of a steady flight's tilt, as feed-forward: acceleration per m/s of
+    #: the velocity setpoint (1/s); the integral supplies the rest of the drag, slowly (a
+    #: 2.5 m/s step: 94 % after 6 s, 98 % after 12 s). Compensating the airframe's whole drag
+    #: (0.58 /s) holds a step's speed to 1 %, but the follow missions fly worse on it
+    #: (lockstep, seeds 2-4, range RMS: follow_ball 0.05-0.06 → 0.10-0.11 m, follow_marker
+    #: 0.12-0.16 → 0.26-0.36 m, whether fed forward on the setpoint or cancelled on the
+    #: velocity flown): the drag's damping is what the follow controller's camera loop leans on
+    drag_feed_forward_per_s: float = 0.1
     #: heading error → yaw rate (1/s)
     yaw_p: float = 2.0
     #: a velocity setpoint below this (each axis) with nothing else asked is a hover
@@ -201,7 +209,7 @@ class OuterLoop:
         v_sp = constrain_xy(_limited(toward, g.position_speed_m_s), feed, self.max_speed_m_s)
         error = v_sp - velocity[:2]
         feed_acc = np.nan_to_num(np.asarray(setpoint.acceleration_m_s2[:2], dtype=float))
-        accel = g.velocity_p * error + self._integral + feed_acc + lim.drag_per_s * v_sp
+        accel = g.velocity_p * error + self._integral + feed_acc + g.drag_feed_forward_per_s * v_sp
         a_max = GRAVITY_M_S2 * math.tan(lim.euler_angle_max_rad)
         norm = float(np.hypot(*accel))
         if norm > a_max:

@@ -224,12 +224,15 @@ def test_saturation_keeps_the_fractions_in_range_and_the_direction() -> None:
 
 
 def _drag_tilt(speed_m_s: float) -> float:
-    """The pitch fraction a steady flight at ``speed_m_s`` needs against the drag."""
-    return math.atan(LIMITS.drag_per_s * speed_m_s / GRAVITY_M_S2) / LIMITS.euler_angle_max_rad
+    """The pitch fraction the drag's feed-forward gives a flight at ``speed_m_s`` at its
+    setpoint (the integral adds the rest of the drag over time)."""
+    share = OuterLoop().gains.drag_feed_forward_per_s
+    return math.atan(share * speed_m_s / GRAVITY_M_S2) / LIMITS.euler_angle_max_rad
 
 
 def test_a_position_goal_is_approached_at_the_position_speed() -> None:
-    """Far away and already at the position part's speed towards it: only the drag's tilt."""
+    """Far away and already at the position part's speed towards it: only the drag's
+    feed-forward."""
     loop = OuterLoop()
     speed = loop.gains.position_speed_m_s
     cruising = loop.update(Setpoint.position(50.0, 0.0, -1.0),
