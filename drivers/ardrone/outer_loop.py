@@ -109,17 +109,16 @@ class OuterLoop:
     built by the simulated drone's face at 15 Hz with 30 ± 10 ms latency, read back through
     :class:`NavdataTelemetry`, this loop at 30 Hz), from 1 m after the takeoff, mean (max) of
     seeds 1–4. The plant is nearly an integrator (the drag's time constant, 1.7 s, is long)
-    behind ~0.3 s of tilt lag and latency; the lead trades rise for damping, and the drag fed
-    forward (the airframe's own, 0.58 /s) makes a steady speed need no integral. With the
-    ``ideal`` profile's navigation (the loop's own dynamics, true speed): a velocity step
-    0 → 0.5 m/s reaches 90 % in 0.92 s, overshoot 7.2 % (8.0 %); 0 → 2.5 m/s 90 % in 2.0 s,
-    overshoot 1.0 % (1.4 %), steady within 1 %; a 2 m position step (approached at
-    ``position_speed_m_s``) 90 % in 2.5 s, overshoot 0.1 % (1.4 %). With the optical-flow
-    navigation (the ``realistic`` profile, the AR.Drone's): the 2 m step on the estimate 90 %
-    in 2.5 s (2.6 s), overshoot 0.9 % (1.6 %), then 2–4 cm short for as long as the flow's
-    velocity bias lasts (the true position is off by the estimate's drift). Vertical and
-    heading (as before the drag feed-forward): 1 m up 90 % in 1.7 s, overshoot 0.5 %; a 90°
-    heading step 90 % in 1.1 s, no overshoot. (Measured by flying the simulated drone through
+    behind ~0.3 s of tilt lag and latency; the lead trades rise for damping. With the
+    ``ideal`` profile's navigation (the loop's own dynamics, the true speed): a velocity step
+    0 → 0.5 m/s reaches 90 % in 1.2 s without overshoot, then 95 % of it after 8 s (the
+    integral supplies the drag slowly); 0 → 2.5 m/s 90 % in 2.9 s (3.3 s), 94 % after 8 s,
+    98 % after 14 s; a 2 m position step (approached at ``position_speed_m_s``) 90 % in 2.7 s,
+    overshoot 0.5 % (2.1 %). With the optical-flow navigation (the ``realistic`` profile, the
+    AR.Drone's): the 2 m step on the estimate 90 % in 2.8 s (2.9 s), overshoot 1.7 % (2.1 %),
+    within 5 cm after 3.2 s (the true position is off by the estimate's drift). Vertical and
+    heading: 1 m up 90 % in 1.7 s, overshoot 0.5 %; a 90° heading step 90 % in 1.1 s, no
+    overshoot. (Measured by flying the simulated drone through
     :class:`~drivers.sim.ardrone_driver.SimArdroneDriver`;
     ``tests/integration/test_ardrone_outer_loop.py`` checks the fast cruise.)
     """
