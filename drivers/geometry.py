@@ -11,6 +11,7 @@ These run inside the simulator's 250 Hz control loop, so they are written for sm
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -197,3 +198,25 @@ def rot_z(yaw_rad: float) -> np.ndarray:
     """Rotation about the down axis by ``yaw_rad`` (heading-frame → NED)."""
     c, s = math.cos(yaw_rad), math.sin(yaw_rad)
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def constrain_xy(v0: Sequence[float], v1: Sequence[float], max_norm: float) -> tuple[float, float]:
+    """``v0 + v1`` limited to ``max_norm``, keeping as much of ``v0`` as possible (PX4's
+    ControlMath::constrainXY, where ``v0`` is the position term, which has priority over the
+    feed-forward ``v1``)."""
+    tx, ty = v0[0] + v1[0], v0[1] + v1[1]
+    if math.hypot(tx, ty) <= max_norm:
+        return tx, ty
+    n0 = math.hypot(v0[0], v0[1])
+    if n0 >= max_norm:
+        return v0[0] / n0 * max_norm, v0[1] / n0 * max_norm
+    n1 = math.hypot(v1[0], v1[1])
+    if math.hypot(v1[0] - v0[0], v1[1] - v0[1]) < 1e-3 or n1 < 1e-9:
+        return (v0[0] / n0 * max_norm, v0[1] / n0 * max_norm) if n0 > 1e-9 else (tx, ty)
+    ux, uy = v1[0] / n1, v1[1] / n1
+    if n0 < 1e-3:
+        return ux * max_norm, uy * max_norm
+    m = ux * v0[0] + uy * v0[1]
+    c = n0 * n0 - max_norm * max_norm
+    s = -m + math.sqrt(m * m - c)
+    return v0[0] + ux * s, v0[1] + uy * s

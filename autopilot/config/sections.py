@@ -235,9 +235,9 @@ class LinkConfig(ConfigModel):
 
         drone = DroneConfig()
         for name, value in keys.items():
-            if name.strip().lower() in DRIVER_KEYS:
-                raise ValueError(f"{name}: the driver sets it itself (from "
-                                 f"{DRIVER_KEYS[name.strip().lower()]})")
+            owner = DRIVER_KEYS.get(name.strip().lower())
+            if owner is not None:
+                raise ValueError(f"{name}: the driver sets it itself (from {owner})")
             try:
                 drone.set(name, config_value(value))
             except ConfigError as exc:

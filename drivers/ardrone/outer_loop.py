@@ -16,6 +16,7 @@ from drivers.base import (
     VehicleState,
 )
 from drivers.geometry import (
+    constrain_xy,
     euler_from_quat,
     wrap_pi,
 )
@@ -72,37 +73,21 @@ def _limited(v: np.ndarray, limit: float) -> np.ndarray:
     return v * (limit / norm) if norm > limit else v
 
 
-def constrain_xy(toward: np.ndarray, feed: np.ndarray, limit: float) -> np.ndarray:
-    """``toward + feed`` limited to ``limit`` with the feed-forward ``feed`` first, as PX4's
-    ``ControlMath::constrainXY``: the sum if within the limit; else ``feed`` (itself limited)
-    plus as much of ``toward`` as fits, its direction kept."""
-    total = toward + feed
-    if float(np.hypot(*total)) <= limit:
-        return total
-    if float(np.hypot(*feed)) >= limit:
-        return _limited(feed, limit)
-    # |feed + k·toward| = limit, 0 ≤ k < 1
-    a = float(toward @ toward)
-    b = 2.0 * float(feed @ toward)
-    c = float(feed @ feed) - limit * limit
-    k = (-b + math.sqrt(max(0.0, b * b - 4.0 * a * c))) / (2.0 * a)
-    return feed + min(1.0, max(0.0, k)) * toward
-
-
 class OuterLoop:
-    """A :class:`~drivers.base.Setpoint` and the newest telemetry to a PCMD, as PX4's
-    position controller would do it on a vehicle that takes tilt angles: position P →
-    velocity setpoint (the feed-forward first, as PX4's ``constrainXY``; at most
-    :attr:`max_speed_m_s`) → velocity PI (+ acceleration
-    feed-forward) → horizontal acceleration, limited to what ``euler_angle_max`` can give
-    (``g·tan``) with its direction kept → tilt ``atan(a/g)`` in the heading frame → fractions
-    of ``euler_angle_max``. Vertical: the vertical speed (position P on ``z``, or the
-    setpoint's) as ``gaz = −v_down / control_vz_max`` (the drone holds a climb rate on its
-    own). Yaw: P on the heading error (with the yaw rate as feed-forward), or the yaw-rate
-    setpoint, as a fraction of ``control_yaw``. A setpoint that asks for no motion (a zero
-    velocity, no position, no turn) is the drone's own hover (PCMD's progressive bit clear),
-    which holds its velocity at zero with its optical flow better than a loop on 15 Hz
-    navdata can; it resets the integral.
+    """A :class:`~drivers.base.Setpoint` and the newest telemetry to a PCMD, as PX4's position
+    controller would do it on a vehicle that takes tilt angles: position P → velocity setpoint
+    (at most :attr:`max_speed_m_s`, the velocity asked kept first and the position error's share
+    what fits: ``constrainXY``'s limit with PX4's priority reversed, since a follow step's
+    velocity is its own closed-loop command and the position part is a position goal's approach,
+    already limited to ``position_speed_m_s``) → velocity PI (+ acceleration feed-forward) →
+    horizontal acceleration, limited to what ``euler_angle_max`` can give (``g·tan``) with its
+    direction kept → tilt ``atan(a/g)`` in the heading frame → fractions of ``euler_angle_max``.
+    Vertical: the vertical speed (position P on ``z``, or the setpoint's) as ``gaz = −v_down /
+    control_vz_max`` (the drone holds a climb rate on its own). Yaw: P on the heading error
+    (with the yaw rate as feed-forward), or the yaw-rate setpoint, as a fraction of
+    ``control_yaw``. A setpoint that asks for no motion (a zero velocity, no position, no turn)
+    is the drone's own hover (PCMD's progressive bit clear), which holds its velocity at zero
+    with its optical flow better than a loop on 15 Hz navdata can; it resets the integral.
 
     The gains (:class:`OuterLoopGains`) were tuned on the simulated AR.Drone in lockstep
     (:class:`~drivers.sim.simulator.Simulator` with ``sim.firmware=ardrone``: its navdata
@@ -205,19 +190,19 @@ class OuterLoop:
         feed = np.nan_to_num(sp_vel[:2])
         toward = np.array([g.position_p * (sp_pos[i] - position[i])
                            if math.isfinite(sp_pos[i]) else 0.0 for i in (0, 1)])
-        v_sp = constrain_xy(_limited(toward, g.position_speed_m_s), feed, self.max_speed_m_s)
+        # (the velocity asked first: the reverse of PX4's priority, see the class docstring)
+        v_sp = np.array(constrain_xy(feed, _limited(toward, g.position_speed_m_s),
+                                     self.max_speed_m_s))
         error = v_sp - velocity[:2]
         feed_acc = np.nan_to_num(np.asarray(setpoint.acceleration_m_s2[:2], dtype=float))
         accel = g.velocity_p * error + self._integral + feed_acc + g.drag_feed_forward_per_s * v_sp
-        a_max = GRAVITY_M_S2 * math.tan(lim.euler_angle_max_rad)
+        a_max = lim.acceleration_m_s2()
         norm = float(np.hypot(*accel))
         if norm > a_max:
             accel *= a_max / norm
         else:  # (no integration while saturated: anti-windup)
-            self._integral = self._integral + g.velocity_i * error * dt
-            i_norm = float(np.hypot(*self._integral))
-            if i_norm > g.velocity_i_limit_m_s2:
-                self._integral *= g.velocity_i_limit_m_s2 / i_norm
+            self._integral = _limited(self._integral + g.velocity_i * error * dt,
+                                      g.velocity_i_limit_m_s2)
         a_forward = c * accel[0] + s * accel[1]
         a_right = -s * accel[0] + c * accel[1]
         pitch_rad = -math.atan(a_forward / GRAVITY_M_S2)

@@ -18,7 +18,7 @@ from drivers.ardrone.cameras import VideoClock, ardrone_cameras, camera_of_frame
 from drivers.ardrone.commander import Commander
 from drivers.ardrone.config import DroneConfig, parse_config_text
 from drivers.ardrone.navdata import ControlState, Demo, State
-from drivers.ardrone.outer_loop import OuterLoop, constrain_xy
+from drivers.ardrone.outer_loop import OuterLoop
 from drivers.ardrone.telemetry import GRAVITY_M_S2, HOVER, DroneLimits, NavdataTelemetry
 from drivers.base import (
     Battery,
@@ -29,7 +29,7 @@ from drivers.base import (
     Setpoint,
     VehicleState,
 )
-from drivers.geometry import euler_from_quat, quat_from_euler, quat_rotate
+from drivers.geometry import constrain_xy, euler_from_quat, quat_from_euler, quat_rotate
 
 FLYING = State.FLY | State.NAVDATA_DEMO
 LIMITS = DroneLimits()
@@ -259,14 +259,15 @@ def test_the_speed_limit_is_the_drones_terminal_speed_share() -> None:
 
 
 def test_a_velocity_fed_forward_comes_before_the_position_error() -> None:
-    """As PX4's constrainXY: the feed-forward kept whole, the position part what fits."""
-    assert constrain_xy(np.array([0.5, 0.0]), np.array([0.0, 1.0]), 3.0) == \
+    """The outer loop's limit (``constrain_xy`` with the feed-forward as its priority term,
+    PX4's order reversed): the feed-forward kept whole, the position part what fits."""
+    assert constrain_xy(np.array([0.0, 1.0]), np.array([0.5, 0.0]), 3.0) == \
         pytest.approx([0.5, 1.0])
-    kept = constrain_xy(np.array([2.0, 0.0]), np.array([0.0, 2.5]), 3.0)
+    kept = constrain_xy(np.array([0.0, 2.5]), np.array([2.0, 0.0]), 3.0)
     assert kept[0] > 0.0
     assert kept[1] == pytest.approx(2.5)
     assert float(np.hypot(*kept)) == pytest.approx(3.0)
-    assert constrain_xy(np.array([1.0, 0.0]), np.array([0.0, 4.0]), 3.0) == \
+    assert constrain_xy(np.array([0.0, 4.0]), np.array([1.0, 0.0]), 3.0) == \
         pytest.approx([0.0, 3.0])
 
 

@@ -16,7 +16,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from drivers.geometry import cross, mat_to_q
+from drivers.geometry import constrain_xy, cross, mat_to_q
 from drivers.sim.config import PositionControlConfig
 
 GRAVITY_M_S2 = 9.80665
@@ -43,27 +43,6 @@ class AttitudeSetpoint:
     q_ned_frd: tuple[float, float, float, float]
     thrust: float  # normalised collective thrust (0..1)
     yaw_rate_ff_rad_s: float
-
-
-def constrain_xy(v0: Sequence[float], v1: Sequence[float], max_norm: float) -> tuple[float, float]:
-    """``v0 + v1`` limited to ``max_norm``, keeping as much of ``v0`` as possible (PX4's
-    ControlMath::constrainXY: the position term has priority over the feed-forward)."""
-    tx, ty = v0[0] + v1[0], v0[1] + v1[1]
-    if math.hypot(tx, ty) <= max_norm:
-        return tx, ty
-    n0 = math.hypot(v0[0], v0[1])
-    if n0 >= max_norm:
-        return v0[0] / n0 * max_norm, v0[1] / n0 * max_norm
-    n1 = math.hypot(v1[0], v1[1])
-    if math.hypot(v1[0] - v0[0], v1[1] - v0[1]) < 1e-3 or n1 < 1e-9:
-        return (v0[0] / n0 * max_norm, v0[1] / n0 * max_norm) if n0 > 1e-9 else (tx, ty)
-    ux, uy = v1[0] / n1, v1[1] / n1
-    if n0 < 1e-3:
-        return ux * max_norm, uy * max_norm
-    m = ux * v0[0] + uy * v0[1]
-    c = n0 * n0 - max_norm * max_norm
-    s = -m + math.sqrt(m * m - c)
-    return v0[0] + ux * s, v0[1] + uy * s
 
 
 def limit_tilt(up: Sequence[float], max_tilt_rad: float) -> tuple[float, float, float]:
