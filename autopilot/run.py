@@ -99,7 +99,14 @@ def _ardrone_sim_vehicle(plan: MissionPlan) -> tuple[type, dict]:
 #: the in-process simulator's vehicle by firmware (``sim.firmware``), with its options: the
 #: PX4-like one is the simulator's own driver; an AR.Drone is flown by the AR.Drone driver, in
 #: process
-SIM_VEHICLES = {"px4": _px4_sim_vehicle, "ardrone": _ardrone_sim_vehicle}
+def _ardupilot_sim_vehicle(plan: MissionPlan) -> tuple[type, dict]:
+    from drivers.sim.arducopter_driver import SimArduCopterDriver
+
+    return SimArduCopterDriver, {}
+
+
+SIM_VEHICLES = {"px4": _px4_sim_vehicle, "ardupilot": _ardupilot_sim_vehicle,
+                "ardrone": _ardrone_sim_vehicle}
 
 
 def make_mavlink_vehicle(plan: MissionPlan, driver_class: type, *, connect: str | None = None,

@@ -75,7 +75,7 @@ async def serve(config: AppConfig, scenario: Scenario | None, *, instance: int =
                 signing: Signing | None = None, console: str | None = None,
                 console_token: str | None = None,
                 on_console: Callable[[object], None] | None = None,
-                title: str = "empty world") -> None:
+                title: str = "empty world", face_class: type[MavlinkFace] = MavlinkFace) -> None:
     """Serve the simulated vehicle until ``stop`` is set (or SIGINT / SIGTERM when None),
     streaming each camera in ``videos`` (camera → URL; by default every enabled camera to its
     :func:`video_destinations`; None: no video). The MAVLink ports listen on ``host``; with
@@ -83,12 +83,13 @@ async def serve(config: AppConfig, scenario: Scenario | None, *, instance: int =
     that watches the vehicle (:mod:`autopilot.console.sim`; ``on_console`` gets its server)."""
     if videos is FROM_CONFIG:
         videos = video_destinations(config)
-    sim_config, objects = build_world(scenario, with_instance_id(config.sim, instance), config)
+    sim = with_instance_id(config.sim, instance, face_class)
+    sim_config, objects = build_world(scenario, sim, config)
     vehicle = SimDriver(sim_config, scenario=objects, lockstep=False,
                         warn_every_s=SLOW_WARNING_EVERY_S, shed_rendering=True,
                         background=False)
     await vehicle.connect()
-    face = MavlinkFace(vehicle, instance=instance, events=vehicle.events(), host=host,
+    face = face_class(vehicle, instance=instance, events=vehicle.events(), host=host,
                        signing=signing)
     loop = asyncio.get_running_loop()
     handle_signals = stop is None
@@ -148,12 +149,7 @@ async def serve(config: AppConfig, scenario: Scenario | None, *, instance: int =
         if handle_signals:
             for sig in (signal.SIGINT, signal.SIGTERM):
                 loop.add_signal_handler(sig, stop.set)
-        offboard, gcs = face.ports["offboard"], face.ports["gcs"]
-        signed = "signed" if signing is not None else "unsigned"
-        log(f"PX4-compatible simulated vehicle (system {face.system_id}, component 1, MAVLink 2, "
-            f"{signed}): offboard API on udp {host}:{offboard[0]} → "
-            f"{offboard[1][0]}:{offboard[1][1]} (MAVSDK: udpin://0.0.0.0:{offboard[1][1]}), "
-            f"ground station on udp {host}:{gcs[0]} → {gcs[1][0]}:{gcs[1][1]}; Ctrl-C to stop")
+        log(face.describe(host))
         await stop.wait()
         log("stopping")
         await _land_if_flying(vehicle, log)
@@ -207,11 +203,12 @@ async def announce_ready(vehicle: SimDriver, say: Callable[[float, str], None]) 
             was_ready = ready or state.armed
 
 
-def with_instance_id(sim: SimConfig, instance: int) -> SimConfig:
-    """PX4 SITL instance i is MAVLink system i + 1 (unless MAV_SYS_ID is configured)."""
-    if "MAV_SYS_ID" in sim.params:
-        return sim
-    return sim.model_copy(update={"params": {**sim.params, "MAV_SYS_ID": instance + 1}})
+def with_instance_id(sim: SimConfig, instance: int,
+                     face_class: type[MavlinkFace] = MavlinkFace) -> SimConfig:
+    """The parameters instance ``instance`` boots with (PX4 SITL: MAV_SYS_ID i + 1;
+    ArduCopter SITL: SYSID_THISMAV stays 1), unless configured."""
+    given = face_class.instance_params(instance)
+    return sim.model_copy(update={"params": {**given, **sim.params}})
 
 
 async def save_photos(vehicle: SimDriver, folder: Path, log: Callable[[str], None]) -> None:

@@ -79,6 +79,21 @@ def run(args: argparse.Namespace) -> int:
 
 def _serve_px4(args: argparse.Namespace, config, scenario, signing, title: str) -> int:
     """PX4 SITL's face: MAVLink on its ports, RTP video, the console."""
+    from drivers.mavlink.face import MavlinkFace
+
+    return _serve_mavlink(args, config, scenario, signing, title, MavlinkFace)
+
+
+def _serve_ardupilot(args: argparse.Namespace, config, scenario, signing, title: str) -> int:
+    """ArduCopter SITL's face: MAVLink on TCP 5760/5762/5763 and UDP out to 14550, RTP video,
+    the console."""
+    from drivers.mavlink.face_ardupilot import ArduPilotFace
+
+    return _serve_mavlink(args, config, scenario, signing, title, ArduPilotFace)
+
+
+def _serve_mavlink(args: argparse.Namespace, config, scenario, signing, title: str,
+                   face_class: type) -> int:
     from autopilot.sim_server import serve
 
     if args.out:
@@ -97,7 +112,7 @@ def _serve_px4(args: argparse.Namespace, config, scenario, signing, title: str) 
                       out_dir=Path(args.out) if args.out else None,
                       log=lambda line: print(line, file=sys.stderr, flush=True),
                       host=args.bind, signing=signing, console=args.console,
-                      console_token=token, title=title))
+                      console_token=token, title=title, face_class=face_class))
     return EXIT_OK
 
 
@@ -120,7 +135,7 @@ def _serve_ardrone(args: argparse.Namespace, config, scenario, signing, title: s
 
 
 #: ``autopilot sim``'s server for each firmware (``sim.firmware``)
-FACES = {"px4": _serve_px4, "ardrone": _serve_ardrone}
+FACES = {"px4": _serve_px4, "ardupilot": _serve_ardupilot, "ardrone": _serve_ardrone}
 
 
 COMMAND = Command("sim", "run the simulator in real time as a MAVLink vehicle (like PX4 SITL)",

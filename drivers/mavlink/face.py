@@ -71,6 +71,12 @@ class MavlinkFace:
     vehicle).
     """
 
+    #: the MAVLink dialect its links speak
+    dialect = mavlink
+    #: the parameter that holds its system id
+    system_id_param = "MAV_SYS_ID"
+    title = "PX4-compatible simulated vehicle"
+
     def __init__(self, vehicle, *, instance: int = 0, host: str = "127.0.0.1",
                  gcs_port: int = 14550, peer_host: str | None = None,
                  events: AsyncIterator[tuple[float, str]] | None = None,
@@ -78,7 +84,7 @@ class MavlinkFace:
         self.vehicle = vehicle
         self.instance = instance
         #: MAV_SYS_ID (PX4 SITL gives instance i the id i + 1; read once, as PX4 at boot)
-        self.system_id = int(vehicle.param("MAV_SYS_ID"))
+        self.system_id = int(vehicle.param(self.system_id_param))
         #: a scenario's rover speaks as this system (sim.rover_link.system_id)
         self.rover_system_id = int(getattr(getattr(getattr(vehicle, "config", None),
                                                    "rover_link", None), "system_id", 0)
@@ -244,15 +250,34 @@ class MavlinkFace:
         async with contextlib.aclosing(self.vehicle.telemetry()) as samples:
             async for state in samples:
                 self._state = state
-                for name, link in self.links.items():
+                for name, link in list(self.links.items()):
                     streams = self._streams[name]
-                    for msg_id in streams.rates_hz:
+                    for msg_id in list(streams.rates_hz):
                         if streams.due(msg_id, state.time_s):
                             msg = self.message(msg_id, link.mav)
                             if msg is not None:
                                 link.send(msg)
                             if msg_id == mavlink.MAVLINK_MSG_ID_MISSION_CURRENT:
                                 self._repeat_reached(link)
+
+    @staticmethod
+    def instance_params(instance: int) -> dict[str, float]:
+        """Parameters SITL instance ``instance`` boots with: PX4's MAV_SYS_ID is i + 1."""
+        return {"MAV_SYS_ID": instance + 1}
+
+    @property
+    def state(self) -> VehicleState | None:
+        """The vehicle's newest telemetry sample (None before the first)."""
+        return self._state
+
+    def describe(self, host: str) -> str:
+        """The line ``autopilot sim`` prints: where clients find the vehicle."""
+        offboard, gcs = self.ports["offboard"], self.ports["gcs"]
+        signed = "signed" if self.signing is not None else "unsigned"
+        return (f"{self.title} (system {self.system_id}, component 1, MAVLink 2, {signed}): "
+                f"offboard API on udp {host}:{offboard[0]} → {offboard[1][0]}:{offboard[1][1]} "
+                f"(MAVSDK: udpin://0.0.0.0:{offboard[1][1]}), ground station on udp "
+                f"{host}:{gcs[0]} → {gcs[1][0]}:{gcs[1][1]}; Ctrl-C to stop")
 
     def set_interval(self, link: FaceLink, msg_id: int, interval_us: float) -> int:
         """SET_MESSAGE_INTERVAL on ``link``: the MAV_RESULT."""

@@ -45,11 +45,12 @@ class FaceLink(asyncio.DatagramProtocol):
         self.peer = default_peer
         self.heard_from: tuple[str, int] | None = None
         self.transport: asyncio.DatagramTransport | None = None
-        self.mav = mavlink.MAVLink(None, srcSystem=face.system_id, srcComponent=COMPONENT_ID)
-        self._rx = mavlink.MAVLink(None, srcSystem=face.system_id, srcComponent=COMPONENT_ID)
+        dialect = face.dialect  # PX4: common; ArduPilot: ardupilotmega
+        self.mav = dialect.MAVLink(None, srcSystem=face.system_id, srcComponent=COMPONENT_ID)
+        self._rx = dialect.MAVLink(None, srcSystem=face.system_id, srcComponent=COMPONENT_ID)
         self._rx.robust_parsing = True
         #: the scenario's rover, a second system on the same port (as a router relays it)
-        self.rover_mav = mavlink.MAVLink(None, srcSystem=face.rover_system_id,
+        self.rover_mav = dialect.MAVLink(None, srcSystem=face.rover_system_id,
                                          srcComponent=COMPONENT_ID)
         if face.signing is not None:
             face.signing.apply(self.mav, self._rx, face.signed_streams)
@@ -96,16 +97,45 @@ class FaceLink(asyncio.DatagramProtocol):
         if fault is not None:  # the simulator's link_loss fault, on the way out
             self.face.impairment.carry(fault, lambda: self._sendto(data, peer))
             return
-        self.transport.sendto(data, peer)
+        self._sendto(data, peer)
 
     def _sendto(self, data: bytes, peer) -> None:
         if self.transport is not None and not self.transport.is_closing():
             self.transport.sendto(data, peer)
 
 
+class FaceStreamLink(FaceLink, asyncio.Protocol):
+    """One TCP connection to a serial port of the vehicle (ArduCopter SITL's SERIALn on TCP
+    5760, 5762, 5763): the same parsing and sending as a UDP port, on a byte stream.
+    ``on_close(link)`` is told when the client goes."""
+
+    def __init__(self, name: str, face: MavlinkFace, on_close=None) -> None:
+        super().__init__(name, face, ("", 0))
+        self._on_close = on_close
+
+    def connection_made(self, transport) -> None:
+        self.transport = transport
+        peer = transport.get_extra_info("peername")
+        self.peer = self.heard_from = tuple(peer[:2]) if peer else ("", 0)
+
+    def data_received(self, data: bytes) -> None:
+        self.datagram_received(data, self.peer)
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        if self._on_close is not None:
+            self._on_close(self)
+
+    def _sendto(self, data: bytes, peer) -> None:
+        if self.transport is not None and not self.transport.is_closing():
+            self.transport.write(data)
+
+
 @dataclass
 class FaceStreams:
     rates_hz: dict[int, float] = field(default_factory=lambda: dict(DEFAULT_RATES_HZ))
+    #: messages whose rate SET_MESSAGE_INTERVAL set: ArduPilot's stream groups
+    #: (REQUEST_DATA_STREAM) leave them be
+    overridden: set[int] = field(default_factory=set)
     next_s: dict[int, float] = field(default_factory=dict)
 
     def due(self, msg_id: int, now_s: float) -> bool:

@@ -106,11 +106,15 @@ class ParamServer:
         value = decode_value(msg.param_type, msg.param_value)
         self._spawn(self._set(link, name, value))
 
+    @staticmethod
+    def refusal_text(name: str, reason: str) -> str:
+        return f"[pm] {name}: {reason}"  # PX4's parameter module
+
     async def _set(self, link, name: str, value: float) -> None:
         try:
             await self.store.set_param(name, value)
         except ParamError as exc:
             log.info("parameter set refused: %s", exc)
-            self._say(link, f"[pm] {name}: {exc.reason}", 4)
+            self._say(link, self.refusal_text(name, exc.reason), 4)
         self._send(link, self.value_message(link.mav, name))
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from drivers.camera_model import distortion_problem, pinhole
 from drivers.sim.faults import Fault
@@ -332,7 +332,7 @@ class FlightStackConfig(_Model):
 #: serve it (drivers/sim/firmwares.py: its flight code; autopilot.run.SIM_VEHICLES: the vehicle
 #: flown in process; autopilot.cli.sim.FACES: ``autopilot sim``'s server); a test checks they
 #: agree
-FIRMWARE_NAMES = ("px4", "ardrone")
+FIRMWARE_NAMES = ("px4", "ardrone", "ardupilot")
 
 
 class SimConfig(_Model):
@@ -340,8 +340,9 @@ class SimConfig(_Model):
     #: them from autopilot/profiles/ideal.yaml); see autopilot.config.PROFILES.
     profile: Literal["realistic", "ideal"]
     #: Which autopilot the simulated vehicle runs (drivers/sim/firmwares.py): ``px4`` (the
-    #: PX4-like flight stack, spoken to over MAVLink) or ``ardrone`` (a Parrot AR.Drone 2.0's
-    #: firmware, spoken to over its SDK protocol; laid over by autopilot/vehicles/ardrone.yaml).
+    #: PX4-like flight stack, spoken to over MAVLink), ``ardupilot`` (ArduCopter, over
+    #: MAVLink as ArduCopter SITL) or ``ardrone`` (a Parrot AR.Drone 2.0's firmware, spoken to
+    #: over its SDK protocol; laid over by autopilot/vehicles/ardrone.yaml).
     firmware: Literal[FIRMWARE_NAMES] = "px4"
     seed: Annotated[int, Field(ge=0)]
     #: Where the local origin (the vehicle's start, PX4's EKF origin and first home) is on
@@ -349,7 +350,9 @@ class SimConfig(_Model):
     global_origin: tuple[Annotated[float, Field(ge=-90, le=90)],
                          Annotated[float, Field(ge=-180, le=180)],
                          Annotated[float, Field(ge=-500, le=9000)]]
-    #: PX4 parameters that differ from their defaults, by name (see drivers/sim/flight/params.py)
+    #: The firmware's parameters that differ from their defaults, by name: PX4's
+    #: (drivers/sim/flight/params.py), or ArduCopter's with ``firmware: ardupilot``
+    #: (drivers/sim/flight/arducopter_params.py)
     params: dict[str, float]
     world: str
     physics_rate_hz: Annotated[int, Field(ge=100, le=10000)]
@@ -382,13 +385,15 @@ class SimConfig(_Model):
     #: injected faults (a mission's ``scenario.faults``; see drivers/sim/faults.py)
     faults: list[Fault] = Field(default_factory=list)
 
-    @field_validator("params")
-    @classmethod
-    def _known_params(cls, params: dict[str, float]) -> dict[str, float]:
-        problems = validate_overrides(params)
+    @model_validator(mode="after")
+    def _known_params(self) -> SimConfig:
+        from drivers.sim.flight.param_tables import PARAM_TABLES
+
+        table = PARAM_TABLES[self.firmware]
+        problems = validate_overrides(self.params, table.specs, table.title, table.source)
         if problems:
-            raise ValueError("; ".join(problems))
-        return params
+            raise ValueError("params: " + "; ".join(problems))
+        return self
 
     @model_validator(mode="after")
     def _integer_ratio(self) -> SimConfig:

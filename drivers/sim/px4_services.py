@@ -8,17 +8,21 @@ simulator's thread between physics batches (``_command``, ``_call``)."""
 from __future__ import annotations
 
 from collections.abc import AsyncIterator
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from drivers.base import FlightMode
 from drivers.mission import MissionItem, MissionType
 from drivers.sim.flight.navigator import MissionStatus, NavEvent
-from drivers.sim.flight.params import SPECS, ParamSpec
+from drivers.sim.flight.param_tables import PARAM_TABLES
+from drivers.sim.flight.params import ParamSpec
 from drivers.sim.outlets import Outlets
 from drivers.sim.runner import SimRunner
 from drivers.sim.simulator import Photo, Simulator
+
+if TYPE_CHECKING:
+    from drivers.sim.config import SimConfig
 
 
 class Px4Services:
@@ -26,6 +30,7 @@ class Px4Services:
     runner: SimRunner
     outlets: Outlets
     _param_defaults: dict[str, float]
+    config: SimConfig
     _failure: Exception | None
 
     def _require_sim(self) -> Simulator:
@@ -38,21 +43,32 @@ class Px4Services:
         raise NotImplementedError
 
     def param_specs(self) -> list[ParamSpec]:
-        """The vehicle's parameters, in index order."""
-        return [SPECS[name] for name in sorted(SPECS)]
+        """The vehicle's parameters (its firmware's table), in index order."""
+        specs = self._param_specs()
+        return [specs[name] for name in sorted(specs)]
+
+    def _param_specs(self) -> dict[str, ParamSpec]:
+        return PARAM_TABLES[self.config.firmware].specs
 
     def param(self, name: str) -> float:
         """A parameter's current value (KeyError if there is none)."""
         if self.runner.sim is not None:
-            return self.runner.sim.params[name]
-        if name not in SPECS:
+            return self.runner.sim.ground_params[name]
+        specs = self._param_specs()
+        if name not in specs:
             raise KeyError(name)
-        return self._param_defaults.get(name, SPECS[name].default)
+        return self._param_defaults.get(name, specs[name].default)
 
     async def set_param(self, name: str, value: float) -> float:
-        """Set a PX4 parameter; returns the stored value. Refused (:class:`ParamError`) for
-        unknown names and values of the wrong type or out of range."""
+        """Set one of the firmware's parameters; returns the stored value. Refused
+        (:class:`ParamError`) for unknown names and values of the wrong type or out of range."""
         return await self._call(f"set {name}", self._require_sim().set_param, name, value)
+
+    async def firmware_command(self, name: str, *args: Any) -> Any:
+        """A command of the firmware's own (ArduCopter's ``set_copter_mode``,
+        ``mission_start``) on the simulator's thread; its result."""
+        sim = self._require_sim()
+        return await self._call(name, sim.command, name, *args)
 
     async def start_mission(self) -> None:
         await self._command("start_mission")

@@ -35,9 +35,8 @@ from drivers.sim.captures import CameraCaptures, Photo
 from drivers.sim.config import SimConfig
 from drivers.sim.fault_effects import FaultEffects
 from drivers.sim.faults import FaultSchedule
-from drivers.sim.firmwares import make_firmware
+from drivers.sim.firmwares import make_firmware, make_params
 from drivers.sim.flight.navigator import NavEvent
-from drivers.sim.flight.params import Parameters, config_defaults
 from drivers.sim.model import build_model
 from drivers.sim.outbox import Outbox, OutputKind, SimOutput
 from drivers.sim.rover import Rover
@@ -105,10 +104,10 @@ class Simulator:
         self.body = VehicleBody(built, self.data, self.dt, config.vehicle.motor_time_constant_s)
         self._rate_div = config.physics_rate_hz // config.flight_stack.rate_loop_hz
         self._dt_ctrl = self.dt * self._rate_div
-        self.params = Parameters(config_defaults(config))
         self.origin = GlobalOrigin(*config.global_origin)
+        params = self.params, self.ground_params = make_params(config)  # cascade's, GCS's
         #: the vehicle's autopilot: the firmware ``sim.firmware`` names
-        self.flight = make_firmware(config, self.airframe, self.params, self.origin)
+        self.flight = make_firmware(config, self.airframe, *params, self.origin)
         self.wind = WindModel(config.wind, rng_wind)
         self.drag = DragModel(config.vehicle)
 
@@ -338,8 +337,8 @@ class Simulator:
         return getattr(target, name)(*args)
 
     def set_param(self, name: str, value: float) -> float:
-        """Set a PX4 parameter (raises ParamError if refused); returns the stored value."""
-        return self.params.set(name, value)
+        """Set a firmware parameter (ParamError if refused); returns the stored value."""
+        return self.ground_params.set(name, value)
 
     def push_setpoint(self, setpoint: Setpoint) -> None:
         if self.faults and not self.link_faults_in_face and \

@@ -18,11 +18,12 @@ LOSSY_LINK = [{"kind": "link_loss", "fraction": 0.1, "duplicate": 0.05, "reorder
 
 
 @contextlib.asynccontextmanager
-async def served(config, scenario=(), **kwargs):
-    """The simulator in real time behind its MAVLink face (instance :data:`INSTANCE`)."""
+async def served(config, scenario=(), face_class=MavlinkFace, **kwargs):
+    """The simulator in real time behind its MAVLink face (instance :data:`INSTANCE`; PX4's,
+    or ``face_class``)."""
     vehicle = SimDriver(config, scenario=scenario, lockstep=False)
     await vehicle.connect()
-    face = MavlinkFace(vehicle, instance=INSTANCE, gcs_port=14557 + INSTANCE,
+    face = face_class(vehicle, instance=INSTANCE, gcs_port=14557 + INSTANCE,
                        events=vehicle.events(), **kwargs)
     try:
         await face.start()

@@ -9,6 +9,7 @@ from types import SimpleNamespace
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from drivers.mavlink.face import MavlinkFace
 from drivers.mavlink.face_link import FaceLink, FaceStats
 from drivers.mavlink.signing import Signing, refresh
 
@@ -25,6 +26,7 @@ def _face(signing=KEY):
             received.append((link.name, msg))
 
     face = SimpleNamespace(system_id=1, rover_system_id=2, signing=signing, signed_streams={},
+                           dialect=MavlinkFace.dialect,
                            stats=FaceStats(), impairment=SimpleNamespace(fault=lambda: None),
                            incoming=SimpleNamespace(receive=receive))
     return face, received

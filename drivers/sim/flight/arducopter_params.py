@@ -61,6 +61,9 @@ ARDUCOPTER_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("GUID_OPTIONS", I32, 0, 0, 2**16 - 1, "", "GUIDED options bitmask"),
     ParamSpec("AUTO_OPTIONS", I32, 0, 0, 2**16 - 1, "", "AUTO options (bit 0: arm in AUTO, "
               "bit 1: take off without raising the throttle)"),
+    ParamSpec("CIRCLE_RADIUS", F, 1000.0, 0.0, 200000.0, "cm", "CIRCLE mode radius"),
+    ParamSpec("CIRCLE_RATE", F, 20.0, -90.0, 90.0, "deg/s", "CIRCLE mode turn rate "
+              "(positive: clockwise)"),
     ParamSpec("WP_YAW_BEHAVIOR", I8, 2, 0, 3, "", "yaw in auto modes (2: face next waypoint "
               "except RTL)"),
     # --- arming and failsafes

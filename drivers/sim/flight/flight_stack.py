@@ -104,7 +104,7 @@ class FlightStack:
         self._apply_params()
         self._now = 0.0
         self._est: EstimatedState | None = None
-        self._health = Health(local_position_ok=False)
+        self.health = Health(local_position_ok=False)  # as last observed
         self._battery_fraction = 1.0
         self._gcs_heard_s = _GCS_NEVER
         self._surface_velocity: np.ndarray | None = None
@@ -148,7 +148,7 @@ class FlightStack:
     def arm(self) -> None:
         if self.armed:
             return
-        problem = self.commander.arming_problem(self._health, self.landed,
+        problem = self.commander.arming_problem(self.health, self.landed,
                                                 self._battery_fraction)
         if problem is not None:
             raise CommandRejected(problem)
@@ -179,13 +179,13 @@ class FlightStack:
             raise CommandRejected(f"takeoff altitude must be positive, got {altitude_m}")
         if not self.armed:
             raise CommandRejected("not armed")
-        if not self._health.local_position_ok:
+        if not self.health.local_position_ok:
             raise CommandRejected("no valid local position")
         self.navigator.takeoff_altitude_override_m = altitude_m
         self._user_mode(FlightMode.TAKEOFF)
 
     def land(self) -> None:
-        self._require_estimate()
+        self.require_estimate()
         self._user_mode(FlightMode.LAND)
 
     def hold(self) -> None:
@@ -193,7 +193,7 @@ class FlightStack:
 
     def precision_land(self) -> None:
         """AUTO.PRECLAND: land on the reported landing target (:mod:`precland`)."""
-        self._require_estimate()
+        self.require_estimate()
         if not self.armed or self.landed:
             raise CommandRejected("precision landing needs the vehicle in the air")
         self._user_mode(FlightMode.PRECLAND)
@@ -204,7 +204,7 @@ class FlightStack:
 
     def start_offboard(self) -> None:
         if self.mode is not FlightMode.OFFBOARD:
-            self.offboard.yaw_rad = yaw_from_quat(self._require_estimate().q_ned_frd)
+            self.offboard.yaw_rad = yaw_from_quat(self.require_estimate().q_ned_frd)
         self._user_mode(FlightMode.OFFBOARD)
 
     def stop_offboard(self) -> None:
@@ -273,7 +273,7 @@ class FlightStack:
         self.commander.request_mode(mode)
 
     def _mode_problem(self, mode: FlightMode, arming: bool = False) -> str | None:
-        return mode_problem(mode, health=self._health, navigator=self.navigator,
+        return mode_problem(mode, health=self.health, navigator=self.navigator,
                             setpoint_age_s=self._now - self.offboard.received_s,
                             offboard_loss_s=self.params["COM_OF_LOSS_T"], landed=self.landed,
                             arming=arming)
@@ -287,7 +287,7 @@ class FlightStack:
             self.navigator.activate(mode, self._nav_estimate(), self.landed)
 
     def _nav_estimate(self) -> Estimate:
-        est = self._require_estimate()
+        est = self.require_estimate()
         return Estimate(est.position_ned_m, est.velocity_ned_m_s, yaw_from_quat(est.q_ned_frd))
 
     def _apply_params(self) -> None:
@@ -305,7 +305,7 @@ class FlightStack:
         """Take in the current estimate and health without running the controllers."""
         self._now = now_s
         self._est = est
-        self._health = health
+        self.health = health
         self.navigator.set_time(now_s)
 
     def update_outer(self, now_s: float, dt_s: float, est: EstimatedState, health: Health,
@@ -321,16 +321,16 @@ class FlightStack:
 
     def _outer(self, now: float, dt: float, est: EstimatedState, height_agl: float) -> None:
         nav_est = Estimate(est.position_ned_m, est.velocity_ned_m_s, yaw_from_quat(est.q_ned_frd))
-        if self.navigator.home is None and self._health.local_position_ok:
+        if self.navigator.home is None and self.health.local_position_ok:
             # PX4 sets home when the position first becomes valid, and again at arming
             self.navigator.home = est.position_ned_m.copy()
         gcs_silent = now - self._gcs_heard_s if self._gcs_heard_s != _GCS_NEVER else 0.0
         self.geofence_breach = self.navigator.geofence_breach(est.position_ned_m)
         self.commander.update(Inputs(
-            now_s=now, landed=self.landed, health=self._health,
+            now_s=now, landed=self.landed, health=self.health,
             battery_fraction=self._battery_fraction,
             setpoint_age_s=now - self.offboard.received_s,
-            setpoint_flyable=self._health.local_position_ok, gcs_silent_s=gcs_silent,
+            setpoint_flyable=self.health.local_position_ok, gcs_silent_s=gcs_silent,
             geofence_breach=self.geofence_breach, has_home=self.navigator.home is not None))
         yaw_now = nav_est.yaw_rad
         if self.armed:
@@ -365,7 +365,7 @@ class FlightStack:
     # Internals
     # ------------------------------------------------------------------------------------
 
-    def _require_estimate(self) -> EstimatedState:
+    def require_estimate(self) -> EstimatedState:
         if self._est is None:
             raise CommandRejected("flight stack not initialised")
         return self._est

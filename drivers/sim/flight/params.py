@@ -262,14 +262,17 @@ class Parameters:
         return dict(self._values)
 
 
-def validate_overrides(overrides: Mapping[str, float]) -> list[str]:
-    """Problems with a configuration's parameter overrides (empty: all fine)."""
+def validate_overrides(overrides: Mapping[str, float], specs: Mapping[str, ParamSpec] = SPECS,
+                       firmware: str = "PX4",
+                       source: str = "drivers/sim/flight/params.py") -> list[str]:
+    """Problems with a configuration's parameter overrides (empty: all fine), against the
+    firmware's table ``specs``."""
     problems = []
     for name, value in overrides.items():
-        spec = SPECS.get(name)
+        spec = specs.get(name)
         if spec is None:
-            problems.append(f"{name}: unknown PX4 parameter (the simulator has "
-                            f"{len(SPECS)}; see drivers/sim/flight/params.py)")
+            problems.append(f"{name}: unknown {firmware} parameter (the simulator has "
+                            f"{len(specs)}; see {source})")
             continue
         try:
             spec.check(float(value))
@@ -278,14 +281,15 @@ def validate_overrides(overrides: Mapping[str, float]) -> list[str]:
     return problems
 
 
-def config_defaults(sim_config) -> dict[str, float]:
-    """The parameter defaults a simulator configuration gives: its mirrored keys, then its
-    ``params`` overrides."""
+def config_defaults(sim_config, overrides: bool = True) -> dict[str, float]:
+    """The parameter defaults a simulator configuration gives: its mirrored keys, then (unless
+    ``overrides`` is false: another firmware's table holds them) its ``params`` overrides."""
     values: dict[str, float] = {}
     for name, (path, scale) in CONFIG_MIRRORS.items():
         node = sim_config
         for part in path.split("."):
             node = getattr(node, part)
         values[name] = float(node) * scale
-    values.update(sim_config.params)
+    if overrides:
+        values.update(sim_config.params)
     return values
