@@ -175,15 +175,15 @@ class ArduCommands:
         if command == c.MAV_CMD_DO_REPOSITION:
             return await self._reposition(p, q, frame)
         if command == c.MAV_CMD_CONDITION_YAW:
-            if not 0.0 <= q[0] <= 360.0:
+            if not 0.0 <= q[0] <= 360.0 or q[3] not in (0.0, 1.0):
                 return FAILED
             await self._firmware("condition_yaw", "condition yaw", math.radians(q[0]),
                                  q[3] != 0, q[2] if q[2] else 1.0)
             return ACCEPTED
         if command == c.MAV_CMD_DO_CHANGE_SPEED:
             if not q[1] > 0:
-                return DENIED
-            if int(q[0]) in (0, 1):
+                return FAILED
+            if q[0] < 1.9:  # 2, 3: climb and descent speeds (not modelled: kept)
                 await v.set_speed(q[1])
             return ACCEPTED
         if command == c.MAV_CMD_DO_FENCE_ENABLE:

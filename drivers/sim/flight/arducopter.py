@@ -240,7 +240,10 @@ class ArduCopterFirmware(OnCascade, FlightModeCommands):
         self._auto_started = True
 
     def mission_start(self) -> None:
-        """MAV_CMD_MISSION_START: AUTO, and the mission flies (from the ground too)."""
+        """MAV_CMD_MISSION_START: AUTO, and the mission flies (from the ground too); armed
+        only (``GCS_MAVLink_Copter.cpp``)."""
+        if not self.armed:
+            raise CommandRejected("mission start: not armed")
         self.set_copter_mode(int(CopterMode.AUTO))
         if self.armed and not self._auto_started:
             self._start_auto()
