@@ -60,7 +60,7 @@ def guided_setpoint(frame: int, mask: int, pos, vel, acc, yaw: float, yaw_rate: 
         return _STOP
     if frame not in (LOCAL_NED, LOCAL_OFFSET_NED, BODY_NED, BODY_OFFSET_NED):
         return _STOP
-    p, v = np.array(pos, float), np.array(vel, float)
+    p, v, a = np.array(pos, float), np.array(vel, float), np.array(acc, float)
     if not vel_ignore and (not np.isfinite(v).all() or np.abs(v).max() > 1000.0):
         return _STOP
     heading = state.yaw_rad if state is not None else 0.0
@@ -70,15 +70,20 @@ def guided_setpoint(frame: int, mask: int, pos, vel, acc, yaw: float, yaw_rate: 
         p = here + p
     elif frame in (BODY_NED, BODY_OFFSET_NED):
         turn = rot_z(heading)
-        p, v = here + turn @ p, turn @ v
+        p, v, a = here + turn @ p, turn @ v, turn @ a
         relative_yaw = True
     use_yaw, use_rate = not mask & px4.IGNORE_YAW, not mask & px4.IGNORE_YAW_RATE
     yaw_sp = (heading + yaw if relative_yaw else yaw) if use_yaw else NAN
     rate_sp = yaw_rate if use_rate else NAN
+    # an acceleration with a velocity is its feed-forward (set_destination_posvelaccel,
+    # set_velaccel)
+    a = a if not acc_ignore and np.isfinite(a).all() else np.full(3, NAN)
     if not pos_ignore and not vel_ignore:
-        return Setpoint(position_ned_m=p, velocity_m_s=v, yaw_rad=yaw_sp, yaw_rate_rad_s=rate_sp)
+        return Setpoint(position_ned_m=p, velocity_m_s=v, yaw_rad=yaw_sp, yaw_rate_rad_s=rate_sp,
+                        acceleration_m_s2=a)
     if pos_ignore and not vel_ignore:
-        return Setpoint(velocity_m_s=v, yaw_rad=yaw_sp, yaw_rate_rad_s=rate_sp)
+        return Setpoint(velocity_m_s=v, yaw_rad=yaw_sp, yaw_rate_rad_s=rate_sp,
+                        acceleration_m_s2=a)
     if not pos_ignore:
         return Setpoint(position_ned_m=p, yaw_rad=yaw_sp, yaw_rate_rad_s=rate_sp)
     if not acc_ignore:

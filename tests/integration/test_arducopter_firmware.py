@@ -193,3 +193,16 @@ def test_parameters_are_arducopters_and_reach_the_flight_code(copter):
             assert "MIS_TAKEOFF_ALT" not in names
 
     run(main())
+
+
+def test_follow_ball_flies_in_process_on_the_arducopter_firmware(tmp_path):
+    """The whole mission on the simulated ArduCopter, asked as the MAVLink drivers' ArduCopter
+    profile asks (GUIDED and NAV_TAKEOFF, GUIDED targets, LAND)."""
+    from .simtools import fly_short
+
+    summary, orphans = fly_short(["sim.firmware=ardupilot"], tmp_path)
+    assert summary["status"] == "completed", summary.get("reason")
+    assert orphans == []
+    follow = summary["metrics"]["follow"]
+    assert follow["detection_rate"] > 0.95
+    assert follow["rms_range_error_m"] < 0.15

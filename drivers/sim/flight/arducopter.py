@@ -240,8 +240,7 @@ class ArduCopterFirmware(OnCascade, FlightModeCommands):
         self._auto_started = True
 
     def mission_start(self) -> None:
-        """MAV_CMD_MISSION_START: AUTO, and the mission flies (from the ground too); armed
-        only (``GCS_MAVLink_Copter.cpp``)."""
+        """MAV_CMD_MISSION_START (armed): AUTO, and the mission flies, from the ground too."""
         if not self.armed:
             raise CommandRejected("mission start: not armed")
         self.set_copter_mode(int(CopterMode.AUTO))
@@ -299,8 +298,7 @@ class ArduCopterFirmware(OnCascade, FlightModeCommands):
         self.push_setpoint(Setpoint(position_ned_m=target), self._now)
 
     def condition_yaw(self, yaw_rad: float, relative: bool, direction: float = 1.0) -> None:
-        """CONDITION_YAW in GUIDED: face ``yaw_rad`` (relative: turned that far, clockwise
-        for ``direction`` > 0)."""
+        """CONDITION_YAW in GUIDED: face ``yaw_rad`` (relative: that far, + clockwise)."""
         if self.copter_mode is CopterMode.GUIDED:
             here = yaw_from_quat(self.stack.require_estimate().q_ned_frd)
             self.guided.face(here + math.copysign(yaw_rad, direction) if relative else yaw_rad)
