@@ -57,7 +57,7 @@ from autopilot.behaviors.base import (
 )
 from autopilot.estimation.range_median import RangeMedian
 from autopilot.estimation.target import TargetEstimate
-from drivers.base import Setpoint, VehicleState
+from drivers.base import FlightMode, Setpoint, VehicleState
 from drivers.geometry import quat_to_matrix
 from drivers.geometry import rot_z as _yaw_matrix
 
@@ -397,6 +397,13 @@ class LandOnRover(Behavior):
 
     def _committed(self, inputs, t, position, dt) -> BehaviorOutput:
         p, s, now = self.params, inputs.state, inputs.now_s
+        if s.failsafe or s.mode is not FlightMode.OFFBOARD:
+            # the vehicle's own failsafe (or a pilot) took over the final descent: it no longer
+            # follows the deck, so cutting the motors would drop it beside the rover
+            return self._out(None, Status.FAILED,
+                             reason=f"the vehicle left offboard control during the final "
+                                    f"descent ({s.mode.value}"
+                                    f"{', failsafe' if s.failsafe else ''}): motors not cut")
         height = self._height(s, t, position)
         rel_vz = float(s.velocity_ned_m_s[2] - t.velocity_ned_m_s[2])
         if rel_vz < 0.05 and now - self._phase_since > 0.5:

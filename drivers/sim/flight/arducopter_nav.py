@@ -145,6 +145,8 @@ def arducopter_text(text: str, breach: str | None) -> str | None:
     if text.startswith(("mode ", "armed", "takeoff", "RTL: ", "landed", "mission", "land ",
                         "loiter")) or text.endswith(": cleared") or "user took over" in text:
         return None  # the cascade's own narration: ArduCopter says none of it
+    if text.startswith("failsafe: offboard setpoints lost"):
+        return None  # (ArduCopter has no target-loss failsafe: the cascade's, unseen)
     if "disarm" in text:
         return "Disarming motors"
     if text.startswith("failsafe: data link lost"):
