@@ -397,13 +397,8 @@ class LandOnRover(Behavior):
 
     def _committed(self, inputs, t, position, dt) -> BehaviorOutput:
         p, s, now = self.params, inputs.state, inputs.now_s
-        if s.failsafe or s.mode is not FlightMode.OFFBOARD:
-            # the vehicle's own failsafe (or a pilot) took over the final descent: it no longer
-            # follows the deck, so cutting the motors would drop it beside the rover
-            return self._out(None, Status.FAILED,
-                             reason=f"the vehicle left offboard control during the final "
-                                    f"descent ({s.mode.value}"
-                                    f"{', failsafe' if s.failsafe else ''}): motors not cut")
+        if (left := _left_offboard(s)) is not None:
+            return self._out(None, Status.FAILED, reason=left)
         height = self._height(s, t, position)
         rel_vz = float(s.velocity_ned_m_s[2] - t.velocity_ned_m_s[2])
         if rel_vz < 0.05 and now - self._phase_since > 0.5:
@@ -546,3 +541,12 @@ class Seed004LandOnRover(LandOnRover):
             return now - self._stalled_since > 0.5
         self._stalled_since = None
         return False
+
+
+def _left_offboard(s: VehicleState) -> str | None:
+    """Why the final descent may not cut the motors: the vehicle's own failsafe (or a pilot)
+    took over, so it no longer follows the deck and a cut would drop it beside the rover."""
+    if s.failsafe or s.mode is not FlightMode.OFFBOARD:
+        return (f"the vehicle left offboard control during the final descent ({s.mode.value}"
+                f"{', failsafe' if s.failsafe else ''}): motors not cut")
+    return None

@@ -2,6 +2,7 @@
 behind, align, descend in the cone, commit, cut the motors at contact, settle; abort and climb
 when the error or the uncertainty grows near the deck; bounded retries; no estimate."""
 
+import dataclasses
 import math
 
 import numpy as np
@@ -174,6 +175,27 @@ def test_contact_is_also_detected_when_the_descent_stalls():
                     range_m=math.nan)
         if out.requests:
             break
+    assert out.requests[0].kind is RequestKind.DISARM
+
+
+def test_motors_are_not_cut_once_the_vehicle_s_own_failsafe_has_taken_over():
+    """A failsafe landing (GPS lost: the vehicle's LAND) in the final descent no longer follows
+    the deck: the step fails without cutting the motors (found by `autopilot bench faults` on
+    the ArduCopter firmware: the cut dropped the vehicle beside the rover)."""
+    b = _landing()
+    b.activate(BehaviorInputs(0.0, _state(0.0, (5.0, 0.0, -3.0))))
+    b.phase, b._height_ref, b._phase_since = "committed", 0.25, 0.0
+    t = 1.0
+    pos = _deck(t).position_ned_m + np.array([0.0, 0.0, -0.05])  # at the touchdown height
+    state = dataclasses.replace(_state(t, pos), mode=FlightMode.LAND, failsafe=True)
+    out = b.update(BehaviorInputs(t, state, target=_deck(t)))
+    assert out.status is Status.FAILED
+    assert "motors not cut" in out.reason
+    assert not any(r.kind is RequestKind.DISARM for r in out.requests)
+    b2 = _landing()  # the same moment under offboard control: the motors are cut
+    b2.activate(BehaviorInputs(0.0, _state(0.0, (5.0, 0.0, -3.0))))
+    b2.phase, b2._height_ref, b2._phase_since = "committed", 0.25, 0.0
+    out = b2.update(BehaviorInputs(t, _state(t, pos), target=_deck(t)))
     assert out.requests[0].kind is RequestKind.DISARM
 
 
