@@ -50,6 +50,18 @@ _TO_FLIGHT_MODE = {
 }
 
 
+#: the modes ArduCopter arms in when a ground station asks (each mode's allows_arming() in
+#: ArduCopter/mode.h; AUTO only with AUTO_OPTIONS bit 0, not assumed)
+GCS_ARMABLE = frozenset({CopterMode.STABILIZE, CopterMode.ACRO, CopterMode.ALT_HOLD,
+                         CopterMode.GUIDED, CopterMode.LOITER, CopterMode.DRIFT,
+                         CopterMode.SPORT, CopterMode.POSHOLD, CopterMode.THROW,
+                         CopterMode.GUIDED_NOGPS})
+
+
+def gcs_armable(custom_mode: int) -> bool:
+    return custom_mode in GCS_ARMABLE
+
+
 def flight_mode(custom_mode: int) -> FlightMode:
     """Our FlightMode for an ArduPilot Copter mode number (UNKNOWN for the others)."""
     try:

@@ -26,8 +26,24 @@ from drivers.base import (
 )
 from drivers.clock import MonotonicClock
 from drivers.geo import GlobalOrigin
+from drivers.geometry import quat_from_euler
+from drivers.mavlink import ardupilot
+from drivers.mavlink.firmware import Px4Profile, firmware_profile
 from drivers.mavlink.link import BootTimeMapper
 from drivers.slots import Broadcast
+
+#: the telemetry both drivers ask for with SET_MESSAGE_INTERVAL (message id → Hz): PX4 streams
+#: most of it unasked, ArduCopter (its SRn rates 0 on a fresh port) nothing but HEARTBEAT;
+#: HOME_POSITION too, which ArduCopter otherwise sends only when home is set or moves
+STREAM_RATES_HZ = {
+    32: 30.0,   # LOCAL_POSITION_NED
+    31: 50.0,   # ATTITUDE_QUATERNION
+    30: 50.0,   # ATTITUDE
+    245: 5.0,   # EXTENDED_SYS_STATE
+    1: 2.0,     # SYS_STATUS
+    132: 10.0,  # DISTANCE_SENSOR
+    242: 0.5,   # HOME_POSITION
+}
 
 
 async def cancel_all(tasks: Iterable[asyncio.Task]) -> None:
@@ -47,7 +63,14 @@ REBOOT_S = 5.0
 class MavlinkVehicle(Vehicle):
     """Base of the MAVLink drivers (the rest of :class:`Vehicle` is theirs)."""
 
-    def __init__(self) -> None:
+    def __init__(self, ardupilot_hold: ardupilot.CopterMode = ardupilot.CopterMode.BRAKE
+                 ) -> None:
+        #: ArduCopter's hold mode (BRAKE or LOITER), when the vehicle is one
+        self.ardupilot_hold = ardupilot_hold
+        firmware_profile(None, ardupilot_hold)  # (a bad hold mode: ValueError now)
+        self._profile: tuple[int | None, Px4Profile] | None = None
+        #: the vehicle's HEARTBEAT custom_mode (None before the first)
+        self._custom_mode: int | None = None
         self._clock = MonotonicClock()
         self._boot = BootTimeMapper()
         self._video: dict[str, object] = {}  # name → VideoSource
@@ -85,6 +108,16 @@ class MavlinkVehicle(Vehicle):
         self._target: tuple[int, int] | None = None
         self.autopilot: int | None = None
         self._text_parts: dict[int, list[str]] = {}
+
+    @property
+    def firmware(self) -> Px4Profile:
+        """What this vehicle's flight stack does its own way (:mod:`drivers.mavlink.firmware`),
+        from its HEARTBEAT's ``autopilot``."""
+        profile = self._profile
+        if profile is None or profile[0] != self.autopilot:
+            profile = self._profile = (self.autopilot,
+                                       firmware_profile(self.autopilot, self.ardupilot_hold))
+        return profile[1]
 
     @property
     def global_origin(self) -> GlobalOrigin | None:
@@ -135,6 +168,19 @@ class MavlinkVehicle(Vehicle):
             velocity_ned_m_s=np.array([msg.vx, msg.vy, msg.vz], dtype=float) / 100.0,
             heading_rad=math.remainder(heading, 2.0 * math.pi) if math.isfinite(heading)
             else math.nan, system_id=msg.get_srcSystem()))
+
+    def _on_attitude(self, msg) -> None:
+        """ATTITUDE_QUATERNION or ATTITUDE, whichever the firmware's own (PX4 sends the
+        quaternion and derives ATTITUDE from it; ArduCopter sends Euler angles)."""
+        euler = msg.get_type() == "ATTITUDE"
+        if euler != self.firmware.attitude_from_euler:
+            return
+        if not self._newer("attitude", msg.time_boot_ms / 1000.0):
+            return
+        self._q = quat_from_euler(msg.roll, msg.pitch, msg.yaw) if euler else \
+            np.array([msg.q1, msg.q2, msg.q3, msg.q4])
+        self._rates = np.array([msg.rollspeed, msg.pitchspeed, msg.yawspeed])
+        self._attitude_vehicle_s = msg.time_boot_ms / 1000.0
 
     def _newer(self, kind: str, vehicle_s: float) -> bool:
         """Is this ``kind`` of message, captured at ``vehicle_s`` (boot clock), newer than

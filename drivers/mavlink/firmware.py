@@ -93,6 +93,11 @@ class Px4Profile:
                     int(v), f"action {int(v)}"))),
         )
 
+    def arming_mode(self, custom_mode: int | None) -> FlightMode | None:
+        """The mode to enter before arming from the HEARTBEAT's ``custom_mode`` (None: arm as
+        it is; PX4 arms in any mode a ground station may ask)."""
+        return None
+
     def mode_params(self, mode: FlightMode, armed: bool) -> tuple[float, ...]:
         """DO_SET_MODE's params for ``mode``."""
         main, sub = px4.PX4_MODES[mode]
@@ -158,6 +163,14 @@ class ArduCopterProfile(Px4Profile):
                 "PASS", f"the failsafe listens to system {int(v)}'s heartbeats (the autopilot "
                 "sends its own; a companion meant to count must use this id)")),
         )
+
+    def arming_mode(self, custom_mode: int | None) -> FlightMode | None:
+        """GUIDED when the vehicle sits in a mode ArduCopter refuses to arm in (LAND, RTL, BRAKE
+        … after a landing: "Arm: LAND mode not armable"), else None. (MAVSDK's action asks for
+        BRAKE there, which ArduCopter refuses too.)"""
+        if custom_mode is None or ardupilot.gcs_armable(custom_mode):
+            return None
+        return FlightMode.OFFBOARD
 
     def mode_params(self, mode: FlightMode, armed: bool) -> tuple[float, ...]:
         return (px4.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, int(ardupilot.copter_mode(mode, self.hold)))

@@ -32,8 +32,6 @@ import math
 import threading
 from concurrent.futures import ThreadPoolExecutor
 
-import numpy as np
-
 from drivers.base import (
     Battery,
     CommandDenied,
@@ -46,18 +44,13 @@ from drivers.base import (
     Setpoint,
     VehicleNotFound,
 )
-from drivers.mavlink import px4
-from drivers.mavlink.common import MavlinkVehicle, cancel_all
+from drivers.mavlink import ardupilot, px4
+from drivers.mavlink.common import STREAM_RATES_HZ, MavlinkVehicle, cancel_all
 from drivers.mavlink.link import MavlinkLink, TimesyncRequests, unheard
 from drivers.mavlink.signing import Signing, refresh
 
 log = logging.getLogger(__name__)
 
-_MODES = {"HOLD": FlightMode.HOLD, "TAKEOFF": FlightMode.TAKEOFF, "LAND": FlightMode.LAND,
-          "OFFBOARD": FlightMode.OFFBOARD, "MISSION": FlightMode.MISSION,
-          "RETURN_TO_LAUNCH": FlightMode.RETURN, "MANUAL": FlightMode.MANUAL,
-          "ALTCTL": FlightMode.ALTCTL, "POSCTL": FlightMode.POSCTL,
-          "STABILIZED": FlightMode.MANUAL, "ACRO": FlightMode.MANUAL}
 _LOST = {"NO_SYSTEM", "CONNECTION_ERROR"}
 #: never taken for the vehicle: MAV_TYPE_GCS, ONBOARD_CONTROLLER, and another vehicle on the
 #: link (GROUND_ROVER, SURFACE_BOAT, SUBMARINE: a rover landing's rover)
@@ -71,8 +64,9 @@ _AUTOPILOT_COMPONENT = 1
 class MavsdkDriver(MavlinkVehicle):
     def __init__(self, url: str = "udpin://127.0.0.1:14540", *,
                  discovery_timeout_s: float = 10.0, telemetry_timeout_s: float = 3.0,
-                 signing: Signing | None = None) -> None:
-        super().__init__()
+                 signing: Signing | None = None,
+                 ardupilot_hold: ardupilot.CopterMode = ardupilot.CopterMode.BRAKE) -> None:
+        super().__init__(ardupilot_hold)
         self.url = url
         self.discovery_timeout_s = discovery_timeout_s
         self.telemetry_timeout_s = telemetry_timeout_s
@@ -91,7 +85,6 @@ class MavsdkDriver(MavlinkVehicle):
         self._last_sample_s = -math.inf
         self._status_text: tuple[float, str] = (-math.inf, "")
         self._ignored: set[tuple[int, int]] = set()
-        self._precland = False  # the vehicle's HEARTBEAT says AUTO.PRECLAND
         self._timesync_sent = TimesyncRequests()
         self._sender = ThreadPoolExecutor(max_workers=1, thread_name_prefix="mavsdk-send")
 
@@ -129,9 +122,10 @@ class MavsdkDriver(MavlinkVehicle):
             self._action = ActionAsync(self._system)
             self._telemetry_plugin = TelemetryAsync(self._system)
             self._direct = MavlinkDirectAsync(self._system)
+            self._request_streams()
             self._tasks = [loop.create_task(coro, name=f"mavsdk-{name}") for name, coro in (
-                ("armed", self._armed_state()), ("mode", self._flight_mode()),
-                ("landed", self._landed_state()), ("health", self._health_state()),
+                ("armed", self._armed_state()), ("landed", self._landed_state()),
+                ("health", self._health_state()),
                 ("battery", self._battery_state()), ("range", self._range()),
                 ("timesync", self._timesync()), ("statustext", self._status_texts()),
                 ("watchdog", self._watchdog()))]
@@ -146,7 +140,15 @@ class MavsdkDriver(MavlinkVehicle):
             raise
 
     async def arm(self) -> None:
-        await self._act("arm", self._require_action().arm())
+        action = self._require_action()
+        mode = self.firmware.arming_mode(self._custom_mode)
+        if mode is None:
+            await self._act("arm", action.arm())
+            return
+        # the vehicle arms only in some modes: into one first, and arm with our own command
+        # (MAVSDK's action, its mode not yet updated, would ask for a hold ArduCopter refuses)
+        await self._set_mode("arm", mode)
+        await self._command("arm", 400, 1)
 
     async def disarm(self, *, force: bool = False) -> None:
         action = self._require_action()
@@ -168,14 +170,22 @@ class MavsdkDriver(MavlinkVehicle):
         await self._act("return to launch", self._require_action().return_to_launch())
 
     async def precision_land(self) -> None:
-        """AUTO.PRECLAND (MAVSDK's action has no call for it: DO_SET_MODE)."""
-        await self._set_mode("precision land", FlightMode.PRECLAND)
+        """The firmware's precision landing (PX4's AUTO.PRECLAND, ArduCopter's LAND with PLND;
+        MAVSDK's action has no call for it: DO_SET_MODE)."""
+        async def set_mode(mode: FlightMode) -> None:
+            await self._set_mode("precision land", mode)
+
+        await self.firmware.precision_land(self._command, set_mode)
 
     async def send_landing_target(self, target: LandingTarget) -> None:
-        x, y, z = (float(v) for v in target.position_ned_m)
+        report = self.firmware.landing_target(target, self.latest_state)
+        if report is None:
+            return  # (not yet expressible: no telemetry to place it against)
+        x, y, z = report.position_m
         fields = {"time_usec": int(self._clock.now() * 1e6), "target_num": target.target_num,
-                  "frame": px4.MAV_FRAME_LOCAL_NED, "angle_x": 0.0, "angle_y": 0.0,
-                  "distance": 0.0, "size_x": 0.0, "size_y": 0.0, "x": x, "y": y, "z": z,
+                  "frame": report.frame, "angle_x": 0.0, "angle_y": 0.0,
+                  "distance": report.distance_m, "size_x": 0.0, "size_y": 0.0,
+                  "x": x, "y": y, "z": z,
                   "q": [1.0, 0.0, 0.0, 0.0], "type": 0, "position_valid": 1}
         await self._send_message("LANDING_TARGET", fields)
 
@@ -183,11 +193,20 @@ class MavsdkDriver(MavlinkVehicle):
         await self._set_mode("start offboard", FlightMode.OFFBOARD)
 
     async def _set_mode(self, name: str, mode: FlightMode) -> None:
-        """DO_SET_MODE with PX4's custom mode (for modes MAVSDK's action has no call for)."""
-        main, sub = px4.PX4_MODES[mode]
-        base = px4.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (px4.MAV_MODE_FLAG_SAFETY_ARMED
-                                                        if self._armed else 0)
-        await self._command(name, 176, base, main, sub)
+        """DO_SET_MODE with the firmware's custom mode (for modes MAVSDK's action has no call
+        for)."""
+        await self._command(name, 176, *self.firmware.mode_params(mode, self._armed))
+
+    def _request_streams(self) -> None:
+        """SET_MESSAGE_INTERVAL for the telemetry the driver reads (ArduCopter streams none
+        unasked on a fresh port; MAVSDK asks only for what its calls name)."""
+        link, target = self._link, self._target
+        if link is None or target is None:
+            return
+        system, component = target
+        for msg_id, rate in STREAM_RATES_HZ.items():
+            link.send(link.mav.command_long_encode(system, component, 511, 0, msg_id,
+                                                   1e6 / rate, 0, 0, 0, 0, 0))
 
     async def stop_offboard(self) -> None:
         await self.hold()
@@ -285,16 +304,13 @@ class MavsdkDriver(MavlinkVehicle):
             self._last_sample_s = self._clock.now()
             self._publish_position(msg.time_boot_ms / 1000.0, (msg.x, msg.y, msg.z),
                                    (msg.vx, msg.vy, msg.vz))
-        elif kind == "ATTITUDE_QUATERNION" and src == self._target and \
-                self._newer("attitude", msg.time_boot_ms / 1000.0):
-            self._q = np.array([msg.q1, msg.q2, msg.q3, msg.q4])
-            self._rates = np.array([msg.rollspeed, msg.pitchspeed, msg.yawspeed])
-            self._attitude_vehicle_s = msg.time_boot_ms / 1000.0
+        elif kind in ("ATTITUDE_QUATERNION", "ATTITUDE") and src == self._target:
+            self._on_attitude(msg)
         elif kind == "HEARTBEAT" and src == self._target:
-            # MAVSDK's flight modes have no precision land: read it off the custom mode
-            self._precland = px4.px4_flight_mode(msg.custom_mode) is FlightMode.PRECLAND
-            if self._precland:
-                self._mode = FlightMode.PRECLAND
+            # the mode off the custom mode, as the firmware numbers it (MAVSDK's flight modes
+            # have no precision land, and fold ArduCopter's BRAKE and LOITER)
+            self._custom_mode = msg.custom_mode
+            self._mode = self.firmware.flight_mode(msg.custom_mode)
         elif kind == "HOME_POSITION" and src == self._target:
             self._on_home_position(msg)
         elif kind == "STATUSTEXT" and src == self._target:
@@ -395,11 +411,6 @@ class MavsdkDriver(MavlinkVehicle):
     async def _armed_state(self) -> None:
         async for armed in self._telemetry_plugin.subscribe_armed():
             self._armed = bool(armed)
-
-    async def _flight_mode(self) -> None:
-        async for mode in self._telemetry_plugin.subscribe_flight_mode():
-            self._mode = FlightMode.PRECLAND if self._precland else \
-                _MODES.get(mode.name, FlightMode.UNKNOWN)
 
     async def _landed_state(self) -> None:
         async for landed in self._telemetry_plugin.subscribe_landed_state():

@@ -30,7 +30,6 @@ import logging
 import math
 from collections import deque
 
-import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
 from drivers.base import (
@@ -44,10 +43,8 @@ from drivers.base import (
     Setpoint,
     VehicleNotFound,
 )
-from drivers.geometry import quat_from_euler
 from drivers.mavlink import ardupilot, px4
-from drivers.mavlink.common import MavlinkVehicle, cancel_all
-from drivers.mavlink.firmware import Px4Profile, firmware_profile
+from drivers.mavlink.common import STREAM_RATES_HZ, MavlinkVehicle, cancel_all
 from drivers.mavlink.link import MavlinkLink, TimesyncRequests, unheard
 from drivers.mavlink.signing import Signing
 
@@ -57,35 +54,23 @@ MAV_AUTOPILOT_INVALID = 8
 #: MAV_COMP_ID_AUTOPILOT1: the flight controller (a gimbal or camera heartbeats too)
 AUTOPILOT_COMPONENT = 1
 #: Streams asked for on connect (message id → Hz).
-STREAM_RATES_HZ = {
-    mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 30.0,
-    mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: 50.0,
-    mavlink.MAVLINK_MSG_ID_ATTITUDE: 50.0,
-    mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: 5.0,
-    mavlink.MAVLINK_MSG_ID_SYS_STATUS: 2.0,
-    mavlink.MAVLINK_MSG_ID_DISTANCE_SENSOR: 10.0,
-}
-
-
 class PymavlinkDriver(MavlinkVehicle):
     def __init__(self, url: str = "udpin://127.0.0.1:14540", *,
                  heartbeat_timeout_s: float = 3.0, command_timeout_s: float = 0.5,
                  command_retries: int = 3,
                  ardupilot_hold: ardupilot.CopterMode = ardupilot.CopterMode.BRAKE,
                  signing: Signing | None = None) -> None:
-        super().__init__()
+        super().__init__(ardupilot_hold)
         self.url = url
         self.signing = signing
         self.heartbeat_timeout_s = heartbeat_timeout_s
         self.command_timeout_s = command_timeout_s
         self.command_retries = command_retries
-        self.ardupilot_hold = ardupilot_hold
         self._link: MavlinkLink | None = None
         self._timesync_sent = TimesyncRequests()
         self._ignored_systems: set[tuple[int, int]] = set()
         self._target: tuple[int, int] | None = None  # (system, component) of the autopilot
         self.autopilot: int | None = None  # MAV_AUTOPILOT of the vehicle
-        self._profile: tuple[int | None, Px4Profile] | None = None
         self._acks: dict[int, asyncio.Future] = {}
         self._params: dict[str, asyncio.Future] = {}
         self._statustext: deque[str] = deque(maxlen=8)
@@ -97,16 +82,6 @@ class PymavlinkDriver(MavlinkVehicle):
     # ------------------------------------------------------------------------------------
     # Vehicle interface
     # ------------------------------------------------------------------------------------
-
-    @property
-    def firmware(self) -> Px4Profile:
-        """What this vehicle's flight stack does its own way (:mod:`drivers.mavlink.firmware`),
-        from its HEARTBEAT's ``autopilot``."""
-        profile = self._profile
-        if profile is None or profile[0] != self.autopilot:
-            profile = self._profile = (self.autopilot,
-                                       firmware_profile(self.autopilot, self.ardupilot_hold))
-        return profile[1]
 
     async def connect(self, timeout_s: float = 10.0) -> None:
         if self._link is not None:
@@ -142,6 +117,9 @@ class PymavlinkDriver(MavlinkVehicle):
                 raise
 
     async def arm(self) -> None:
+        mode = self.firmware.arming_mode(self._custom_mode)
+        if mode is not None:  # the vehicle arms only in some modes: into one first
+            await self._set_mode(mode)
         await self._command("arm", mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1)
 
     async def disarm(self, *, force: bool = False) -> None:
@@ -362,6 +340,7 @@ class PymavlinkDriver(MavlinkVehicle):
                 return
             self._last_heartbeat_s = self._clock.now()
             self._armed = bool(msg.base_mode & px4.MAV_MODE_FLAG_SAFETY_ARMED)
+            self._custom_mode = msg.custom_mode
             self._mode = self.firmware.flight_mode(msg.custom_mode)
             self._failsafe = msg.system_status == px4.MAV_STATE_CRITICAL
             self._heard.set()
@@ -410,22 +389,6 @@ class PymavlinkDriver(MavlinkVehicle):
         self._statustext.append(text.rstrip("\x00"))
         self._on_vehicle_text(msg)
 
-    def _on_attitude_quaternion(self, msg) -> None:
-        if not self._newer("attitude", msg.time_boot_ms / 1000.0):
-            return
-        self._q = np.array([msg.q1, msg.q2, msg.q3, msg.q4])
-        self._rates = np.array([msg.rollspeed, msg.pitchspeed, msg.yawspeed])
-        self._attitude_vehicle_s = msg.time_boot_ms / 1000.0
-
-    def _on_attitude(self, msg) -> None:
-        if not self.firmware.attitude_from_euler:
-            return  # (PX4 sends the quaternion; its ATTITUDE is derived from it)
-        if not self._newer("attitude", msg.time_boot_ms / 1000.0):
-            return
-        self._q = quat_from_euler(msg.roll, msg.pitch, msg.yaw)
-        self._rates = np.array([msg.rollspeed, msg.pitchspeed, msg.yawspeed])
-        self._attitude_vehicle_s = msg.time_boot_ms / 1000.0
-
     def _on_extended_sys_state(self, msg) -> None:
         self._landed = px4.landed_state(msg.landed_state)
 
@@ -465,8 +428,8 @@ _HANDLERS = {
     "PARAM_VALUE": PymavlinkDriver._on_param,
     "STATUSTEXT": PymavlinkDriver._on_statustext,
     "TIMESYNC": PymavlinkDriver._on_timesync,
-    "ATTITUDE_QUATERNION": PymavlinkDriver._on_attitude_quaternion,
-    "ATTITUDE": PymavlinkDriver._on_attitude,
+    "ATTITUDE_QUATERNION": MavlinkVehicle._on_attitude,
+    "ATTITUDE": MavlinkVehicle._on_attitude,
     "EXTENDED_SYS_STATE": PymavlinkDriver._on_extended_sys_state,
     "SYS_STATUS": PymavlinkDriver._on_sys_status,
     "DISTANCE_SENSOR": PymavlinkDriver._on_distance_sensor,

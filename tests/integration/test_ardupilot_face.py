@@ -12,7 +12,11 @@ import time
 import pytest
 from pymavlink import mavutil
 
+from autopilot.flight_ops import wait_for_state
+from drivers.base import FlightMode, Setpoint
 from drivers.mavlink.face_ardupilot import ArduPilotFace
+from drivers.mavlink.mavsdk_driver import MavsdkDriver
+from drivers.mavlink.pymavlink_driver import PymavlinkDriver
 
 from ..conftest import sim_with
 from .mavtools import INSTANCE, served
@@ -157,5 +161,52 @@ def test_parameters_and_missions_as_arducopter_speaks_them(copter):
         _until(m, "HEARTBEAT", lambda h: True, 2.0, texts)
         assert "Flight plan received" in texts
         m.close()
+
+    asyncio.run(main())
+
+
+@pytest.mark.parametrize("driver_class", [
+    PymavlinkDriver,
+    pytest.param(MavsdkDriver, id="MavsdkDriver")])
+def test_both_drivers_fly_an_arducopter_from_its_firmware_profile(copter, driver_class):
+    """Each driver on SERIAL0 (no stream unasked: the driver asks), the firmware known from the
+    heartbeat: GUIDED takeoff, velocity targets in GUIDED, BRAKE, LAND to a disarm, and arming
+    again out of LAND (not armable there: GUIDED first)."""
+    async def main():
+        async with served(copter, face_class=ArduPilotFace) as (vehicle, _):
+            driver = driver_class(f"tcpout://127.0.0.1:{SERIAL0}")
+            await driver.connect(timeout_s=10.0)
+            try:
+                assert driver.firmware.name == "ardupilot"
+                assert driver.latest_state.mode is FlightMode.MANUAL  # STABILIZE at boot
+                for flight in range(2):
+                    await wait_for_state(driver, lambda s: s.health.armable, 30.0, "armable")
+                    await driver.arm()
+                    await driver.takeoff(3.0)
+                    await wait_for_state(driver, lambda s: s.in_air and s.altitude_m > 2.7,
+                                         30.0, f"takeoff to 3 m ({flight})")
+                    assert vehicle.simulator.flight.custom_mode == 4  # GUIDED
+                    start = driver.latest_state.position_ned_m.copy()
+                    await driver.start_offboard()
+                    for _ in range(40):
+                        await driver.send_setpoint(Setpoint.velocity_ned(1.0, 0.0, 0.0,
+                                                                         yaw_rad=0.0))
+                        await asyncio.sleep(0.05)
+                    await wait_for_state(driver, lambda s, x=start[0]: s.position_ned_m[0] > x + 1,
+                                         5.0, "north in GUIDED")
+                    await driver.hold()
+                    await wait_for_state(driver, lambda s: s.mode is FlightMode.HOLD, 3.0,
+                                         "BRAKE")
+                    assert vehicle.simulator.flight.custom_mode == 17
+                    await driver.land()
+                    await wait_for_state(driver, lambda s: not s.armed, 60.0, "landed")
+                    # it stays in LAND, where ArduCopter does not arm
+                    assert vehicle.simulator.flight.custom_mode == 9
+                    assert vehicle.latest_state.altitude_m < 0.3
+                # the attitude is ArduCopter's Euler angles, read
+                yaw_error = driver.latest_state.yaw_rad - vehicle.latest_state.yaw_rad
+                assert abs(math.remainder(yaw_error, math.tau)) < 0.05
+            finally:
+                await driver.close()
 
     asyncio.run(main())

@@ -221,3 +221,20 @@ def test_a_parameter_is_read_by_name():
             await driver.get_param("NOPE", timeout_s=0.06)  # never answered
 
     asyncio.run(main())
+
+
+def test_arducopter_profile_arms_out_of_the_modes_arducopter_refuses():
+    from drivers.mavlink.firmware import ArduCopterProfile, Px4Profile
+    from drivers.sim.flight.arducopter_modes import MODES
+
+    profile = ArduCopterProfile()
+    c = ardupilot.CopterMode
+    for mode in (c.LAND, c.RTL, c.BRAKE, c.AUTO, c.CIRCLE, c.SMART_RTL):
+        assert profile.arming_mode(int(mode)) is FlightMode.OFFBOARD  # GUIDED first
+    for mode in (c.STABILIZE, c.GUIDED, c.LOITER):
+        assert profile.arming_mode(int(mode)) is None
+    assert profile.arming_mode(None) is None  # no heartbeat yet: as it is
+    assert Px4Profile().arming_mode(4) is None
+    # the driver's knowledge and the simulated ArduCopter's agree
+    assert {m for m, spec in MODES.items() if spec.gcs_arm} == \
+        {m for m in ardupilot.GCS_ARMABLE if m in MODES}
