@@ -29,15 +29,24 @@ pytestmark = pytest.mark.serial  # MAVSDK's examples against the simulator in re
 EXAMPLES = Path(__file__).parent / "mavsdk_examples"
 
 
-async def _run_example(name: str, timeout_s: float) -> tuple[int, str]:
+async def _run_example(name: str, timeout_s: float, url: str = CLIENT_URL) -> tuple[int, str]:
     proc = await asyncio.create_subprocess_exec(
-        sys.executable, str(EXAMPLES / name), CLIENT_URL, stdout=asyncio.subprocess.PIPE,
+        sys.executable, str(EXAMPLES / name), url, stdout=asyncio.subprocess.PIPE,
         stderr=asyncio.subprocess.STDOUT, env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    out = bytearray()  # what it printed, kept as it comes (a killed example's output too)
+
+    async def read() -> None:
+        while chunk := await proc.stdout.read(4096):
+            out.extend(chunk)
+
+    reader = asyncio.ensure_future(read())
     try:
-        out, _ = await asyncio.wait_for(proc.communicate(), timeout_s)
+        await asyncio.wait_for(asyncio.shield(reader), timeout_s)
+        await proc.wait()
     except TimeoutError:
         proc.kill()
-        out, _ = await proc.communicate()
+        await proc.wait()
+        await reader
         raise AssertionError(f"{name} did not finish within {timeout_s:g} s:\n"
                              f"{out.decode(errors='replace')[-3000:]}") from None
     return proc.returncode, out.decode(errors="replace")
@@ -211,5 +220,80 @@ def test_offboard_position_ned(no_camera_config):
             final = vehicle.latest_state
             assert final.position_ned_m[:2] == pytest.approx([0.0, 10.0], abs=0.3)
             assert final.altitude_m < 0.3  # the last setpoint is on the ground: it lands
+
+    asyncio.run(main())
+
+
+# --- MAVSDK's examples against the simulator as ArduCopter SITL (autopilot sim --firmware
+# ardupilot), on the UDP port a ground station finds it on (sim_vehicle.py's MAVProxy output,
+# every stream at 4 Hz). What MAVSDK supports on ArduPilot, and where it stops: docs/ardupilot.md
+
+def _arducopter(config):
+    return sim_with(config, firmware="ardupilot")
+
+
+async def _run_on(face, name: str, timeout_s: float) -> tuple[int, str]:
+    port = face.ports["udp"][1][1]
+    return await _run_example(name, timeout_s, url=f"udpin://0.0.0.0:{port}")
+
+
+@pytest.mark.long
+def test_takeoff_and_land_as_published_waits_for_a_home_arducopter_never_streams(
+        no_camera_config):
+    from drivers.mavlink.face_ardupilot import ArduPilotFace
+
+    async def main():
+        async with served(_arducopter(no_camera_config), face_class=ArduPilotFace) as (
+                vehicle, face):
+            with pytest.raises(AssertionError, match="did not finish") as stopped:
+                await _run_on(face, "takeoff_and_land.py", 25.0)
+            text = str(stopped.value)
+            assert "-- Global position estimate OK" in text
+            assert text.rstrip().endswith("Fetching amsl altitude at home location....")
+            assert not vehicle.latest_state.armed
+
+    asyncio.run(main())
+
+
+def test_takeoff_and_land_on_arducopter_with_home_asked_for(no_camera_config):
+    from drivers.mavlink.face_ardupilot import ArduPilotFace
+
+    async def main():
+        async with served(_arducopter(no_camera_config), face_class=ArduPilotFace) as (
+                vehicle, face):
+            track = _Track(vehicle)
+            code, out = await _run_on(face, "takeoff_and_land_ardupilot.py", 90.0)
+            _check(code, out, "-- Global position estimate OK", "-- Home at 488.",
+                   "-- Return-to-launch altitude: 15.0 m",  # RTL_ALT 1500 cm
+                   "Status: 1: Arming motors", "-- Landing")
+            await wait_for_state(vehicle, lambda s: not s.armed, 30.0, "landed and disarmed")
+            await track.aclose()
+            # MAVSDK's own takeoff altitude on ArduPilot (2 m, NAV_TAKEOFF in GUIDED), LAND
+            assert track.max_altitude_m == pytest.approx(2.0, abs=0.3)
+            assert FlightMode.OFFBOARD in track.modes()  # GUIDED
+            assert FlightMode.LAND in track.modes()
+            assert vehicle.latest_state.altitude_m < 0.3
+
+    asyncio.run(main())
+
+
+def test_mission_example_on_arducopter_stops_where_mavsdk_s_mission_plugin_does(
+        no_camera_config):
+    """MAVSDK's Mission plugin is PX4's: on ArduPilot its upload is taken, its first waypoint
+    landing in seq 0 (ArduPilot's home, not flown), and the download it does next comes back
+    with home at seq 0 in a frame the plugin cannot express: UNSUPPORTED (MissionRaw is
+    MAVSDK's way to ArduPilot missions)."""
+    from drivers.mavlink.face_ardupilot import ArduPilotFace
+
+    async def main():
+        async with served(_arducopter(no_camera_config), face_class=ArduPilotFace) as (
+                vehicle, face):
+            code, out = await _run_on(face, "fly_mission.py", 60.0)
+            assert code != 0
+            assert "-- Mission uploaded" in out
+            assert "UNSUPPORTED; origin: download_mission()" in out
+            flown = vehicle.mission_items()  # what the vehicle holds beyond home
+            assert len(flown) == 16  # the plugin's 17 items, the first taken for home
+            assert not vehicle.latest_state.armed
 
     asyncio.run(main())
