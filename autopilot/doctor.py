@@ -140,7 +140,12 @@ async def _param_checks(vehicle, add) -> None:
     """The parameters a companion computer depends on, as its firmware names them (a driver
     that reads parameters: pymavlink)."""
     firmware, get = getattr(vehicle, "firmware", None), getattr(vehicle, "get_param", None)
-    if firmware is None or get is None:
+    if firmware is None:
+        return
+    estimator = firmware.estimator_check(getattr(vehicle, "ekf_flags", None))
+    if estimator is not None:
+        add("estimator", *estimator)
+    if get is None:
         return
     for check in firmware.companion_params():
         try:

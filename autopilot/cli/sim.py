@@ -17,13 +17,14 @@ def arguments(sim: argparse.ArgumentParser) -> None:
     sim.add_argument("--mission", metavar="NAME|FILE",
                      help="put this mission's scenario (e.g. the moving ball) in the world")
     sim.add_argument("--firmware", choices=FIRMWARE_NAMES, default=None,
-                     help="the vehicle it is: px4 (default: a PX4 SITL vehicle over MAVLink) "
-                     "or ardrone (a Parrot AR.Drone 2.0 over its SDK protocol: AT commands "
-                     "udp 5556, navdata udp 5554, video tcp 5555, configuration tcp 5559); "
-                     "as --set sim.firmware=…")
+                     help="the vehicle it is: px4 (default: a PX4 SITL vehicle over MAVLink), "
+                     "ardupilot (ArduCopter SITL as a ground station finds it: MAVLink on tcp "
+                     "5760, 5762, 5763 and udp out to 14550) or ardrone (a Parrot AR.Drone "
+                     "2.0 over its SDK protocol: AT commands udp 5556, navdata udp 5554, "
+                     "video tcp 5555, configuration tcp 5559); as --set sim.firmware=…")
     sim.add_argument("--instance", type=int, default=0, metavar="N",
-                     help="instance number: PX4 SITL's ports 14580+N, 18570+N; an AR.Drone's "
-                     "ports moved by 10×N (default 0)")
+                     help="instance number: PX4 SITL's ports 14580+N, 18570+N; ArduCopter's "
+                     "and an AR.Drone's moved by 10×N, as sim_vehicle.py -I N (default 0)")
     sim.add_argument("--video", action="append", metavar="[CAMERA=]URL",
                      help="where a camera streams (RTP H.264; repeatable; default: every "
                      "camera to the address its vehicle.cameras.NAME.video names — front "

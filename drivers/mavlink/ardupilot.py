@@ -84,3 +84,28 @@ def copter_mode(mode: FlightMode, hold: CopterMode = CopterMode.BRAKE) -> Copter
     if mode not in table:
         raise ValueError(f"no ArduPilot Copter mode for {mode.name}")
     return table[mode]
+
+
+#: EKF_STATUS_REPORT's flags (ArduPilot's EKF_STATUS_FLAGS), by name
+EKF_FLAGS = {"attitude": 1, "horizontal velocity": 2, "vertical velocity": 4,
+             "horizontal position (relative)": 8, "horizontal position (absolute)": 16,
+             "vertical position (absolute)": 32, "vertical position (above ground)": 64,
+             "constant position mode": 128, "predicted horizontal position (relative)": 256,
+             "predicted horizontal position (absolute)": 512, "uninitialized": 1024,
+             "GPS glitch": 32768}
+#: what GUIDED flight on position needs of the EKF (AP_AHRS's checks before GUIDED and AUTO)
+_NEEDED = ("attitude", "horizontal velocity", "vertical velocity",
+           "horizontal position (absolute)", "vertical position (absolute)")
+
+
+def ekf_judgement(flags: int) -> tuple[str, str]:
+    """(PASS / WARN / FAIL, what the flags mean for a companion that flies on position)."""
+    missing = [name for name in _NEEDED if not flags & EKF_FLAGS[name]]
+    bad = [name for name in ("constant position mode", "uninitialized", "GPS glitch")
+           if flags & EKF_FLAGS[name]]
+    if flags & EKF_FLAGS["uninitialized"] or missing:
+        return ("FAIL", f"EKF flags 0x{flags:04x}: no " + ", ".join(missing or ["estimate"])
+                + (f"; {', '.join(bad)}" if bad else "") + " (GUIDED needs a position)")
+    if bad:
+        return ("WARN", f"EKF flags 0x{flags:04x}: {', '.join(bad)}")
+    return ("PASS", f"EKF flags 0x{flags:04x}: attitude, velocity and absolute position good")

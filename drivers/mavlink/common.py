@@ -71,6 +71,8 @@ class MavlinkVehicle(Vehicle):
         self._profile: tuple[int | None, Px4Profile] | None = None
         #: the vehicle's HEARTBEAT custom_mode (None before the first)
         self._custom_mode: int | None = None
+        #: ArduPilot's EKF_STATUS_REPORT flags (None: none heard; PX4 sends none)
+        self.ekf_flags: int | None = None
         self._clock = MonotonicClock()
         self._boot = BootTimeMapper()
         self._video: dict[str, object] = {}  # name → VideoSource
@@ -181,6 +183,14 @@ class MavlinkVehicle(Vehicle):
             np.array([msg.q1, msg.q2, msg.q3, msg.q4])
         self._rates = np.array([msg.rollspeed, msg.pitchspeed, msg.yawspeed])
         self._attitude_vehicle_s = msg.time_boot_ms / 1000.0
+
+    def _on_ekf_status(self, msg) -> None:
+        self.ekf_flags = int(msg.flags)
+
+    def _stream_requests(self) -> dict[int, float]:
+        """What to ask the vehicle for (message id → Hz): the drivers' telemetry and the
+        firmware's own (ArduPilot's EKF_STATUS_REPORT)."""
+        return {**STREAM_RATES_HZ, **self.firmware.streams_hz}
 
     def _newer(self, kind: str, vehicle_s: float) -> bool:
         """Is this ``kind`` of message, captured at ``vehicle_s`` (boot clock), newer than

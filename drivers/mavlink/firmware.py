@@ -21,8 +21,9 @@ from __future__ import annotations
 
 import math
 import struct
-from collections.abc import Awaitable, Callable
+from collections.abc import Awaitable, Callable, Mapping
 from dataclasses import dataclass
+from types import MappingProxyType
 
 import numpy as np
 
@@ -69,6 +70,8 @@ class Px4Profile:
     attitude_from_euler = False
 
     title = "PX4"
+    #: the firmware's own messages the drivers ask for (id → Hz) beyond the common telemetry
+    streams_hz: Mapping[int, float] = MappingProxyType({})
 
     def flight_mode(self, custom_mode: int) -> FlightMode:
         return px4.px4_flight_mode(custom_mode)
@@ -96,6 +99,11 @@ class Px4Profile:
     def arming_mode(self, custom_mode: int | None) -> FlightMode | None:
         """The mode to enter before arming from the HEARTBEAT's ``custom_mode`` (None: arm as
         it is; PX4 arms in any mode a ground station may ask)."""
+        return None
+
+    def estimator_check(self, ekf_flags: int | None) -> tuple[str, str] | None:
+        """``autopilot doctor``'s judgement of the estimator's own report (PX4's health bits
+        are read with the rest of SYS_STATUS: None)."""
         return None
 
     def mode_params(self, mode: FlightMode, armed: bool) -> tuple[float, ...]:
@@ -136,6 +144,8 @@ class ArduCopterProfile(Px4Profile):
         ardupilot.copter_mode(FlightMode.HOLD, hold)  # (BRAKE or LOITER, else ValueError)
 
     title = "ArduPilot"
+    #: EKF_STATUS_REPORT, for ``autopilot doctor``'s estimator check
+    streams_hz = MappingProxyType({193: 1.0})
 
     def flight_mode(self, custom_mode: int) -> FlightMode:
         return ardupilot.flight_mode(custom_mode)
@@ -159,6 +169,8 @@ class ArduCopterProfile(Px4Profile):
                                            7: "Brake or Land"}.get(int(v), f"action {int(v)}"))),
             ParamCheck("FS_GCS_TIMEOUT", lambda v: (
                 "PASS" if v <= 5.0 else "WARN", f"counts as lost after {v:g} s of silence")),
+            *(ParamCheck(f"SERIAL{n}_PROTOCOL", lambda v, n=n: _serial_protocol(n, v))
+              for n in (1, 2)),
             ParamCheck("SYSID_MYGCS", lambda v: (
                 "PASS", f"the failsafe listens to system {int(v)}'s heartbeats (the autopilot "
                 "sends its own; a companion meant to count must use this id)")),
@@ -171,6 +183,12 @@ class ArduCopterProfile(Px4Profile):
         if custom_mode is None or ardupilot.gcs_armable(custom_mode):
             return None
         return FlightMode.OFFBOARD
+
+    def estimator_check(self, ekf_flags: int | None) -> tuple[str, str] | None:
+        """EKF_STATUS_REPORT's flags, as a companion flying on position needs them."""
+        if ekf_flags is None:
+            return ("WARN", "no EKF_STATUS_REPORT heard (its stream asked for at 1 Hz)")
+        return ardupilot.ekf_judgement(ekf_flags)
 
     def mode_params(self, mode: FlightMode, armed: bool) -> tuple[float, ...]:
         return (px4.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, int(ardupilot.copter_mode(mode, self.hold)))
@@ -198,6 +216,20 @@ class ArduCopterProfile(Px4Profile):
         frd = (c * rel[0] + s * rel[1], -s * rel[0] + c * rel[1], float(rel[2]))
         distance = float(np.linalg.norm(frd))
         return TargetReport(MAV_FRAME_LOCAL_FRD, frd, distance) if distance > 0 else None
+
+
+def _serial_protocol(port: int, value: float) -> tuple[str, str]:
+    """A telemetry port's SERIALn_PROTOCOL, for a companion that may be wired to it (TELEM1 is
+    SERIAL1, TELEM2 SERIAL2). Its SRn rates do not matter: the drivers ask for their own
+    streams."""
+    v = int(value)
+    if v == 2:
+        return ("PASS", f"MAVLink 2 on SERIAL{port} (TELEM{port}): a companion may use it")
+    if v == 1:
+        return ("WARN", f"MAVLink 1 on SERIAL{port}: no signing, and messages beyond MAVLink 1 "
+                "(e.g. LANDING_TARGET's position) are lost; set 2 for a companion")
+    return ("WARN", f"SERIAL{port} is protocol {v}, not MAVLink: the companion is on another "
+            "port, or set 2")
 
 
 #: HEARTBEAT autopilot → its profile (the hold mode is ArduCopter's choice of BRAKE or LOITER)

@@ -33,7 +33,9 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from urllib.parse import urlsplit
 
-from pymavlink.dialects.v20 import common as mavlink
+# ArduPilot's dialect (common and its own messages: EKF_STATUS_REPORT…): the link reads either
+# firmware's vehicle
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from drivers.mavlink.signing import Signing, refresh
 

@@ -45,7 +45,7 @@ from drivers.base import (
     VehicleNotFound,
 )
 from drivers.mavlink import ardupilot, px4
-from drivers.mavlink.common import STREAM_RATES_HZ, MavlinkVehicle, cancel_all
+from drivers.mavlink.common import MavlinkVehicle, cancel_all
 from drivers.mavlink.link import MavlinkLink, TimesyncRequests, unheard
 from drivers.mavlink.signing import Signing, refresh
 
@@ -204,7 +204,7 @@ class MavsdkDriver(MavlinkVehicle):
         if link is None or target is None:
             return
         system, component = target
-        for msg_id, rate in STREAM_RATES_HZ.items():
+        for msg_id, rate in self._stream_requests().items():
             link.send(link.mav.command_long_encode(system, component, 511, 0, msg_id,
                                                    1e6 / rate, 0, 0, 0, 0, 0))
 
@@ -311,6 +311,8 @@ class MavsdkDriver(MavlinkVehicle):
             # have no precision land, and fold ArduCopter's BRAKE and LOITER)
             self._custom_mode = msg.custom_mode
             self._mode = self.firmware.flight_mode(msg.custom_mode)
+        elif kind == "EKF_STATUS_REPORT" and src == self._target:
+            self._on_ekf_status(msg)
         elif kind == "HOME_POSITION" and src == self._target:
             self._on_home_position(msg)
         elif kind == "STATUSTEXT" and src == self._target:

@@ -44,7 +44,7 @@ from drivers.base import (
     VehicleNotFound,
 )
 from drivers.mavlink import ardupilot, px4
-from drivers.mavlink.common import STREAM_RATES_HZ, MavlinkVehicle, cancel_all
+from drivers.mavlink.common import MavlinkVehicle, cancel_all
 from drivers.mavlink.link import MavlinkLink, TimesyncRequests, unheard
 from drivers.mavlink.signing import Signing
 
@@ -101,7 +101,7 @@ class PymavlinkDriver(MavlinkVehicle):
         except BaseException:
             await self.close()
             raise
-        for msg_id, rate in STREAM_RATES_HZ.items():
+        for msg_id, rate in self._stream_requests().items():
             self._send(self._command_long_msg(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL,
                                               msg_id, 1e6 / rate))
         # as a real link: connected once a telemetry sample has arrived
@@ -430,6 +430,7 @@ _HANDLERS = {
     "TIMESYNC": PymavlinkDriver._on_timesync,
     "ATTITUDE_QUATERNION": MavlinkVehicle._on_attitude,
     "ATTITUDE": MavlinkVehicle._on_attitude,
+    "EKF_STATUS_REPORT": MavlinkVehicle._on_ekf_status,
     "EXTENDED_SYS_STATE": PymavlinkDriver._on_extended_sys_state,
     "SYS_STATUS": PymavlinkDriver._on_sys_status,
     "DISTANCE_SENSOR": PymavlinkDriver._on_distance_sensor,

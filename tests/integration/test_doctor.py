@@ -98,3 +98,32 @@ def test_doctor_fails_clearly_without_a_vehicle(capsys):
     link = next(c for c in report["checks"] if c["item"] == "link")
     assert link["status"] == "FAIL"
     assert "no autopilot heartbeat" in link["detail"]
+
+
+def test_doctor_recognises_an_arducopter_and_reads_what_a_companion_needs():
+    from drivers.mavlink.face_ardupilot import ArduPilotFace
+
+    plan = load_mission("follow_ball", ["driver=pymavlink"])
+    serial0 = 5760 + 10 * INSTANCE
+
+    async def main_():
+        stop = asyncio.Event()
+        server = asyncio.ensure_future(serve(
+            load_config(overrides=["sim.firmware=ardupilot"]), None, instance=INSTANCE,
+            videos={}, log=lambda line: None, stop=stop, face_class=ArduPilotFace))
+        try:
+            await asyncio.sleep(3.0)
+            return await run_doctor(plan, connect=f"tcpout://127.0.0.1:{serial0}",
+                                    duration_s=3.0)
+        finally:
+            stop.set()
+            await server
+
+    checks = {c.item: c for c in asyncio.run(main_())}
+    assert checks["link"].detail.startswith("ArduPilot vehicle"), checks["link"]
+    for item in ("telemetry", "vehicle", "estimator", "param GUID_TIMEOUT",
+                 "param SERIAL1_PROTOCOL", "param SERIAL2_PROTOCOL"):
+        assert checks[item].status == "PASS", checks[item]
+    assert "attitude, velocity and absolute position good" in checks["estimator"].detail
+    # ArduCopter's default: no GCS failsafe — a lost companion leaves it in GUIDED
+    assert checks["param FS_GCS_ENABLE"].status == "WARN"

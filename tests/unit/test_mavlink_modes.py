@@ -238,3 +238,14 @@ def test_arducopter_profile_arms_out_of_the_modes_arducopter_refuses():
     # the driver's knowledge and the simulated ArduCopter's agree
     assert {m for m, spec in MODES.items() if spec.gcs_arm} == \
         {m for m in ardupilot.GCS_ARMABLE if m in MODES}
+
+
+def test_ekf_flags_judged_as_a_companion_flying_on_position_needs_them():
+    good = 0x33F  # attitude, velocities, relative and absolute positions, above ground
+    assert ardupilot.ekf_judgement(good)[0] == "PASS"
+    status, text = ardupilot.ekf_judgement(0x401)  # attitude only, uninitialized
+    assert status == "FAIL"
+    assert "horizontal position (absolute)" in text
+    assert "uninitialized" in text
+    assert ardupilot.ekf_judgement(good | 0x80)[0] == "WARN"  # constant position mode
+    assert ardupilot.ekf_judgement(good & ~0x10)[0] == "FAIL"  # no absolute position
