@@ -28,11 +28,13 @@ Phases (each shown as the step's phase):
     At ``touchdown_height_m`` (or ground contact: the descent stalls), the vehicle's own LAND
     mode finishes: it holds the horizontal position, detects the touchdown and disarms.
 ``precision landing``
-    ``method: px4_precland``: once aligned, the descent is PX4's own precision landing
-    (AUTO.PRECLAND): the pad's estimate streams to it as LANDING_TARGET (local NED) while the
-    pad is seen; PX4 approaches, descends, searches when it loses the target and falls back to
-    a normal landing by its PLD_* parameters. The step ends when the vehicle has landed and
-    disarmed, and fails if the vehicle leaves that mode in the air.
+    ``method: vehicle_precland`` (or ``px4_precland``): once aligned, the descent is the
+    vehicle's own precision landing — PX4's AUTO.PRECLAND, ArduCopter's LAND with PLND — the
+    pad's estimate streaming to it as LANDING_TARGET while the pad is seen; PX4 approaches,
+    descends, searches when it loses the target and falls back to a normal landing by its
+    PLD_* parameters, ArduCopter retries and fails safe by its PLND_* ones. The step ends when
+    the vehicle has landed and disarmed, and fails if the vehicle leaves that landing in the
+    air.
 
 Over the pad, the position setpoint is the pad's estimate plus a trim that integrates the
 remaining horizontal offset between the vehicle's estimated position and the pad's
@@ -51,7 +53,7 @@ from dataclasses import dataclass
 from typing import Annotated, Literal
 
 import numpy as np
-from pydantic import Field
+from pydantic import Field, field_validator
 
 from autopilot.behaviors.base import (
     Behavior,
@@ -80,9 +82,15 @@ class LandPadParams(Params):
     """``circle``: the disc's diameter; ``markers``: the square pad's side."""
     ids: tuple[int, int, int, int, int] = (0, 1, 2, 3, 4)
     """``markers``: the five markers' ids, the centre one first."""
-    method: Literal["offboard", "px4_precland"] = "offboard"
-    """``offboard``: this step flies the descent; ``px4_precland``: once aligned, PX4's own
-    precision landing does (AUTO.PRECLAND, fed LANDING_TARGET)."""
+    method: Literal["offboard", "vehicle_precland"] = "offboard"
+    """``offboard``: this step flies the descent; ``vehicle_precland``: once aligned, the
+    vehicle's own precision landing does, fed LANDING_TARGET (PX4's AUTO.PRECLAND, ArduCopter's
+    LAND with PLND_ENABLED); ``px4_precland`` is taken for it (its first name)."""
+    @field_validator("method", mode="before")
+    @classmethod
+    def _first_name(cls, value):
+        return "vehicle_precland" if value == "px4_precland" else value
+
     lander: Literal["ours", "seed001"] = "ours"
     """``ours``, or ``seed001``: seed 001's own landing logic once the pad is seen (a baseline
     for ``autopilot bench land_pad``; :mod:`autopilot.behaviors.land_pad_seed001`)."""
@@ -287,7 +295,7 @@ class LandPad(Behavior):
                 self._aligned_since = now
             if now - self._aligned_since >= p.settle_s:
                 self._z_ref = float(s.position_ned_m[2])
-                if p.method == "px4_precland":
+                if p.method == "vehicle_precland":
                     self._set_phase("precision landing", now)
                     return self._out(None, requests=(self._landing_target(inputs),
                                                      VehicleRequest(RequestKind.PRECISION_LAND)))
@@ -295,7 +303,10 @@ class LandPad(Behavior):
         else:
             self._aligned_since = None
         xy = self._over_pad(s, dt)
-        return self._out(self._setpoint((xy[0], xy[1], self._z_ref), now))
+        # the vehicle's own precision landing gets the pad from the first aligned sight on, so
+        # that its estimator has settled at the hand-over (ArduCopter's takes 2 s)
+        early = (self._landing_target(inputs),) if p.method == "vehicle_precland" else ()
+        return self._out(self._setpoint((xy[0], xy[1], self._z_ref), now), requests=early)
 
     def _over_pad(self, s: VehicleState, dt: float) -> np.ndarray:
         """The horizontal setpoint over the pad: its estimate plus the integrated offset."""
@@ -380,7 +391,9 @@ class LandPad(Behavior):
             return self._out(None, Status.FAILED,
                              reason=f"not landed within {self.params.timeout_s:g} s")
         grace_s = 1.5  # the mode change shows in telemetry a little later
-        if s.in_air and now - self._phase_since > grace_s and s.mode is not FlightMode.PRECLAND:
+        # the firmware's own: PX4's PRECLAND, ArduCopter's LAND (with PLND)
+        if s.in_air and now - self._phase_since > grace_s and \
+                s.mode not in (FlightMode.PRECLAND, FlightMode.LAND):
             return self._out(None, Status.FAILED,
                              reason=f"precision landing interrupted: the vehicle is in "
                                     f"{s.mode.value}")

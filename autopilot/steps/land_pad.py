@@ -101,9 +101,9 @@ def _behavior(params: LandPadParams, ctx: StepContext) -> Behavior:
 
 
 def _spec(params: LandPadParams, config):
-    if params.lander == "seed001" and params.method == "px4_precland":
-        raise ValueError("lander: seed001 lands with its own logic: method px4_precland "
-                         "does not apply (use method: offboard)")
+    if params.lander == "seed001" and params.method == "vehicle_precland":
+        raise ValueError("lander: seed001 lands with its own logic: method vehicle_precland "
+                         "(px4_precland) does not apply (use method: offboard)")
     if config.perception.pad.detector == "seed001" and params.pad != "circle":
         raise ValueError(f"pad: {params.pad} cannot be found by perception.pad.detector "
                          "seed001 (template matching of a disc): use a circle pad or the "
@@ -187,7 +187,7 @@ COMPLETED = register_status(20, "land pad completed", stays_landed=True)
 register(StepKind(
     "land_pad", LandPadParams, _behavior, pipelines=_spec, metrics=landing_metrics,
     warnings=search_warnings,
-    needs=lambda params, config: ("precision_landing",) if params.method == "px4_precland"
+    needs=lambda params, config: ("precision_landing",) if params.method == "vehicle_precland"
     else (),
     summary=((Figure("landing", "on_pad", "on the pad"),
               Figure("landing", "error_m", "touchdown error", "m"),

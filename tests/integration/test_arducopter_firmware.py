@@ -206,3 +206,30 @@ def test_follow_ball_flies_in_process_on_the_arducopter_firmware(tmp_path):
     follow = summary["metrics"]["follow"]
     assert follow["detection_rate"] > 0.95
     assert follow["rms_range_error_m"] < 0.15
+
+
+def test_land_pad_handed_to_plnd_lands_on_the_pad(tmp_path):
+    """land_pad's descent handed to the vehicle's own precision landing: on the ArduCopter
+    firmware that is LAND with PLND (AC_PrecLand), fed LANDING_TARGET from the first aligned
+    sight, so its estimator has settled (2 s) before the hand-over."""
+    from autopilot.flightlog.log import read_log
+    from autopilot.mission import load_mission
+    from autopilot.run import fly
+
+    plan = load_mission("land_pad", [
+        "sim.firmware=ardupilot", "sim.params.PLND_ENABLED=1", "sim.params.PLND_TYPE=1",
+        "steps.1.land_pad.method=vehicle_precland", "scenario.seed=5"])
+    summary = run(fly(plan, tmp_path))
+    assert summary["status"] == "completed", summary.get("reason")
+    landing = summary["metrics"]["landing"]
+    assert landing["on_pad"]
+    assert landing["error_m"] <= 0.2  # (AC_PrecLand's own descent: no final slow-down model)
+    log = read_log(tmp_path / "flight.mcap")
+    texts = [r["text"] for r in log["/vehicle/status_text"]]
+    handed = next(r["time_s"] for r in log["/mission/events"]
+                  if r["text"] == "request precision_land")
+    complete = next(r["time_s"] for r in log["/vehicle/status_text"]
+                    if r["text"] == "PrecLand: Init Complete")
+    assert texts.index("PrecLand: Target Found") < texts.index("PrecLand: Init Complete")
+    assert complete <= handed  # settled before LAND began
+    assert "PrecLand: Failsafe Measures" not in texts

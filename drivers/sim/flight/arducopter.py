@@ -33,9 +33,10 @@ What is ArduCopter's here:
   FENCE_ACTION on a breach of FENCE_RADIUS / FENCE_ALT_MAX); the user's next mode change
   ends them.
 
-Not ArduCopter's (yet): SMART_RTL, GUIDED_NOGPS and AVOID_ADSB are refused; precision landing
-flies the simulator's own (PX4's PLD_*) procedure, not AC_PrecLand's retry state machine; the
-battery failsafe keeps PX4's thresholds; the EKF failsafe is the loss of position (land).
+Precision landing is AC_PrecLand's, with its retry state machine (:mod:`.ac_precland`).
+
+Not ArduCopter's (yet): SMART_RTL, GUIDED_NOGPS and AVOID_ADSB are refused; the battery
+failsafe keeps PX4's thresholds; the EKF failsafe is the loss of position (land).
 """
 
 from __future__ import annotations
@@ -52,6 +53,7 @@ from drivers.geo import GlobalOrigin
 from drivers.geometry import yaw_from_quat
 from drivers.mavlink.ardupilot import CopterMode, flight_mode
 from drivers.sim.config import FlightStackConfig
+from drivers.sim.flight.ac_precland import AcPrecLand
 from drivers.sim.flight.arducopter_modes import MODES, Flown
 from drivers.sim.flight.arducopter_nav import (
     Circle,
@@ -128,6 +130,7 @@ class ArduCopterFirmware(OnCascade, FlightModeCommands):
         self.guided = GuidedInput()
         self.stack.offboard = self.guided
         self.navigator = self.stack.navigator
+        self.navigator.precland = AcPrecLand(params, self._say)  # LAND with PLND
         self.nav_events = self.stack.nav_events
         self.hover_thrust = self.stack.hover_thrust
         #: (time_s, text) in ArduCopter's words, drained by the simulator
@@ -206,7 +209,7 @@ class ArduCopterFirmware(OnCascade, FlightModeCommands):
                 self._set_return_altitude()
             s.return_to_launch()
         elif flown is Flown.LAND:
-            if self.armed and not self.landed and self._precision_landing():
+            if self.armed and not self.landed and _precision_landing(self.params):
                 s.precision_land()
             else:
                 s.land()
@@ -381,9 +384,6 @@ class ArduCopterFirmware(OnCascade, FlightModeCommands):
     # Mode details
     # ------------------------------------------------------------------------------------
 
-    def _precision_landing(self) -> bool:
-        return int(self.params["PLND_ENABLED"]) == 1 and int(self.params["PLND_TYPE"]) == 1
-
     def _set_return_altitude(self) -> None:
         s = self.stack
         est = s.require_estimate()
@@ -413,6 +413,11 @@ class ArduCopterFirmware(OnCascade, FlightModeCommands):
             values["NAV_DLL_ACT"] = 0
         for name, value in values.items():
             _set(self.internal, name, value)
+
+
+def _precision_landing(params: Parameters) -> bool:
+    """LAND lands on the companion's target (PLND_ENABLED, PLND_TYPE 1: companion)."""
+    return int(params["PLND_ENABLED"]) == 1 and int(params["PLND_TYPE"]) == 1
 
 
 def _set(params: Parameters, name: str, value: float) -> None:

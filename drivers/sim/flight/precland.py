@@ -101,7 +101,8 @@ class PrecLand:
         self._switch_start(now)
 
     def tick(self, now: float, position_ned_m: np.ndarray, velocity_ned_m_s: np.ndarray,
-             landed: bool, origin_down_m: float) -> PrecLandSetpoint:
+             landed: bool, origin_down_m: float, height_agl_m: float = math.nan
+             ) -> PrecLandSetpoint:
         self._pos = np.asarray(position_ned_m, dtype=float)
         self._vel = np.asarray(velocity_ned_m_s, dtype=float)
         self._origin_down = origin_down_m

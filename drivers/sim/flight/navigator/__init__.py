@@ -101,6 +101,12 @@ class Navigator:
         """AUTO.PRECLAND, on the landing target a companion reports."""
         return self._precland.precland
 
+    @precland.setter
+    def precland(self, procedure) -> None:
+        """Another firmware's precision landing (ArduCopter's AC_PrecLand), with PrecLand's
+        interface: ``landing_target``, ``activate``, ``tick``."""
+        self._precland.precland = procedure
+
     @property
     def takeoff_altitude_override_m(self) -> float | None:
         return self._takeoff.altitude_override_m

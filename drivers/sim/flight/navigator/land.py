@@ -37,7 +37,7 @@ class PrecisionLand:
         ctx = self.ctx
         origin_down = ctx.home[2] if ctx.home is not None else 0.0
         out = self.precland.tick(ctx.now, est.position_ned_m, est.velocity_ned_m_s, landed,
-                                 origin_down)
+                                 origin_down, height_agl_m)
         if out.land:
             return ctx.descend(est, height_agl_m, out.position_ned_m[:2])
         yaw = ctx.slew_yaw(ctx.hold_yaw, dt)
