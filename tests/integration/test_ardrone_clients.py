@@ -59,8 +59,18 @@ def drone():
         proc.kill()
 
 
+# pyardrone's video thread is a daemon blocked in cv2.VideoCapture.read(), which close() does
+# not stop. At interpreter exit CPython ends such a thread with pthread_exit, whose unwinding
+# OpenCV's C++ swallows in a catch (...): glibc then aborts ("FATAL: exception not rethrown",
+# SIGABRT) after the script has done and printed everything. A client script therefore leaves
+# with os._exit once its output is flushed, as an application using pyardrone has to; any
+# exception before that still ends it with a non-zero status.
+EXIT_WITHOUT_FINALIZING = "\nimport os, sys\nsys.stdout.flush()\nos._exit(0)\n"
+
+
 def _run(script: str, timeout_s: float = 150) -> dict:
-    result = subprocess.run([sys.executable, "-c", textwrap.dedent(script)],
+    script = textwrap.dedent(script) + EXIT_WITHOUT_FINALIZING
+    result = subprocess.run([sys.executable, "-c", script],
                             capture_output=True, text=True, timeout=timeout_s,
                             cwd=Path(__file__).parent)
     assert result.returncode == 0, result.stderr[-3000:]
