@@ -23,7 +23,7 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
-from autopilot.bench import down, follow, landing, load_figures, offboard
+from autopilot.bench import down, follow, landing, load_figures, mavlink, offboard
 
 
 def _preformatted(bench: str, format_table: Callable[[dict], str],
@@ -54,6 +54,11 @@ FORMATTERS: dict[str, Callable[[dict], list[str]]] = {
         "Landing on the moving rover: ours against seed 004's fused filter and gain-scheduled "
         "PID, and ours without the tag, in the same trials; a trial that did not land on the "
         "deck counts in the success rate and as infinite in the error percentiles"),
+    "mavlink": _preformatted(
+        "mavlink", mavlink.format_table,
+        "Every shipped mission through each MAVLink driver against `autopilot sim` as PX4 "
+        "SITL and as ArduCopter SITL, in real time, each part its own process (H.264 video, "
+        "the simulator's calibrations), scored against truth: the step's headline figures"),
     "load": _preformatted(
         "load", load_figures.format_table,
         "Real-time follow_ball on a busy CPU: `autopilot sim` on a core of its own, the "
@@ -72,6 +77,14 @@ def command_of(result: dict) -> str:
     elif result["bench"] == "load":
         parts += ["--hogs " + ",".join(str(n) for n in result["hogs"]),
                   f"--follow-s {result['follow_s']:g}", f"--driver {result['driver']}"]
+    elif result["bench"] == "mavlink":
+        cells = result["cells"]
+        for flag, key, every in (("--mission", "mission", mavlink.MISSIONS),
+                                 ("--firmware", "firmware", tuple(mavlink.FACES)),
+                                 ("--driver", "driver", mavlink.DRIVERS)):
+            flown = list(dict.fromkeys(c[key] for c in cells))
+            if set(flown) != set(every):
+                parts += [f"{flag} {v}" for v in flown]
     elif result.get("quick"):
         parts.append("--quick")
     else:
@@ -108,6 +121,7 @@ MERGERS: dict[str, Callable[[list[dict]], dict]] = {
     "follow_marker": follow.merge,
     "hover_image": down.merge,
     "land_pad": down.merge,
+    "mavlink": mavlink.merge,
 }
 
 
@@ -134,7 +148,9 @@ def vehicle_of(result: dict) -> str | None:
 
 
 def _flown(result: dict) -> set[tuple[str, str, int]]:
-    """(scenario, row, seed) of every run in a result."""
+    """(scenario, row, seed) of every run in a result (the mavlink bench: each cell)."""
+    if "cells" in result:
+        return {(c["mission"], c["firmware"], c["driver"]) for c in result["cells"]}
     return {(scenario, row, run.get("seed")) for scenario, data in result["scenarios"].items()
             for row, runs in data.get("runs", {}).items() for run in runs}
 

@@ -282,3 +282,49 @@ def test_the_published_page_is_what_its_inputs_generate(capsys, monkeypatch):
     monkeypatch.chdir(root)
     assert tables.main(["@docs/bench-data/benchmarks.args"]) == 0
     assert capsys.readouterr().out == (root / "docs" / "benchmarks.md").read_text()
+
+
+def _mavlink_cell(mission, firmware, driver, status="completed", **figures):
+    return {"mission": mission, "firmware": firmware, "driver": driver, "status": status,
+            "reason": "" if status == "completed" else "telemetry lost", "wall_s": 80.0,
+            "figures": figures}
+
+
+def test_mavlink_headline_takes_each_scored_step_s_first_figures():
+    from autopilot.bench import mavlink
+
+    metrics = {"steps": [
+        {"name": "follow_ball", "follow": {"detection_rate": 0.98, "rms_range_error_m": 0.05,
+                                            "rms_image_error_px": 12.0}},
+        {"name": "no_such_kind", "x": {"y": 1.0}}]}
+    figures = mavlink.headline(metrics)
+    assert figures  # the follow step's first figures, named group.key
+    assert all(k.startswith("follow.") for k in figures)
+    assert figures.get("follow.rms_range_error_m") == pytest.approx(0.05)
+    assert mavlink.headline({}) == {}
+
+
+def test_mavlink_cells_flown_apart_are_pooled_and_the_command_names_what_was_flown():
+    from autopilot.bench import mavlink
+
+    px4 = {"bench": "mavlink", "cells": [
+        _mavlink_cell("land_pad", "px4", "mavsdk", **{"landing.error_m": 0.031}),
+        _mavlink_cell("follow_ball", "px4", "mavsdk", **{"follow.rms_range_error_m": 0.05})]}
+    ardupilot = {"bench": "mavlink", "cells": [
+        _mavlink_cell("follow_ball", "ardupilot", "mavsdk", "failed")]}
+    merged = mavlink.merge([px4, ardupilot])
+    assert [(c["mission"], c["firmware"]) for c in merged["cells"]] == [
+        ("follow_ball", "ardupilot"), ("follow_ball", "px4"), ("land_pad", "px4")]
+    table = mavlink.format_table(merged)
+    follow_rows = table.split("land_pad")[0]
+    assert "ardupilot  mavsdk     failed" in follow_rows
+    assert "—" in follow_rows  # the failed flight has no figure, never a number
+    assert "0.050" in follow_rows
+    assert tables.command_of(merged) == (
+        "autopilot bench mavlink --mission follow_ball --mission land_pad --driver mavsdk "
+        "--json")
+    page = tables.render([px4, ardupilot])
+    assert "flown as 2 processes, pooled" in page
+    # the same cell flown again is a table of its own, never counted twice
+    page = tables.render([px4, px4])
+    assert page.count("Command: `autopilot bench mavlink") == 2
