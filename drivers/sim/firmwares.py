@@ -38,8 +38,10 @@ def _px4_params(config: SimConfig) -> tuple[Parameters, Parameters]:
 def _ardupilot_params(config: SimConfig) -> tuple[Parameters, Parameters]:
     from drivers.sim.flight.arducopter_params import ARDUCOPTER_PARAMS
 
+    # the simulated pack's capacity, as its user sets BATT_CAPACITY
+    ground = {"BATT_CAPACITY": round(config.battery.capacity_mah), **config.params}
     return (Parameters(config_defaults(config, overrides=False)),
-            Parameters(config.params, specs=ARDUCOPTER_PARAMS))
+            Parameters(ground, specs=ARDUCOPTER_PARAMS))
 
 
 def _px4(config: SimConfig, airframe: Airframe, params: Parameters, ground: Parameters,
@@ -55,7 +57,8 @@ def _ardupilot(config: SimConfig, airframe: Airframe, params: Parameters, ground
     from drivers.sim.flight.arducopter import ArduCopterFirmware
 
     return ArduCopterFirmware(config.flight_stack, airframe,
-                              config.flight_stack.motor_idle_fraction, ground, params, origin)
+                              config.flight_stack.motor_idle_fraction, ground, params, origin,
+                              battery_resistance_ohm=config.battery.internal_resistance_ohm)
 
 
 def _ardrone(config: SimConfig, airframe: Airframe, params: Parameters, ground: Parameters,

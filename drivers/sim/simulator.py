@@ -267,7 +267,7 @@ class Simulator:
             health = self.onboard.health(t, ft)
             est = self.onboard.update(dt_outer, truth, ft)
             self.flight.update_outer(t, dt_outer, est, health, self.onboard.range(ft),
-                                     battery.remaining,
+                                     battery.reading(),
                                      self.onboard.rangefinder.surface_velocity(self.model,
                                                                                self.data))
             q_est, gyro = est.q_ned_frd.tolist(), est.rates_frd_rad_s.tolist()

@@ -154,3 +154,29 @@ def test_pose_history_interpolates_and_extrapolates():
     assert ahead.position_ned_m[0] == pytest.approx(0.07)
     assert h.pose_at(1.5) is None
     assert h.pose_at(0.5) is None
+
+
+def test_pose_history_places_the_attitude_at_its_own_capture_time():
+    """Over MAVLink the attitude travels apart from the position (ArduPilot: ATTITUDE and
+    LOCAL_POSITION_NED at their own rates): a sample's attitude may be a message older than
+    its position, and is placed at its own time."""
+    import dataclasses
+
+    from drivers.geometry import quat_from_euler
+
+    h = PoseHistory(max_extrapolation_s=0.1)
+    rate = 1.0  # rad/s of roll
+    for k in range(10):
+        t = 1.0 + 0.04 * k
+        state = vehicle_state(t, (0.0, 0.0, -5.0))
+        att_t = t - 0.02  # the attitude in each sample is 20 ms older than its position
+        h.add(dataclasses.replace(state, attitude_q=quat_from_euler(rate * (att_t - 1.0), 0, 0),
+                                  angular_velocity_frd_rad_s=(rate, 0.0, 0.0),
+                                  attitude_time_s=att_t))
+    from drivers.geometry import euler_from_quat
+
+    roll = euler_from_quat(h.pose_at(1.2).attitude_q)[0]
+    assert roll == pytest.approx(0.2, abs=1e-6)  # not 0.18, the attitude that came with it
+    # past the newest attitude (at 1.34): turned on at its rates
+    roll = euler_from_quat(h.pose_at(1.37).attitude_q)[0]
+    assert roll == pytest.approx(0.37, abs=1e-6)

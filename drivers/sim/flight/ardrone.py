@@ -40,7 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from drivers.ardrone.navdata import ControlState
-from drivers.base import FlightMode, Health, LandedState, ProgressiveCommand
+from drivers.base import Battery, FlightMode, Health, LandedState, ProgressiveCommand
 from drivers.geometry import quat_from_euler, yaw_from_quat
 from drivers.sim.config import FlightStackConfig
 from drivers.sim.flight.commander import CommandRejected
@@ -245,10 +245,10 @@ class ArdroneFirmware:
         self._health = health
 
     def update_outer(self, now_s: float, dt_s: float, est, health: Health,
-                     height_agl_m: float, battery_fraction: float,
+                     height_agl_m: float, battery: Battery,
                      surface_velocity_ned_m_s: np.ndarray | None = None) -> None:
         self.observe(now_s, est, health)
-        self._battery_fraction = battery_fraction
+        self._battery_fraction = battery.remaining_fraction
         # the drone's height: its fused estimate (sonar, IMU), not a raw echo, which can be
         # an outlier or absent (below the sonar's 0.2 m, over soft surfaces)
         self._height_m = -float(est.position_ned_m[2])
@@ -260,7 +260,8 @@ class ArdroneFirmware:
             self.land_detector.update(now_s, False, relative, est.rates_frd_rad_s, 0.0, False,
                                       height_agl_m)
             return
-        if self.flying and battery_fraction <= 0.0 and self.state is not ControlState.LANDING:
+        if self.flying and battery.remaining_fraction <= 0.0 and \
+                self.state is not ControlState.LANDING:
             self.state = ControlState.LANDING
             self._event("battery too low: landing")
         self._outer(dt_s, est, yaw)

@@ -33,10 +33,16 @@ What is ArduCopter's here:
   FENCE_ACTION on a breach of FENCE_RADIUS / FENCE_ALT_MAX); the user's next mode change
   ends them.
 
+* **SMART_RTL** retraces the path flown (:mod:`.ac_smartrtl`); the failsafes' "SmartRTL or
+  RTL" and "SmartRTL or Land" actions fly it when its path is there.
+* the **battery failsafe** is ArduPilot's monitor (:mod:`.ac_battery`): BATT_LOW_VOLT /
+  BATT_CRT_VOLT for BATT_LOW_TIMER, BATT_LOW_MAH / BATT_CRT_MAH, BATT_FS_LOW_ACT /
+  BATT_FS_CRT_ACT (PX4's thresholds underneath are off).
+
 Precision landing is AC_PrecLand's, with its retry state machine (:mod:`.ac_precland`).
 
-Not ArduCopter's (yet): SMART_RTL, GUIDED_NOGPS and AVOID_ADSB are refused; the battery
-failsafe keeps PX4's thresholds; the EKF failsafe is the loss of position (land).
+Not ArduCopter's (yet): GUIDED_NOGPS and AVOID_ADSB are refused; the EKF failsafe is the loss
+of position (land).
 """
 
 from __future__ import annotations
@@ -44,20 +50,23 @@ from __future__ import annotations
 import contextlib
 import math
 from collections import deque
-from collections.abc import Sequence
 
 import numpy as np
 
-from drivers.base import FlightMode, Health, Setpoint
+from drivers.base import Battery, FlightMode, Health
 from drivers.geo import GlobalOrigin
 from drivers.geometry import yaw_from_quat
 from drivers.mavlink.ardupilot import CopterMode, flight_mode
 from drivers.sim.config import FlightStackConfig
+from drivers.sim.flight.ac_battery import AcBatteryMonitor
 from drivers.sim.flight.ac_precland import AcPrecLand
+from drivers.sim.flight.ac_smartrtl import SmartRtlFlight, SmartRtlPath
+from drivers.sim.flight.arducopter_failsafe import Failsafes
 from drivers.sim.flight.arducopter_modes import MODES, Flown
 from drivers.sim.flight.arducopter_nav import (
     Circle,
     FlightModeCommands,
+    GuidedCommands,
     OnCascade,
     arducopter_text,
     rtl_return_altitude_m,
@@ -70,7 +79,6 @@ from drivers.sim.flight.guided import GuidedInput
 from drivers.sim.flight.navigator.context import MissionState
 from drivers.sim.flight.params import ParamError, Parameters
 
-NAN = float("nan")
 MAV_CMD_NAV_TAKEOFF = 22
 #: AUTO_OPTIONS bits
 _AUTO_ARM, _AUTO_NO_THROTTLE = 1, 2
@@ -83,6 +91,8 @@ _FENCE_ACTIONS = {0: 1, 1: 3, 2: 5, 3: 3, 4: 2, 5: 5}
 #: the mode a failsafe's action flies, as ArduCopter reports it
 _FAILSAFE_MODES = {FlightMode.RETURN: CopterMode.RTL, FlightMode.LAND: CopterMode.LAND,
                    FlightMode.HOLD: CopterMode.BRAKE}
+#: what the cascade underneath is handed as its battery: ArduCopter's own monitor acts
+_CASCADE_BATTERY = Battery(voltage_v=0.0, current_a=0.0, remaining_fraction=1.0)
 
 
 def internal_values(values: dict[str, float], si: SiLimits) -> dict[str, float]:
@@ -115,13 +125,14 @@ def internal_values(values: dict[str, float], si: SiLimits) -> dict[str, float]:
     }
 
 
-class ArduCopterFirmware(OnCascade, FlightModeCommands):
+class ArduCopterFirmware(OnCascade, GuidedCommands, FlightModeCommands, Failsafes):
     """ArduCopter on the simulated airframe. ``params`` are ArduPilot's (what a ground station
     reads and sets); ``internal`` the PX4 parameters of the cascade underneath, kept in step."""
 
     def __init__(self, cfg: FlightStackConfig, airframe: Airframe, motor_idle_fraction: float,
                  params: Parameters, internal: Parameters,
-                 origin: GlobalOrigin | None = None) -> None:
+                 origin: GlobalOrigin | None = None, *,
+                 battery_resistance_ohm: float = 0.0) -> None:
         self.params = params
         self.internal = internal
         self.stack = FlightStack(cfg, airframe, motor_idle_fraction, internal, origin)
@@ -141,6 +152,10 @@ class ArduCopterFirmware(OnCascade, FlightModeCommands):
         self._was_armed = False
         self._auto_started = False
         self._circle: Circle | None = None
+        self.smart_rtl = SmartRtlPath(params, self._say)
+        self._srtl: SmartRtlFlight | None = None
+        self.battery = AcBatteryMonitor(params, self._say, battery_resistance_ohm)
+        self._failsafe_seen: str | None = None
         self.si = si_limits(params.snapshot())
         params.on_change(lambda name, value: self._apply_params())
         self._apply_params()
@@ -158,6 +173,12 @@ class ArduCopterFirmware(OnCascade, FlightModeCommands):
     def custom_mode(self) -> int:
         """HEARTBEAT custom_mode: the Copter mode number."""
         return int(self.copter_mode)
+
+    @property
+    def failsafe(self) -> str | None:
+        """The failsafe acting (the cascade's, or the battery monitor's level)."""
+        level = self.battery.level
+        return self.stack.failsafe or (f"battery {level.name.lower()}" if level else None)
 
     @property
     def position_controlled(self) -> bool:
@@ -197,6 +218,9 @@ class ArduCopterFirmware(OnCascade, FlightModeCommands):
     def _enter(self, mode: CopterMode, flown: Flown) -> None:
         s = self.stack
         self._circle = None
+        if self._srtl is not None:
+            self._srtl.end()
+            self._srtl = None
         if flown is Flown.GUIDED:
             est = s.require_estimate()
             self.guided.now_s = self._now
@@ -213,6 +237,16 @@ class ArduCopterFirmware(OnCascade, FlightModeCommands):
                 s.precision_land()
             else:
                 s.land()
+        elif flown is Flown.SMART_RTL:
+            if not self.smart_rtl.active:
+                raise CommandRejected("no path home (SmartRTL is off for this flight)")
+            if self.armed and not self.landed:
+                est = s.require_estimate()
+                self._srtl = SmartRtlFlight.start(self.smart_rtl, est.position_ned_m)
+                self.guided.hold(est.position_ned_m, yaw_from_quat(est.q_ned_frd), self._now)
+                s.start_offboard()
+            else:
+                s.hold()
         elif flown is Flown.CIRCLE:
             if self.armed and not self.landed:
                 self._start_circle()
@@ -261,60 +295,22 @@ class ArduCopterFirmware(OnCascade, FlightModeCommands):
         health = self.stack.health
         if spec.requires_gps and not health.local_position_ok:
             raise CommandRejected("Arm: Need Position Estimate")
+        battery = self.battery.arming_problem()
+        if battery is not None:
+            raise CommandRejected(f"PreArm: {battery}")
         try:
             self.stack.arm()
         except CommandRejected as exc:
             raise CommandRejected(f"Arm: {exc.reason}") from None
         self._airborne = False
         est = self.stack.require_estimate()
+        self.smart_rtl.set_home(self._now, health.local_position_ok, est.position_ned_m)
         if spec.flown is Flown.GUIDED:
             self.guided.hold(est.position_ned_m, yaw_from_quat(est.q_ned_frd), self._now)
         if self.copter_mode is CopterMode.AUTO:
             self._enter_auto()
         self._say("Arming motors")
         self._was_armed = True
-
-    def takeoff(self, altitude_m: float | None = None) -> None:
-        """NAV_TAKEOFF to ``altitude_m`` above home (ArduCopter's rules)."""
-        spec = MODES[self.copter_mode]
-        if not self.armed:
-            raise CommandRejected("takeoff: not armed")
-        if not spec.user_takeoff:
-            raise CommandRejected(f"takeoff: not in a mode that takes off ({spec.name})")
-        if not self.landed:
-            raise CommandRejected("takeoff: already flying")
-        if altitude_m is None or not altitude_m > 0:
-            raise CommandRejected("takeoff: altitude must be above the current altitude")
-        self.stack.takeoff(altitude_m)
-
-    def reposition(self, target_ned_m: Sequence[float], yaw_rad: float = NAN,
-                   speed_m_s: float = NAN) -> None:
-        """DO_REPOSITION (in GUIDED, or switching to it): a position target (NaN: keep that
-        axis; speed and yaw are ignored, as ArduCopter)."""
-        if not self.armed or self.landed:
-            raise CommandRejected("reposition needs the vehicle in the air")
-        if self.copter_mode is not CopterMode.GUIDED:
-            self.set_copter_mode(int(CopterMode.GUIDED))
-        est = self.stack.require_estimate()
-        target = np.where(np.isfinite(np.asarray(target_ned_m, float)),
-                          np.asarray(target_ned_m, float), est.position_ned_m)
-        self.push_setpoint(Setpoint(position_ned_m=target), self._now)
-
-    def condition_yaw(self, yaw_rad: float, relative: bool, direction: float = 1.0) -> None:
-        """CONDITION_YAW in GUIDED: face ``yaw_rad`` (relative: that far, + clockwise)."""
-        if self.copter_mode is CopterMode.GUIDED:
-            here = yaw_from_quat(self.stack.require_estimate().q_ned_frd)
-            self.guided.face(here + math.copysign(yaw_rad, direction) if relative else yaw_rad)
-
-    def push_setpoint(self, sp: Setpoint, now_s: float) -> None:
-        """A GUIDED target (ignored in the other modes, as ArduCopter)."""
-        self._now = now_s
-        if self.copter_mode is not CopterMode.GUIDED:
-            return
-        s = self.stack
-        s.push_setpoint(sp, now_s)
-        if s.commander.user_mode is FlightMode.TAKEOFF and not self.landed:
-            s.start_offboard()  # a target in the air ends the takeoff
 
     # ------------------------------------------------------------------------------------
     # The loop
@@ -327,15 +323,21 @@ class ArduCopterFirmware(OnCascade, FlightModeCommands):
         self.stack.observe(now_s, est, health)
 
     def update_outer(self, now_s: float, dt_s: float, est: EstimatedState, health: Health,
-                     height_agl_m: float, battery_fraction: float,
+                     height_agl_m: float, battery: Battery,
                      surface_velocity_ned_m_s: np.ndarray | None = None) -> None:
         self.observe(now_s, est, health)
+        landing = MODES[self.copter_mode].flown is Flown.LAND or self.stack.position_loop.landing
+        fs = self.battery.update(now_s, dt_s, battery, self.armed, self.landed, landing)
+        if fs is not None:
+            self._battery_failsafe(fs)
         self.guided.timeout_s = self.si.guided_timeout_s
         self.guided.auto_yaw = int(self.params["WP_YAW_BEHAVIOR"])
         if self._circle is not None:
             self.stack.push_setpoint(self._circle.setpoint(
                 dt_s, math.radians(float(self.params["CIRCLE_RATE"]))), now_s)
-        self.stack.update_outer(now_s, dt_s, est, health, height_agl_m, battery_fraction,
+        if self._srtl is not None:
+            self._fly_smart_rtl(est)
+        self.stack.update_outer(now_s, dt_s, est, health, height_agl_m, _CASCADE_BATTERY,
                                 surface_velocity_ned_m_s)
         self._after_tick(est)
 
@@ -346,9 +348,13 @@ class ArduCopterFirmware(OnCascade, FlightModeCommands):
             if self._was_armed:
                 self._was_armed = False
                 self._auto_started = False
+                self.battery.disarmed()
             return
         if not self.landed:
             self._airborne = True
+        if self.copter_mode is not CopterMode.SMART_RTL:
+            self.smart_rtl.update(self._now, s.health.local_position_ok, est.position_ned_m)
+        self._smart_rtl_failsafe()
         failsafe_mode = _FAILSAFE_MODES.get(s.mode) if s.failsafe is not None else None
         if failsafe_mode is not None and failsafe_mode is not self.copter_mode:
             self.copter_mode = failsafe_mode  # ArduCopter's failsafes change the mode
@@ -366,7 +372,7 @@ class ArduCopterFirmware(OnCascade, FlightModeCommands):
             else:
                 self.copter_mode = CopterMode.LOITER  # ArduCopter's exit_mission
         if self.landed and self._airborne and (
-                flown in (Flown.LAND, Flown.RTL) or s.position_loop.landing):
+                flown in (Flown.LAND, Flown.RTL, Flown.SMART_RTL) or s.position_loop.landing):
             s.disarm()  # LAND, RTL and AUTO's landing disarm at touchdown
 
     def _translate_events(self) -> None:

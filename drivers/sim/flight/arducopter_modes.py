@@ -27,6 +27,7 @@ class Flown(enum.Enum):
     RTL = "rtl"
     LAND = "land"
     CIRCLE = "circle"      # orbit a centre CIRCLE_RADIUS ahead
+    SMART_RTL = "smart_rtl"  # back along the path flown (:mod:`.ac_smartrtl`)
     UNSUPPORTED = "unsupported"  # known, not modelled by the simulator: refused
 
 
@@ -61,7 +62,7 @@ MODES: dict[CopterMode, ModeSpec] = {
     CopterMode.THROW: _M("THROW", Flown.PILOT, True, True, False),
     CopterMode.AVOID_ADSB: _M("AVOID_ADSB", Flown.UNSUPPORTED, True, False, False),
     CopterMode.GUIDED_NOGPS: _M("GUIDED_NOGPS", Flown.UNSUPPORTED, False, True, True),
-    CopterMode.SMART_RTL: _M("SMARTRTL", Flown.UNSUPPORTED, True, False, False),
+    CopterMode.SMART_RTL: _M("SMARTRTL", Flown.SMART_RTL, True, False, False),
 }
 #: the numbers of modes outside :class:`CopterMode` that a quad build has (FLOWHOLD needs
 #: optical flow, FOLLOW a lead vehicle, ZIGZAG and SYSTEMID a pilot): known by name, refused

@@ -1,5 +1,5 @@
 """Pieces of the simulated ArduCopter (:mod:`drivers.sim.flight.arducopter`): what it passes to
-the cascade underneath, the commands of
+the cascade underneath, GUIDED's commands, the commands of
 the simulator's own driver in ArduCopter's modes, RTL's return altitude, CIRCLE's orbit and
 the cascade's events in ArduCopter's words."""
 
@@ -11,15 +11,19 @@ from collections.abc import Sequence
 import numpy as np
 
 from drivers.base import FlightMode, LandedState, Setpoint
+from drivers.geometry import yaw_from_quat
 from drivers.mavlink.ardupilot import CopterMode, copter_mode
 from drivers.mission import MissionItem, MissionType
+from drivers.sim.flight.arducopter_modes import MODES
 from drivers.sim.flight.arducopter_params import SiLimits
 from drivers.sim.flight.commander import CommandRejected
 from drivers.sim.flight.flight_stack import FlightStack
+from drivers.sim.flight.guided import GuidedInput
 from drivers.sim.flight.params import Parameters
 
 #: RTL never returns lower than this above the current height when the cone limits it
 RTL_ABS_MIN_CLIMB_M = 2.5
+NAN = float("nan")
 
 
 class OnCascade:
@@ -105,6 +109,64 @@ class FlightModeCommands:
 
     def precision_land(self) -> None:
         self.land()  # LAND with PLND_ENABLED lands on the target
+
+
+class GuidedCommands:
+    """GUIDED's commands on the simulated ArduCopter: NAV_TAKEOFF, DO_REPOSITION, CONDITION_YAW
+    and the companion's targets."""
+
+    stack: FlightStack
+    guided: GuidedInput
+    copter_mode: CopterMode
+    _now: float
+    armed: bool
+    landed: bool
+
+    def set_copter_mode(self, number: int) -> None:
+        raise NotImplementedError
+
+    def takeoff(self, altitude_m: float | None = None) -> None:
+        """NAV_TAKEOFF to ``altitude_m`` above home (ArduCopter's rules)."""
+        spec = MODES[self.copter_mode]
+        if not self.armed:
+            raise CommandRejected("takeoff: not armed")
+        if not spec.user_takeoff:
+            raise CommandRejected(f"takeoff: not in a mode that takes off ({spec.name})")
+        if not self.landed:
+            raise CommandRejected("takeoff: already flying")
+        if altitude_m is None or not altitude_m > 0:
+            raise CommandRejected("takeoff: altitude must be above the current altitude")
+        self.stack.takeoff(altitude_m)
+
+    def reposition(self, target_ned_m: Sequence[float], yaw_rad: float = NAN,
+                   speed_m_s: float = NAN) -> None:
+        """DO_REPOSITION (in GUIDED, or switching to it): a position target (NaN: keep that
+        axis; speed and yaw are ignored, as ArduCopter)."""
+        if not self.armed or self.landed:
+            raise CommandRejected("reposition needs the vehicle in the air")
+        if self.copter_mode is not CopterMode.GUIDED:
+            self.set_copter_mode(int(CopterMode.GUIDED))
+        est = self.stack.require_estimate()
+        target = np.where(np.isfinite(np.asarray(target_ned_m, float)),
+                          np.asarray(target_ned_m, float), est.position_ned_m)
+        self.push_setpoint(Setpoint(position_ned_m=target), self._now)
+
+    def condition_yaw(self, yaw_rad: float, relative: bool, direction: float = 1.0) -> None:
+        """CONDITION_YAW in GUIDED: face ``yaw_rad`` (relative: that far, + clockwise)."""
+        if self.copter_mode is CopterMode.GUIDED:
+            here = yaw_from_quat(self.stack.require_estimate().q_ned_frd)
+            self.guided.face(here + math.copysign(yaw_rad, direction) if relative else yaw_rad)
+
+    def push_setpoint(self, sp: Setpoint, now_s: float) -> None:
+        """A GUIDED target (ignored in the other modes, as ArduCopter)."""
+        self._now = now_s
+        if self.copter_mode is not CopterMode.GUIDED:
+            return
+        s = self.stack
+        s.push_setpoint(sp, now_s)
+        if s.commander.user_mode is FlightMode.TAKEOFF and not self.landed:
+            s.start_offboard()  # a target in the air ends the takeoff
+
 
 
 def rtl_return_altitude_m(params: Parameters, si: SiLimits, position_ned_m: np.ndarray,

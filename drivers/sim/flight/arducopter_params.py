@@ -79,7 +79,8 @@ ARDUCOPTER_PARAMS: tuple[ParamSpec, ...] = (
     # --- battery (SITL's copter.parm: a monitor on)
     ParamSpec("BATT_MONITOR", I8, 4, 0, 30, "", "battery monitor (4: analog voltage and "
               "current)"),
-    ParamSpec("BATT_CAPACITY", I32, 3300, 0, 1000000, "mAh", "battery capacity"),
+    ParamSpec("BATT_CAPACITY", I32, 3300, 0, 1000000, "mAh", "battery capacity (the "
+              "simulator sets its pack's)"),
     ParamSpec("BATT_LOW_VOLT", F, 10.5, 0.0, 100.0, "V", "low battery voltage"),
     ParamSpec("BATT_CRT_VOLT", F, 0.0, 0.0, 100.0, "V", "critical battery voltage"),
     ParamSpec("BATT_LOW_MAH", F, 0.0, 0.0, 1000000.0, "mAh", "low battery remaining"),
@@ -87,6 +88,13 @@ ARDUCOPTER_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("BATT_LOW_TIMER", I8, 10, 0, 120, "s", "low voltage for this long"),
     ParamSpec("BATT_FS_LOW_ACT", I8, 0, 0, 7, "", "low battery action"),
     ParamSpec("BATT_FS_CRT_ACT", I8, 0, 0, 7, "", "critical battery action"),
+    ParamSpec("BATT_FS_VOLTSRC", I8, 0, 0, 1, "", "failsafe voltage source (0 raw, 1 "
+              "sag-compensated)"),
+    # --- SmartRTL (AP_SmartRTL)
+    ParamSpec("SRTL_ACCURACY", F, 2.0, 0.0, 10.0, "m", "SmartRTL accuracy (minimum distance "
+              "between points)"),
+    ParamSpec("SRTL_POINTS", I16, 300, 0, 500, "", "SmartRTL maximum points on the path (0: "
+              "off)"),
     # --- fence (AC_Fence; SITL's copter.parm: radius 150 m)
     ParamSpec("FENCE_ENABLE", I8, 0, 0, 1, "", "fence enabled"),
     ParamSpec("FENCE_TYPE", I8, 7, 0, 15, "", "fence types (1 alt max, 2 circle, 4 polygon, "

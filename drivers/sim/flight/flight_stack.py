@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from drivers.base import FlightMode, Health, LandedState, Setpoint
+from drivers.base import Battery, FlightMode, Health, LandedState, Setpoint
 from drivers.geo import GlobalOrigin
 from drivers.geometry import yaw_from_quat
 from drivers.mission import MissionItem, MissionType
@@ -309,13 +309,13 @@ class FlightStack:
         self.navigator.set_time(now_s)
 
     def update_outer(self, now_s: float, dt_s: float, est: EstimatedState, health: Health,
-                     height_agl_m: float, battery_fraction: float,
+                     height_agl_m: float, battery: Battery,
                      surface_velocity_ned_m_s: np.ndarray | None = None) -> None:
         """Position-loop tick: commander, mode logic, position/velocity control.
         ``surface_velocity_ned_m_s``: the velocity of the surface under the vehicle (a moving
         deck), which the land detector judges the vehicle's motion against."""
         self.observe(now_s, est, health)
-        self._battery_fraction = battery_fraction
+        self._battery_fraction = battery.remaining_fraction
         self._surface_velocity = surface_velocity_ned_m_s
         self._outer(now_s, dt_s, est, height_agl_m)
 
