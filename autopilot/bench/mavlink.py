@@ -64,14 +64,19 @@ def _cameras(mission: str) -> list[str]:
 
 
 def fly_one(mission: str, firmware: str, driver: str, out: Path, *, instance: int = 6,
-            timeout_s: float = 400.0, log: Callable[[str], None] = print) -> dict:
-    """One flight: the simulator, the autopilot, the score; the run's summary (or why not)."""
+            timeout_s: float = 400.0, overrides: Sequence[str] = (),
+            log: Callable[[str], None] = print) -> dict:
+    """One flight: the simulator, the autopilot, the score; the run's summary (or why not).
+    ``overrides`` (``KEY=VALUE``) go to both processes: the world's (``scenario.*``,
+    ``sim.*``) to the simulator, the mission's to the autopilot."""
     truth, run = out / "truth", out / "run"
     rover = "rover_link" in _needs(mission)
     sim_args = ["sim", "--firmware", firmware, "--instance", str(instance), "--mission",
                 mission, "--out", str(truth)]
     if rover:
         sim_args += ["--set", "sim.rover_link.mavlink=true"]
+    sets = [arg for item in overrides for arg in ("--set", item)]
+    sim_args += sets
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
     with open(out / "sim.log", "w") as sim_log:
         sim = subprocess.Popen(_cli(*sim_args), stdout=sim_log, stderr=subprocess.STDOUT,
@@ -85,6 +90,7 @@ def fly_one(mission: str, firmware: str, driver: str, out: Path, *, instance: in
                 run_args += ["--calibration", f"{camera}={truth / f'{camera}_calibration.yaml'}"]
             if rover:
                 run_args += ["--set", "link.rover_system_id=2"]
+            run_args += sets
             started = time.monotonic()
             with open(out / "run.log", "w") as run_log:
                 try:
@@ -140,7 +146,8 @@ def headline(metrics: dict) -> dict[str, float | bool]:
 
 def run_bench(missions: Sequence[str] = MISSIONS, firmwares: Sequence[str] = tuple(FACES),
               drivers: Sequence[str] = DRIVERS, *, out_dir: Path | None = None,
-              instance: int = 6, log: Callable[[str], None] = print) -> dict:
+              instance: int = 6, overrides: Sequence[str] = (),
+              log: Callable[[str], None] = print) -> dict:
     cells = []
     with tempfile.TemporaryDirectory(prefix="bench-mavlink-") as tmp:
         base = out_dir or Path(tmp)
@@ -150,11 +157,12 @@ def run_bench(missions: Sequence[str] = MISSIONS, firmwares: Sequence[str] = tup
                     out = base / f"{mission}-{firmware}-{driver}"
                     out.mkdir(parents=True, exist_ok=True)
                     log(f"{mission} on {firmware} through {driver} ...")
-                    cell = fly_one(mission, firmware, driver, out, instance=instance, log=log)
+                    cell = fly_one(mission, firmware, driver, out, instance=instance,
+                                   overrides=overrides, log=log)
                     log(f"  {cell['status']} {cell.get('figures', cell.get('reason', ''))}")
                     cells.append({"mission": mission, "firmware": firmware, "driver": driver,
                                   **cell})
-    return {"bench": "mavlink", "cells": cells}
+    return {"bench": "mavlink", "overrides": list(overrides), "cells": cells}
 
 
 def merge(results: list[dict]) -> dict:
@@ -165,7 +173,8 @@ def merge(results: list[dict]) -> dict:
         for c in result["cells"]:
             cells[(c["mission"], c["firmware"], c["driver"])] = c
     order = {m: i for i, m in enumerate(MISSIONS)}
-    return {"bench": "mavlink", "cells": sorted(
+    return {"bench": "mavlink", "overrides": list(results[0].get("overrides") or ()),
+            "cells": sorted(
         cells.values(), key=lambda c: (order.get(c["mission"], len(order)), c["firmware"],
                                       c["driver"]))}
 
@@ -187,6 +196,10 @@ def format_table(result: dict) -> str:
                 v = c.get("figures", {}).get(k)
                 row += f" {_fmt(v):>24}"
             lines.append(row)
+        for c in cells:
+            if c["status"] != "completed":
+                lines.append(f"  ({c['firmware']} through {c['driver']}: "
+                             f"{c.get('reason') or c['status']})")
         lines.append("")
     return "\n".join(lines).rstrip()
 

@@ -16,6 +16,7 @@ from drivers.base import CommandDenied, Setpoint
 from drivers.mavlink.ardupilot import CopterMode
 from tests.conftest import sim_with
 
+from .mavtools import collected
 from .simtools import GROUND_Z, armable, run, simulator
 
 GUIDED, SMART_RTL, RTL = int(CopterMode.GUIDED), int(CopterMode.SMART_RTL), int(CopterMode.RTL)
@@ -24,24 +25,6 @@ GUIDED, SMART_RTL, RTL = int(CopterMode.GUIDED), int(CopterMode.SMART_RTL), int(
 @pytest.fixture
 def copter(sim_config):
     return sim_with(sim_config, firmware="ardupilot")
-
-
-@contextlib.asynccontextmanager
-async def _texts(drv):
-    texts: list[str] = []
-
-    async def listen():
-        async with contextlib.aclosing(drv.events(buffer=256)) as events:
-            async for _, text in events:
-                texts.append(text)
-
-    task = asyncio.ensure_future(listen())
-    try:
-        yield texts
-    finally:
-        task.cancel()
-        with contextlib.suppress(asyncio.CancelledError):
-            await task
 
 
 async def _takeoff(drv, altitude_m: float = 3.0) -> None:
@@ -90,7 +73,7 @@ def test_smart_rtl_retraces_the_path_flown_and_lands_home(copter):
 
 def test_a_gcs_failsafe_smartrtl_or_rtl_flies_smart_rtl(copter):
     async def main():
-        async with simulator(copter) as drv, _texts(drv) as texts:
+        async with simulator(copter) as drv, collected(drv.events(buffer=256)) as said:
             await drv.set_param("FS_GCS_ENABLE", 3)  # SmartRTL or RTL
             await armable(drv)
             flight = drv.simulator.flight
@@ -114,14 +97,14 @@ def test_a_gcs_failsafe_smartrtl_or_rtl_flies_smart_rtl(copter):
             await wait_for_state(drv, lambda s: seen.append(s) or not s.armed, 120.0, "home")
             xy = np.array([s.position_ned_m[:2] for s in seen])
             assert np.min(np.linalg.norm(xy - [15.0, 0.0], axis=1)) < 2.5
-            assert not any("SmartRTL Unavailable" in t for t in texts)
+            assert not any("SmartRTL Unavailable" in text for _, text in said)
 
     run(main())
 
 
 def test_low_battery_voltage_takes_batt_fs_low_act_and_refuses_arming(copter):
     async def main():
-        async with simulator(copter) as drv, _texts(drv) as texts:
+        async with simulator(copter) as drv, collected(drv.events(buffer=256)) as said:
             await armable(drv)
             # the pack at rest: 16.8 V (4S full); below a threshold above it, no arming
             await drv.set_param("BATT_LOW_VOLT", 17.0)
@@ -137,6 +120,7 @@ def test_low_battery_voltage_takes_batt_fs_low_act_and_refuses_arming(copter):
             flight = drv.simulator.flight
             await wait_for_state(drv, lambda s: flight.custom_mode == RTL, 30.0,
                                  "the battery failsafe's RTL")
+            texts = [text for _, text in said]
             assert any(t.startswith("Battery 1 is low ") and "mAh" in t for t in texts)
             assert "Battery Failsafe" in texts
             assert drv.latest_state.failsafe

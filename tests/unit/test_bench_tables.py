@@ -320,6 +320,7 @@ def test_mavlink_cells_flown_apart_are_pooled_and_the_command_names_what_was_flo
     assert "ardupilot  mavsdk     failed" in follow_rows
     assert "—" in follow_rows  # the failed flight has no figure, never a number
     assert "0.050" in follow_rows
+    assert "(ardupilot through mavsdk: telemetry lost)" in follow_rows  # why, not just "failed"
     assert tables.command_of(merged) == (
         "autopilot bench mavlink --mission follow_ball --mission land_pad --driver mavsdk "
         "--json")

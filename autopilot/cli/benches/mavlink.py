@@ -20,6 +20,9 @@ def arguments(bench: argparse.ArgumentParser) -> None:
                        metavar="NAME", help="pymavlink or mavsdk (repeatable; default both)")
     bench.add_argument("--instance", type=int, default=6, metavar="N",
                        help="the simulator's SITL instance (its ports; default 6)")
+    bench.add_argument("--set", dest="overrides", action="append", default=[],
+                       metavar="KEY=VALUE", help="a key of the world or the mission, for both "
+                       "processes (e.g. scenario.seed=5, sim.wind.gust_mps=1.5)")
     bench.add_argument("--out", type=Path, default=None, metavar="DIR",
                        help="keep each flight's logs, truth and summary here")
 
@@ -33,7 +36,8 @@ def run(args: argparse.Namespace) -> int:
     result = mavlink.run_bench(args.missions or mavlink.MISSIONS,
                                args.firmwares or tuple(mavlink.FACES),
                                args.drivers or mavlink.DRIVERS, out_dir=args.out,
-                               instance=args.instance, log=progress_for(args))
+                               instance=args.instance, overrides=args.overrides,
+                               log=progress_for(args))
     print(json.dumps(result) if args.json else mavlink.format_table(result))
     return EXIT_OK
 
