@@ -1,47 +1,73 @@
-"""The goal API and the console through each MAVLink driver against the ArduCopter face (real
-time): standby over MAVLink, a goto goal flown in GUIDED and succeeded, Y hands the vehicle to
-the keys, W moves it forward (GUIDED velocity targets), key up brakes, Y hands it back and a
-land goal ends the run — ArduCopter's modes along the way."""
+"""The goal API and the console through each MAVLink driver against ``autopilot sim
+--firmware ardupilot`` (a process of its own with its video, real time): standby over MAVLink,
+a goto goal flown in GUIDED and succeeded, Y hands the vehicle to the keys, W moves it forward
+(GUIDED velocity targets), key up brakes, Y hands it back and a land goal lands it in LAND."""
 
 from __future__ import annotations
 
 import asyncio
 import math
+import os
+import subprocess
+import sys
+import time
 
 import numpy as np
 import pytest
 
 from autopilot.mission import load_mission
 from autopilot.run import fly
-from drivers.mavlink.face_ardupilot import ArduPilotFace
 
-from ..conftest import sim_with
-from .mavtools import INSTANCE, served
 from .test_console import Socket, _forward, _hold_keys, _settled
 from .test_goal_api import Client
 
 pytestmark = pytest.mark.serial  # real time, MAVLink ports
 
+INSTANCE = 7
 SERIAL0 = 5760 + 10 * INSTANCE
-GUIDED, LAND = 4, 9
+
+
+@pytest.fixture(scope="module")
+def copter():
+    """``autopilot sim --firmware ardupilot`` (standby's world, its cameras streaming)."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "autopilot", "sim", "--firmware", "ardupilot", "--instance",
+         str(INSTANCE), "--mission", "standby"], stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT, text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    lines = []
+    deadline = time.monotonic() + 180
+    while time.monotonic() < deadline:
+        line = proc.stdout.readline()
+        if not line:
+            break
+        lines.append(line)
+        if "Ctrl-C to stop" in line:
+            break
+    if proc.poll() is not None or not lines or "Ctrl-C to stop" not in lines[-1]:
+        proc.kill()
+        pytest.fail("the simulated ArduCopter did not start: " + "".join(lines))
+    yield proc
+    proc.terminate()
+    try:
+        proc.wait(60)
+    except subprocess.TimeoutExpired:
+        proc.kill()
 
 
 @pytest.mark.parametrize("driver", ["pymavlink", "mavsdk"])
-def test_goals_and_keys_fly_an_arducopter_through_each_driver(sim_config, tmp_path, driver):
-    copter = sim_with(sim_config, firmware="ardupilot")
+def test_goals_and_keys_fly_an_arducopter_through_each_driver(copter, tmp_path, driver):
     plan = load_mission("standby", [f"driver={driver}"])
     seen: dict = {}
 
-    def script(c: Client, modes) -> None:
-        c.wait(lambda s: s["status_code"] == 3 and s["waiting_for_goals"], 90, "standby")
-        seen["standby_mode"] = modes()
+    def script(c: Client) -> None:
+        seen["standby"] = c.wait(lambda s: s["status_code"] == 3 and s["waiting_for_goals"],
+                                 90, "standby")
         code, body = c.call("POST", "/api/goals", {"goto": {"position_m": [4.0, 2.0, 3.0]}})
         assert code == 202, body
         goal = body["goal_id"]
         c.wait(lambda s: c.call("GET", f"/api/goals/{goal}")[1]["state"] == "succeeded", 60,
                "the goto goal")
         seen["at_goal"] = c.call("GET", "/api/status")[1]
-        seen["goal_mode"] = modes()
         sock = Socket(c.server.bound_port)
         sock.send({"type": "action", "action": "autopilot"})  # Y
         assert sock.next("answer")["ok"]
@@ -50,7 +76,7 @@ def test_goals_and_keys_fly_an_arducopter_through_each_driver(sim_config, tmp_pa
         moved = _hold_keys(sock, c, ["forward"],
                            lambda s: _forward(s, heading) - _forward(status, heading) > 1.0)
         seen["forward_m"] = _forward(moved, heading) - _forward(status, heading)
-        seen["manual_mode"] = modes()
+        seen["manual"] = moved
         sock.send({"type": "keys", "held": []})
         settled = _settled(c, "hover after W")
         seen["drift_after_w_m"] = abs(_forward(settled, heading) - _forward(moved, heading))
@@ -59,35 +85,34 @@ def test_goals_and_keys_fly_an_arducopter_through_each_driver(sim_config, tmp_pa
         c.wait(lambda s: s["control"] != "manual" and s["waiting_for_goals"], 30, "handed back")
         code, body = c.call("POST", "/api/goals", {"land": {}})
         assert code == 202, body
+        seen["landing"] = c.wait(lambda s: s["mode"] == "land", 30, "LAND")
 
     async def main():
-        async with served(copter, face_class=ArduPilotFace) as (vehicle, _):
-            servers: list = []
-            flight = asyncio.ensure_future(fly(
-                plan, tmp_path, connect=f"tcpout://127.0.0.1:{SERIAL0}", api="127.0.0.1:0",
-                console=True, on_api=servers.append))
-            while not servers or not servers[0].started.is_set():
-                if flight.done():
-                    return flight.result(), None
-                await asyncio.sleep(0.01)
-            client = Client(servers[0].bound_port)
-            client.server = servers[0]
-            try:
-                await asyncio.to_thread(script, client,
-                                        lambda: vehicle.simulator.flight.custom_mode)
-            except BaseException:
-                await asyncio.to_thread(client.call, "POST", "/api/abort")
-                await flight
-                raise
-            summary = await asyncio.wait_for(flight, 120)
-            return summary, vehicle.simulator.flight.custom_mode
+        servers: list = []
+        flight = asyncio.ensure_future(fly(
+            plan, tmp_path, connect=f"tcpout://127.0.0.1:{SERIAL0}", api="127.0.0.1:0",
+            console=True, on_api=servers.append))
+        while not servers or not servers[0].started.is_set():
+            if flight.done():
+                return flight.result()
+            await asyncio.sleep(0.01)
+        client = Client(servers[0].bound_port)
+        client.server = servers[0]
+        try:
+            await asyncio.to_thread(script, client)
+        except BaseException:
+            await asyncio.to_thread(client.call, "POST", "/api/abort")
+            await flight
+            raise
+        return await asyncio.wait_for(flight, 120)
 
-    summary, final_mode = asyncio.run(main())
+    summary = asyncio.run(main())
     assert summary["status"] == "completed", summary["reason"]
-    assert seen["standby_mode"] == GUIDED  # the hover is GUIDED's
+    # GUIDED reads as offboard (the firmware profile's mapping), LAND as land
+    assert seen["standby"]["mode"] == "offboard"
     np.testing.assert_allclose(seen["at_goal"]["position_ned_m"], [4.0, 2.0, -3.0], atol=0.6)
-    assert seen["goal_mode"] == GUIDED
-    assert seen["manual_mode"] == GUIDED  # the keys: GUIDED velocity targets
+    assert seen["at_goal"]["mode"] == "offboard"
+    assert seen["manual"]["mode"] == "offboard"  # the keys: GUIDED velocity targets
     assert seen["forward_m"] > 1.0
     assert seen["drift_after_w_m"] < 1.5
-    assert final_mode == LAND  # landed by LAND, disarmed there
+    assert seen["landing"]["armed"]
