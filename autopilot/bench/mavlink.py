@@ -23,7 +23,6 @@ import sys
 import tempfile
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 
 MISSIONS = ("follow_ball", "follow_marker", "hover_image", "land_pad", "orbit", "survey",
@@ -33,44 +32,37 @@ DRIVERS = ("pymavlink", "mavsdk")
 HEADLINE = 3
 
 
-@dataclass(frozen=True, slots=True)
-class Face:
-    """How a firmware's simulated vehicle is reached (``instance``: its SITL instance)."""
-
-    name: str
-    connect: Callable[[int], str]
+#: the firmwares flown (``autopilot sim --firmware``): their faces' modules and classes
+FACES = {"px4": ("drivers.mavlink.face", "MavlinkFace"),
+         "ardupilot": ("drivers.mavlink.face_ardupilot", "ArduPilotFace")}
 
 
-FACES = {
-    "px4": Face("px4", lambda n: f"udpin://127.0.0.1:{14540 + n}"),
-    "ardupilot": Face("ardupilot", lambda n: f"tcpout://127.0.0.1:{5760 + 10 * n}"),
-}
+def _connect(firmware: str, instance: int) -> str:
+    """Where the autopilot connects to ``firmware``'s face (the face says)."""
+    import importlib
+
+    module, name = FACES[firmware]
+    return getattr(importlib.import_module(module), name).companion_url(instance)
 
 
 def _cli(*args: str) -> list[str]:
     return [sys.executable, "-m", "autopilot", *args]
 
 
-def _needs(mission: str) -> set[str]:
+def _plan(mission: str, overrides: Sequence[str]):
     from autopilot.mission import load_mission
 
-    return {need for _, _, need in load_mission(mission).needs()}
-
-
-def _cameras(mission: str) -> list[str]:
-    from autopilot.mission import load_mission
-
-    return load_mission(mission).cameras_used()
+    return load_mission(mission, list(overrides))
 
 
 def fly_one(mission: str, firmware: str, driver: str, out: Path, *, instance: int = 6,
-            timeout_s: float = 400.0, overrides: Sequence[str] = (),
-            log: Callable[[str], None] = print) -> dict:
+            timeout_s: float = 400.0, overrides: Sequence[str] = ()) -> dict:
     """One flight: the simulator, the autopilot, the score; the run's summary (or why not).
     ``overrides`` (``KEY=VALUE``) go to both processes: the world's (``scenario.*``,
     ``sim.*``) to the simulator, the mission's to the autopilot."""
     truth, run = out / "truth", out / "run"
-    rover = "rover_link" in _needs(mission)
+    plan = _plan(mission, overrides)
+    rover = "rover_link" in {need for _, _, need in plan.needs()}
     sim_args = ["sim", "--firmware", firmware, "--instance", str(instance), "--mission",
                 mission, "--out", str(truth)]
     if rover:
@@ -85,8 +77,8 @@ def fly_one(mission: str, firmware: str, driver: str, out: Path, *, instance: in
             if not _ready(out / "sim.log", sim, 120.0):
                 return {"status": "not run", "reason": "the simulator did not start"}
             run_args = ["run", "--mission", mission, "--driver", driver, "--connect",
-                        FACES[firmware].connect(instance), "--out", str(run), "--overwrite"]
-            for camera in _cameras(mission):
+                        _connect(firmware, instance), "--out", str(run), "--overwrite"]
+            for camera in plan.cameras_used():
                 run_args += ["--calibration", f"{camera}={truth / f'{camera}_calibration.yaml'}"]
             if rover:
                 run_args += ["--set", "link.rover_system_id=2"]
@@ -158,7 +150,7 @@ def run_bench(missions: Sequence[str] = MISSIONS, firmwares: Sequence[str] = tup
                     out.mkdir(parents=True, exist_ok=True)
                     log(f"{mission} on {firmware} through {driver} ...")
                     cell = fly_one(mission, firmware, driver, out, instance=instance,
-                                   overrides=overrides, log=log)
+                                   overrides=overrides)
                     log(f"  {cell['status']} {cell.get('figures', cell.get('reason', ''))}")
                     cells.append({"mission": mission, "firmware": firmware, "driver": driver,
                                   **cell})

@@ -61,6 +61,8 @@ _REACHED_REPEATS = 10
 ACCEPTED, UNSUPPORTED = px4.MAV_RESULT_ACCEPTED, px4.MAV_RESULT_UNSUPPORTED
 
 _HEARTBEAT = mavlink.MAVLINK_MSG_ID_HEARTBEAT
+#: PX4 SITL's offboard API port (instance N: + N), where a companion or MAVSDK listens
+OFFBOARD_PORT = 14540
 
 
 class MavlinkFace:
@@ -76,6 +78,11 @@ class MavlinkFace:
     #: the parameter that holds its system id
     system_id_param = "MAV_SYS_ID"
     title = "PX4-compatible simulated vehicle"
+
+    @staticmethod
+    def companion_url(instance: int = 0) -> str:
+        """Where a companion computer's driver connects to instance ``instance``."""
+        return f"udpin://127.0.0.1:{OFFBOARD_PORT + instance}"
 
     def __init__(self, vehicle, *, instance: int = 0, host: str = "127.0.0.1",
                  gcs_port: int = 14550, peer_host: str | None = None,
@@ -96,7 +103,7 @@ class MavlinkFace:
         self.signed_streams: dict = {}
         self.stats = FaceStats()
         peer = peer_host or ("127.0.0.1" if host in ("0.0.0.0", "") else host)
-        self.ports = {"offboard": (14580 + instance, (peer, 14540 + instance)),
+        self.ports = {"offboard": (14580 + instance, (peer, OFFBOARD_PORT + instance)),
                       "gcs": (18570 + instance, (peer, gcs_port))}
         self.links: dict[str, FaceLink] = {}
         self._streams = {name: FaceStreams() for name in self.ports}

@@ -80,6 +80,11 @@ _BASE_MODE = (M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | M.MAV_MODE_FLAG_STABILIZE_EN
               | M.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED)
 
 
+def serial0_port(instance: int = 0) -> int:
+    """ArduCopter SITL's SERIAL0 TCP port for instance ``instance`` (5760, + 10 per instance)."""
+    return 5760 + 10 * instance
+
+
 class ArduPilotFace(MavlinkFace):
     """Serves ``vehicle`` (the simulator driver on the ArduCopter firmware) as ArduCopter SITL
     instance ``instance``."""
@@ -94,7 +99,7 @@ class ArduPilotFace(MavlinkFace):
         super().__init__(vehicle, instance=instance, host=host, gcs_port=gcs_port,
                          peer_host=peer_host, events=events, signing=signing)
         peer = peer_host or ("127.0.0.1" if host in ("0.0.0.0", "") else host)
-        base = 5760 + 10 * instance
+        base = serial0_port(instance)
         #: SERIALn → its TCP port
         self.serial_ports = {0: base, 1: base + 2, 2: base + 3}
         #: the UDP link: from an ephemeral port to the ground station's 14550
@@ -110,6 +115,11 @@ class ArduPilotFace(MavlinkFace):
         self.incoming = ArduIncoming(self)
         self._home: tuple | None = None
         self._plnd_frame_said = False
+
+    @staticmethod
+    def companion_url(instance: int = 0) -> str:
+        """SERIAL0, where ``sim_vehicle.py``'s MAVProxy (or a companion) connects."""
+        return f"tcpout://127.0.0.1:{serial0_port(instance)}"
 
     @staticmethod
     def instance_params(instance: int) -> dict[str, float]:

@@ -12,16 +12,16 @@ files are untouched)."""
 from __future__ import annotations
 
 import json
-import os
 import subprocess
 import sys
 import textwrap
-import time
 from pathlib import Path
 
 import pytest
 
 from drivers.ardrone.urls import ArdronePorts
+
+from .sim_process import sim_process
 
 pytestmark = pytest.mark.serial
 
@@ -33,30 +33,8 @@ READY_LINE = "AR.Drone 2.0-compatible simulated drone on"
 @pytest.fixture(scope="module")
 def drone():
     """``autopilot sim --firmware ardrone`` on its own ports, until the module ends."""
-    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "autopilot", "sim", "--firmware", "ardrone", "--instance",
-         str(INSTANCE)], stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True, env=env)
-    lines = []
-    deadline = time.monotonic() + 180
-    while time.monotonic() < deadline:
-        line = proc.stderr.readline()
-        if not line:
-            break
-        lines.append(line)
-        if READY_LINE in line:
-            break
-    else:
-        proc.kill()
-        pytest.fail("the simulated drone did not start: " + "".join(lines))
-    if proc.poll() is not None:
-        pytest.fail("the simulated drone exited: " + "".join(lines) + proc.stderr.read())
-    yield proc
-    proc.terminate()
-    try:
-        proc.wait(60)
-    except subprocess.TimeoutExpired:
-        proc.kill()
+    with sim_process(["--firmware", "ardrone", "--instance", str(INSTANCE)], READY_LINE) as proc:
+        yield proc
 
 
 # pyardrone's video thread is a daemon blocked in cv2.VideoCapture.read(), which close() does

@@ -14,7 +14,7 @@ from pymavlink import mavutil
 
 from autopilot.flight_ops import wait_for_state
 from drivers.base import FlightMode, Setpoint
-from drivers.mavlink.face_ardupilot import ArduPilotFace
+from drivers.mavlink.face_ardupilot import ArduPilotFace, serial0_port
 from drivers.mavlink.mavsdk_driver import MavsdkDriver
 from drivers.mavlink.pymavlink_driver import PymavlinkDriver
 
@@ -23,7 +23,7 @@ from .mavtools import INSTANCE, served
 
 pytestmark = pytest.mark.serial  # real time
 
-SERIAL0 = 5760 + 10 * INSTANCE
+SERIAL0 = serial0_port(INSTANCE)
 
 
 @pytest.fixture

@@ -7,51 +7,30 @@ from __future__ import annotations
 
 import asyncio
 import math
-import os
-import subprocess
-import sys
-import time
 
 import numpy as np
 import pytest
 
 from autopilot.mission import load_mission
 from autopilot.run import fly
+from drivers.mavlink.face_ardupilot import serial0_port
 
+from .sim_process import sim_process
 from .test_console import Socket, _forward, _hold_keys, _settled
 from .test_goal_api import Client
 
 pytestmark = pytest.mark.serial  # real time, MAVLink ports
 
 INSTANCE = 7
-SERIAL0 = 5760 + 10 * INSTANCE
+SERIAL0 = serial0_port(INSTANCE)
 
 
 @pytest.fixture(scope="module")
 def copter():
     """``autopilot sim --firmware ardupilot`` (standby's world, its cameras streaming)."""
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "autopilot", "sim", "--firmware", "ardupilot", "--instance",
-         str(INSTANCE), "--mission", "standby"], stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT, text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"})
-    lines = []
-    deadline = time.monotonic() + 180
-    while time.monotonic() < deadline:
-        line = proc.stdout.readline()
-        if not line:
-            break
-        lines.append(line)
-        if "Ctrl-C to stop" in line:
-            break
-    if proc.poll() is not None or not lines or "Ctrl-C to stop" not in lines[-1]:
-        proc.kill()
-        pytest.fail("the simulated ArduCopter did not start: " + "".join(lines))
-    yield proc
-    proc.terminate()
-    try:
-        proc.wait(60)
-    except subprocess.TimeoutExpired:
-        proc.kill()
+    with sim_process(["--firmware", "ardupilot", "--instance", str(INSTANCE), "--mission",
+                      "standby"], "Ctrl-C to stop") as proc:
+        yield proc
 
 
 @pytest.mark.parametrize("driver", ["pymavlink", "mavsdk"])

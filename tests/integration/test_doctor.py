@@ -101,10 +101,10 @@ def test_doctor_fails_clearly_without_a_vehicle(capsys):
 
 
 def test_doctor_recognises_an_arducopter_and_reads_what_a_companion_needs():
-    from drivers.mavlink.face_ardupilot import ArduPilotFace
+    from drivers.mavlink.face_ardupilot import ArduPilotFace, serial0_port
 
     plan = load_mission("follow_ball", ["driver=pymavlink"])
-    serial0 = 5760 + 10 * INSTANCE
+    serial0 = serial0_port(INSTANCE)
 
     async def main_():
         stop = asyncio.Event()

@@ -60,6 +60,7 @@ class SmartRtlPath:
         self._max = 0
         self._accuracy_m = 0.0
         self._simplified = 0  # points already simplified (routine cleanup)
+        self._changed = False  # points added since the routine cleanup last ran
         self._last_good_s = 0.0
         self._last_saved_s = 0.0
 
@@ -91,7 +92,9 @@ class SmartRtlPath:
             self._last_saved_s = now_s
         elif now_s - self._last_saved_s > TIMEOUT_S:
             self._deactivate("buffer full")
-        self._routine_cleanup()
+        if self._changed:  # (a full buffer that nothing could shorten stays as it is)
+            self._changed = False
+            self._routine_cleanup()
 
     def _add(self, point: np.ndarray) -> bool:
         if self.points and np.linalg.norm(point - self.points[-1]) < self._accuracy_m:
@@ -99,6 +102,7 @@ class SmartRtlPath:
         if len(self.points) >= self._max:
             return False
         self.points.append(point.copy())
+        self._changed = True
         return True
 
     def _deactivate(self, why: str) -> None:
