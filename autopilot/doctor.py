@@ -94,6 +94,7 @@ async def mavlink_checks(vehicle, plan: MissionPlan, url: str, duration_s: float
     """A MAVLink vehicle's link, telemetry, time sync and health, and its cameras' streams."""
     await _link_checks(vehicle, url, duration_s, add, signing=signing)
     await _param_checks(vehicle, add)
+    await _needs_checks(vehicle, plan, add)
     setups = vehicle.camera_setups if isinstance(vehicle, VideoInput) else {}
     for name, setup in setups.items():
         await _camera_checks(vehicle, name, setup.url, duration_s, setup.calibration, add)
@@ -137,8 +138,8 @@ async def ardrone_checks(vehicle, plan: MissionPlan, url: str, duration_s: float
 
 
 async def _param_checks(vehicle, add) -> None:
-    """The parameters a companion computer depends on, as its firmware names them (a driver
-    that reads parameters: pymavlink)."""
+    """The parameters a companion computer depends on, as its firmware names them (both
+    MAVLink drivers read parameters)."""
     firmware, get = getattr(vehicle, "firmware", None), getattr(vehicle, "get_param", None)
     if firmware is None:
         return
@@ -155,6 +156,21 @@ async def _param_checks(vehicle, add) -> None:
             continue
         status, text = check.judge(value)
         add(f"param {check.name}", status, f"{value:g}: {text}")
+
+
+async def _needs_checks(vehicle, plan: MissionPlan, add) -> None:
+    """What the mission's steps need of the vehicle that its own settings may deny (a landing
+    handed to ArduCopter with PLND_ENABLED 0): FAIL, as ``autopilot run`` would refuse it."""
+    from drivers.capabilities import NEEDS, SETTINGS, lacks, settings_problem
+
+    for need in dict.fromkeys(need for _, _, need in plan.needs()):
+        steps = ", ".join(f"steps[{i}].{name}" for i, name, n in plan.needs() if n == need)
+        if lacks(vehicle, (need,)):
+            add(need, "FAIL", f"{steps} need {NEEDS[need][1]}, which this driver does not have")
+        elif need in SETTINGS:
+            problem = await settings_problem(vehicle, need)
+            add(need, "FAIL" if problem else "PASS", f"{steps}: {problem}" if problem else
+                f"{steps}: {NEEDS[need][1]}, its settings allow it")
 
 
 async def _samples(vehicle, duration_s: float) -> list:

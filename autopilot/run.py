@@ -228,6 +228,24 @@ def check_vehicle_can_fly(plan: MissionPlan, vehicle: Vehicle) -> None:
         raise ConfigError(problems)
 
 
+async def check_vehicle_settings(plan: MissionPlan, vehicle: Vehicle) -> None:
+    """Refuse, once connected and before anything flies, a mission with a step that needs what
+    this vehicle's own settings keep it from (``vehicle_precland`` on an ArduCopter with
+    PLND_ENABLED 0, whose LAND would land anywhere), naming the step and the setting."""
+    from drivers.capabilities import settings_problem
+
+    problems, asked = [], {}
+    for index, name, need in plan.needs():
+        if need not in asked:  # (once per need: a question may be a parameter read)
+            asked[need] = await settings_problem(vehicle, need)
+        problem = asked[need]
+        if problem is not None:
+            problems.append(Problem(str(plan.source), None, f"steps[{index}].{name}",
+                                    f"needs {need}: {problem}"))
+    if problems:
+        raise ConfigError(problems)
+
+
 def with_calibrations(plan: MissionPlan, calibration: str | Path | Sequence[str]):
     """The simulator's configuration with ``--calibration`` files as what its cameras report
     (as a real camera reports its calibration file): each checked now, by its option."""
@@ -359,6 +377,7 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
     try:
         await vehicle.connect(plan.config.link.connect_timeout_s if plan.config.driver != "sim"
                               else 10.0)
+        await check_vehicle_settings(plan, vehicle)
         setups = vehicle.camera_setups if isinstance(vehicle, VideoInput) else {}
         for camera, setup in setups.items():  # the cameras the mission needs must be
             await first_frame(vehicle, camera,  # streaming before anything takes off

@@ -5,7 +5,10 @@ finds with ``isinstance`` (as MAVSDK's plugins are found per vehicle): the
 ==================  ======================================================================
 protocol            who has it
 ==================  ======================================================================
-PrecisionLanding    PX4 over MAVLink, the simulator (AUTO.PRECLAND and LANDING_TARGET)
+PrecisionLanding    MAVLink (PX4's AUTO.PRECLAND, ArduCopter's LAND with PLND), the
+                    simulator: LANDING_TARGET in, the vehicle lands on it
+LandingSettings     the same drivers: whether the vehicle's parameters let it (ArduCopter's
+                    PLND_ENABLED is 0 by default)
 UwbRanging          the simulator (UWB ranges to anchors on a rover)
 RoverLink           the simulator, a MAVLink link that hears a rover (its reported state)
 StatusTexts         the simulator, MAVLink (STATUSTEXT): the vehicle's own messages
@@ -46,6 +49,15 @@ class PrecisionLanding(Protocol):
     async def send_landing_target(self, target: LandingTarget) -> None:
         """Report the landing target's position (MAVLink LANDING_TARGET, MAV_FRAME_LOCAL_NED:
         what PX4's precision landing flies to). Fire and forget; stream it while it is seen."""
+
+
+@runtime_checkable
+class LandingSettings(Protocol):
+    async def precision_landing_problem(self) -> str | None:
+        """What in the vehicle's own parameters keeps its precision landing from landing on
+        the reported target (ArduCopter with PLND_ENABLED 0 lands anywhere), None if nothing
+        does. Asked before a mission that hands a landing to the vehicle flies; the landing
+        itself is refused the same way (:class:`~drivers.base.CommandDenied`)."""
 
 
 @runtime_checkable
@@ -136,7 +148,8 @@ NEEDS = {
     "global_position": (_knows_global_position,
                         "a global position (GNSS): positions on Earth, geotagged photos"),
     "precision_landing": (lambda vehicle: isinstance(vehicle, PrecisionLanding),
-                          "the vehicle's own precision landing (PX4 AUTO.PRECLAND)"),
+                          "the vehicle's own precision landing (PX4 AUTO.PRECLAND, "
+                          "ArduCopter PLND)"),
     "rover_link": (lambda vehicle: isinstance(vehicle, RoverLink),
                    "the rover's reports (a MAVLink link that hears the rover)"),
 }
@@ -145,3 +158,19 @@ NEEDS = {
 def lacks(vehicle, needs) -> list[str]:
     """Of ``needs`` (names in :data:`NEEDS`), what ``vehicle`` does not have."""
     return [need for need in needs if not NEEDS[need][0](vehicle)]
+
+
+#: the needs a vehicle may have by its driver yet not by its settings: how to ask it (once
+#: connected) what keeps it from one, None if nothing does
+SETTINGS = {
+    "precision_landing": lambda vehicle: vehicle.precision_landing_problem()
+    if isinstance(vehicle, LandingSettings) else None,
+}
+
+
+async def settings_problem(vehicle, need: str) -> str | None:
+    """What in a connected ``vehicle``'s own settings keeps it from ``need``, None if nothing
+    does (or it cannot say)."""
+    ask = SETTINGS.get(need)
+    pending = ask(vehicle) if ask is not None else None
+    return None if pending is None else await pending

@@ -34,7 +34,9 @@ Phases (each shown as the step's phase):
     descends, searches when it loses the target and falls back to a normal landing by its
     PLD_* parameters, ArduCopter retries and fails safe by its PLND_* ones. The step ends when
     the vehicle has landed and disarmed, and fails if the vehicle leaves that landing in the
-    air.
+    air. A vehicle that refuses the hand-over (ArduCopter with PLND_ENABLED 0, whose LAND would
+    land anywhere: a mission is refused for it before it flies, a goal only here) is landed by
+    this step's own descent, the refusal in the log.
 
 Over the pad, the position setpoint is the pad's estimate plus a trim that integrates the
 remaining horizontal offset between the vehicle's estimated position and the pad's
@@ -381,6 +383,15 @@ class LandPad(Behavior):
         return VehicleRequest(RequestKind.LANDING_TARGET,
                               position_ned_m=tuple(float(v) for v in self._pad),
                               time_s=inputs.now_s)
+
+    def request_failed(self, request: VehicleRequest, reason: str) -> BehaviorOutput:
+        """The vehicle refused its precision landing (ArduCopter with PLND_ENABLED 0, named in
+        the refusal, which the log keeps): it is still hovering over the pad under this step's
+        setpoints, so this step flies the descent itself. Any other refusal fails the step."""
+        if request.kind is RequestKind.PRECISION_LAND and self.phase == "precision landing":
+            self._set_phase("descending", self._phase_since)
+            return self._out(None)  # (the next tick's setpoint descends)
+        return super().request_failed(request, reason)
 
     def _precision_landing(self, inputs: BehaviorInputs, fresh: bool) -> BehaviorOutput:
         """PX4 lands; the pad's estimate goes to it while the pad is seen."""

@@ -11,7 +11,8 @@ COMPONENT_ARM_DISARM, and which attitude message it sends.
 * **ArduCopter** (``MAV_AUTOPILOT_ARDUPILOTMEGA``): Copter mode numbers (DO_SET_MODE param1 = the
   custom-mode flag, param2 = the number); offboard is GUIDED and hold BRAKE or LOITER; takeoff
   is GUIDED then NAV_TAKEOFF with the altitude above home in param7; landing is the LAND mode,
-  which with PLND_ENABLED lands on the target; LANDING_TARGET only in BODY_FRD or LOCAL_FRD, the
+  which with PLND_ENABLED and PLND_TYPE 1 lands on the target (a precision landing is refused
+  otherwise, naming them); LANDING_TARGET only in BODY_FRD or LOCAL_FRD, the
   target as a position relative to the vehicle (``position_valid``, its distance > 0); 2989
   forces an arming, 21196 a disarm; ATTITUDE (Euler angles). (ArduPilot's GCS_Common.cpp,
   mode.cpp, AC_PrecLand: ``docs/reference/ardupilot-mavlink.md``.)
@@ -27,7 +28,7 @@ from types import MappingProxyType
 
 import numpy as np
 
-from drivers.base import FlightMode, LandingTarget, VehicleState
+from drivers.base import CommandDenied, FlightMode, LandingTarget, VehicleError, VehicleState
 from drivers.mavlink import ardupilot, px4
 
 MAV_AUTOPILOT_ARDUPILOTMEGA = 3
@@ -51,6 +52,10 @@ class ParamCheck:
 Command = Callable[..., Awaitable[None]]
 SetMode = Callable[[FlightMode], Awaitable[None]]
 SetParam = Callable[[str, float], Awaitable[object]]
+#: a parameter's value as the vehicle reports it (KeyError: it did not answer)
+GetParam = Callable[[str], Awaitable[float]]
+#: ArduPilot's PLND_TYPE for a target a companion computer reports (LANDING_TARGET)
+PLND_TYPE_COMPANION = 1
 
 
 @dataclass(frozen=True, slots=True)
@@ -122,7 +127,14 @@ class Px4Profile:
     async def land(self, command: Command, set_mode: SetMode) -> None:
         await command("land", MAV_CMD_NAV_LAND, *[math.nan] * 7)
 
-    async def precision_land(self, command: Command, set_mode: SetMode) -> None:
+    async def precision_landing_problem(self, get_param: GetParam) -> str | None:
+        """What in the vehicle's parameters keeps its precision landing from landing on the
+        companion's target, None if nothing does. (PX4's AUTO.PRECLAND always takes
+        LANDING_TARGET: its PLD_* parameters only shape the search and the fallback.)"""
+        return None
+
+    async def precision_land(self, command: Command, set_mode: SetMode,
+                             get_param: GetParam) -> None:
         await set_mode(FlightMode.PRECLAND)
 
     def landing_target(self, target: LandingTarget,
@@ -202,8 +214,36 @@ class ArduCopterProfile(Px4Profile):
     async def land(self, command: Command, set_mode: SetMode) -> None:
         await set_mode(FlightMode.LAND)
 
-    async def precision_land(self, command: Command, set_mode: SetMode) -> None:
-        await set_mode(FlightMode.LAND)  # LAND with PLND_ENABLED lands on the target
+    async def precision_landing_problem(self, get_param: GetParam) -> str | None:
+        """ArduCopter has no precision landing mode: its LAND lands on the target only with
+        PLND_ENABLED set (1; 2 in older firmware: strict) and PLND_TYPE 1, companion computer;
+        otherwise LAND lands where the vehicle is. Both as the vehicle reports them (one it does
+        not answer for is a problem too: a firmware built without AC_PrecLand has none)."""
+        values = {}
+        for name in ("PLND_ENABLED", "PLND_TYPE"):
+            try:
+                values[name] = int(await get_param(name))
+            except (KeyError, OSError, VehicleError) as exc:
+                return (f"{name} not read ({exc}): the vehicle may have no precision landing "
+                        "(ArduCopter built without AC_PrecLand)")
+        fix = ("set PLND_ENABLED 1 and PLND_TYPE 1 (companion computer) and reboot the "
+               "vehicle, or land with method: ours")
+        if values["PLND_ENABLED"] == 0:
+            return ("PLND_ENABLED is 0: ArduCopter's LAND would land where the vehicle is, not "
+                    f"on the target ({fix})")
+        if values["PLND_TYPE"] != PLND_TYPE_COMPANION:
+            return (f"PLND_TYPE is {values['PLND_TYPE']}, not 1 (companion computer): "
+                    f"ArduCopter would ignore the LANDING_TARGET the autopilot sends ({fix})")
+        return None
+
+    async def precision_land(self, command: Command, set_mode: SetMode,
+                             get_param: GetParam) -> None:
+        """LAND, once the parameters say it will land on the target (else CommandDenied
+        naming them: the step goes to its fallback rather than landing anywhere)."""
+        problem = await self.precision_landing_problem(get_param)
+        if problem is not None:
+            raise CommandDenied("precision land", problem)
+        await set_mode(FlightMode.LAND)
 
     def landing_target(self, target: LandingTarget,
                        state: VehicleState | None) -> TargetReport | None:

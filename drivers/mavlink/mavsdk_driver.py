@@ -77,6 +77,7 @@ class MavsdkDriver(MavlinkVehicle):
         self._action = None
         self._telemetry_plugin = None
         self._direct = None
+        self._param = None
         self._link: MavlinkLink | None = None
         self._raw_handle = None
         self._resigner = None
@@ -96,6 +97,7 @@ class MavsdkDriver(MavlinkVehicle):
         from mavsdk.asyncio import ComponentType, Configuration, Mavsdk
         from mavsdk.asyncio.plugins.action import ActionAsync
         from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
+        from mavsdk.asyncio.plugins.param import ParamAsync
         from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
 
         if self._mavsdk is not None:
@@ -122,6 +124,7 @@ class MavsdkDriver(MavlinkVehicle):
             self._action = ActionAsync(self._system)
             self._telemetry_plugin = TelemetryAsync(self._system)
             self._direct = MavlinkDirectAsync(self._system)
+            self._param = ParamAsync(self._system)
             self._request_streams()
             self._tasks = [loop.create_task(coro, name=f"mavsdk-{name}") for name, coro in (
                 ("armed", self._armed_state()), ("landed", self._landed_state()),
@@ -175,7 +178,17 @@ class MavsdkDriver(MavlinkVehicle):
         async def set_mode(mode: FlightMode) -> None:
             await self._set_mode("precision land", mode)
 
-        await self.firmware.precision_land(self._command, set_mode)
+        await self.firmware.precision_land(self._command, set_mode, self.get_param)
+
+    async def precision_landing_problem(self) -> str | None:
+        return await self.firmware.precision_landing_problem(self.get_param)
+
+    async def get_param(self, name: str) -> float:
+        """A parameter's value through MAVSDK's param plugin (KeyError if the vehicle has no
+        such parameter or does not answer)."""
+        if self._param is None:
+            raise ConnectionLost("not connected")
+        return await read_param(self._param, name)
 
     async def send_landing_target(self, target: LandingTarget) -> None:
         report = self.firmware.landing_target(target, self.latest_state)
@@ -462,3 +475,21 @@ class _Resigner:
             refresh(tx)
             out.append(msg.pack(tx))
         return out
+
+
+async def read_param(plugin, name: str) -> float:
+    """``name``'s value through MAVSDK's param plugin in the vehicle's own type: as an integer
+    first (as most that a companion reads are), then as a float; KeyError naming MAVSDK's
+    result if neither is answered."""
+    from mavsdk.plugins.param import ParamError, ParamResult
+
+    wrong = {ParamResult.WRONG_TYPE, ParamResult.TYPE_MISMATCH}
+    try:
+        try:
+            return float(await plugin.get_param_int(name))
+        except ParamError as exc:
+            if exc.result not in wrong:
+                raise
+        return float(await plugin.get_param_float(name))
+    except ParamError as exc:
+        raise KeyError(f"{name}: {exc.result.name.lower().replace('_', ' ')}") from None

@@ -139,7 +139,10 @@ class PymavlinkDriver(MavlinkVehicle):
         await self._set_mode(FlightMode.RETURN)
 
     async def precision_land(self) -> None:
-        await self.firmware.precision_land(self._command, self._set_mode)
+        await self.firmware.precision_land(self._command, self._set_mode, self.get_param)
+
+    async def precision_landing_problem(self) -> str | None:
+        return await self.firmware.precision_landing_problem(self.get_param)
 
     async def send_landing_target(self, target: LandingTarget) -> None:
         self._check_alive()

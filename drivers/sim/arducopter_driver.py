@@ -2,9 +2,9 @@
 simulator's own driver, asking the ArduCopter firmware (:mod:`drivers.sim.flight.arducopter`)
 what a MAVLink driver asks an ArduCopter — through the same firmware profile
 (:class:`~drivers.mavlink.firmware.ArduCopterProfile`): a takeoff is GUIDED then NAV_TAKEOFF,
-a landing the LAND mode (on the target with PLND_ENABLED), a hold BRAKE. The MAVLink itself is
-not exercised here: ``autopilot sim --firmware ardupilot`` serves the same vehicle as
-ArduCopter SITL to the MAVLink drivers and to any ground station.
+a landing the LAND mode (a precision landing only with PLND_ENABLED and PLND_TYPE 1), a
+hold BRAKE. The MAVLink itself is not exercised here: ``autopilot sim --firmware ardupilot``
+serves the same vehicle as ArduCopter SITL to the MAVLink drivers and to any ground station.
 """
 
 from __future__ import annotations
@@ -41,4 +41,7 @@ class SimArduCopterDriver(SimDriver):
         await self.set_mode(FlightMode.HOLD)
 
     async def precision_land(self) -> None:
-        await self.profile.precision_land(self._mav_command, self.set_mode)
+        await self.profile.precision_land(self._mav_command, self.set_mode, self.get_param)
+
+    async def precision_landing_problem(self) -> str | None:
+        return await self.profile.precision_landing_problem(self.get_param)

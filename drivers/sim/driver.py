@@ -149,6 +149,9 @@ class SimDriver(Px4Services, Vehicle):
     async def precision_land(self) -> None:
         await self._command("precision_land")
 
+    async def precision_landing_problem(self) -> str | None:
+        return None  # PX4's AUTO.PRECLAND lands on the target whatever its PLD_* say
+
     async def send_landing_target(self, target: LandingTarget) -> None:
         await self._command("landing_target", target.position_ned_m, target.time_s)
 

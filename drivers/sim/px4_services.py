@@ -59,6 +59,11 @@ class Px4Services:
             raise KeyError(name)
         return self._param_defaults.get(name, specs[name].default)
 
+    async def get_param(self, name: str) -> float:
+        """:meth:`param` as the MAVLink drivers ask for it (one value read from another
+        thread: safe, see :class:`~drivers.sim.flight.params.Parameters`)."""
+        return float(self.param(name))
+
     async def set_param(self, name: str, value: float) -> float:
         """Set one of the firmware's parameters; returns the stored value. Refused
         (:class:`ParamError`) for unknown names and values of the wrong type or out of range."""

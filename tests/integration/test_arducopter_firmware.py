@@ -233,3 +233,57 @@ def test_land_pad_handed_to_plnd_lands_on_the_pad(tmp_path):
     assert texts.index("PrecLand: Target Found") < texts.index("PrecLand: Init Complete")
     assert complete <= handed  # settled before LAND began
     assert "PrecLand: Failsafe Measures" not in texts
+
+
+def test_a_landing_handed_to_arducopter_without_plnd_is_refused_before_it_flies(tmp_path):
+    """ArduCopter's PLND_ENABLED is 0 by default: its LAND would land wherever the vehicle is.
+    A mission that hands land_pad's descent to it is refused once connected (naming the step
+    and the parameter), with nothing armed; the vehicle's own precision landing refuses too."""
+    from autopilot.config import ConfigError
+    from autopilot.mission import load_mission
+    from autopilot.run import fly
+    from drivers.sim.arducopter_driver import SimArduCopterDriver
+
+    plan = load_mission("land_pad", ["sim.firmware=ardupilot",
+                                     "steps.1.land_pad.method=vehicle_precland"])
+    with pytest.raises(ConfigError) as caught:
+        run(fly(plan, tmp_path))
+    text = str(caught.value)
+    assert "steps[1].land_pad" in text
+    assert "PLND_ENABLED is 0" in text
+
+    async def refused():
+        driver = SimArduCopterDriver(plan.config.sim, lockstep=True)
+        await driver.connect()
+        try:
+            with pytest.raises(CommandDenied, match="PLND_ENABLED is 0"):
+                await driver.precision_land()
+            assert _mode(driver) != LAND
+            await driver.set_param("PLND_ENABLED", 1)
+            assert "PLND_TYPE is 0" in await driver.precision_landing_problem()
+        finally:
+            await driver.close()
+
+    run(refused())
+
+
+def test_a_refused_hand_over_in_flight_lands_with_our_descent(tmp_path, monkeypatch):
+    """A land_pad goal is not checked before it flies as a mission is: when the vehicle
+    refuses the hand-over in flight, the step flies the descent itself, on the pad."""
+    import autopilot.run as run_module
+    from autopilot.flightlog.log import read_log
+    from autopilot.mission import load_mission
+
+    async def unchecked(plan, vehicle):
+        return None
+
+    monkeypatch.setattr(run_module, "check_vehicle_settings", unchecked)
+    plan = load_mission("land_pad", ["sim.firmware=ardupilot",
+                                     "steps.1.land_pad.method=vehicle_precland"])
+    summary = run(run_module.fly(plan, tmp_path))
+    assert summary["status"] == "completed", summary.get("reason")
+    landing = summary["metrics"]["landing"]
+    assert landing["on_pad"]
+    assert landing["error_m"] <= 0.1
+    events = [r["text"] for r in read_log(tmp_path / "flight.mcap")["/mission/events"]]
+    assert any("precision_land refused" in t and "PLND_ENABLED is 0" in t for t in events)

@@ -95,3 +95,20 @@ def test_goals_and_keys_fly_an_arducopter_through_each_driver(copter, tmp_path, 
     assert seen["forward_m"] > 1.0
     assert seen["drift_after_w_m"] < 1.5
     assert seen["landing"]["armed"]
+
+
+@pytest.mark.parametrize("driver", ["pymavlink", "mavsdk"])
+def test_a_landing_handed_to_plnd_off_is_refused_before_anything_flies(copter, tmp_path,
+                                                                       driver):
+    """ArduCopter SITL's PLND_ENABLED is 0, as the firmware's: land_pad handed to the vehicle
+    would land wherever it is, so ``autopilot run`` refuses it once connected, naming the step
+    and the parameter, read through either driver."""
+    from autopilot.config import ConfigError
+
+    plan = load_mission("land_pad", [f"driver={driver}",
+                                     "steps.1.land_pad.method=vehicle_precland"])
+    with pytest.raises(ConfigError) as caught:
+        asyncio.run(fly(plan, tmp_path, connect=f"tcpout://127.0.0.1:{SERIAL0}"))
+    text = str(caught.value)
+    assert "steps[1].land_pad" in text
+    assert "PLND_ENABLED is 0" in text

@@ -127,3 +127,40 @@ def test_doctor_recognises_an_arducopter_and_reads_what_a_companion_needs():
     assert "attitude, velocity and absolute position good" in checks["estimator"].detail
     # ArduCopter's default: no GCS failsafe — a lost companion leaves it in GUIDED
     assert checks["param FS_GCS_ENABLE"].status == "WARN"
+
+
+@pytest.mark.parametrize(("driver", "plnd", "status"), [
+    ("pymavlink", [], "FAIL"),
+    ("mavsdk", ["sim.params.PLND_ENABLED=1", "sim.params.PLND_TYPE=1"], "PASS")])
+def test_doctor_says_whether_an_arducopter_would_take_a_landing_handed_to_it(driver, plnd,
+                                                                            status):
+    """land_pad handed to the vehicle (method: vehicle_precland) lands on the pad on an
+    ArduCopter only with PLND_ENABLED 1 and PLND_TYPE 1 (its PLND_ENABLED is 0 by default):
+    FAIL naming the parameter, as ``autopilot run`` refuses the mission, or PASS — read
+    through either driver (MAVSDK's param plugin, pymavlink's PARAM_REQUEST_READ)."""
+    from drivers.mavlink.face_ardupilot import ArduPilotFace, serial0_port
+
+    plan = load_mission("land_pad", [f"driver={driver}",
+                                     "steps.1.land_pad.method=vehicle_precland"])
+    serial0 = serial0_port(INSTANCE)
+
+    async def main_():
+        stop = asyncio.Event()
+        server = asyncio.ensure_future(serve(
+            load_config(overrides=["sim.firmware=ardupilot", *plnd]), None, instance=INSTANCE,
+            videos={}, log=lambda line: None, stop=stop, face_class=ArduPilotFace))
+        try:
+            await asyncio.sleep(3.0)
+            return await run_doctor(plan, connect=f"tcpout://127.0.0.1:{serial0}",
+                                    duration_s=1.0)
+        finally:
+            stop.set()
+            await server
+
+    checks = {c.item: c for c in asyncio.run(main_())}
+    check = checks["precision_landing"]
+    assert check.status == status, check
+    assert "steps[1].land_pad" in check.detail
+    if status == "FAIL":
+        assert "PLND_ENABLED is 0" in check.detail
+    assert checks["param GUID_TIMEOUT"].status == "PASS"  # (the driver reads parameters)

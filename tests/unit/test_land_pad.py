@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from autopilot.behaviors.base import BehaviorInputs, RequestKind, Status
+from autopilot.behaviors.base import BehaviorInputs, RequestKind, Status, VehicleRequest
 from autopilot.behaviors.land_pad import LandPad, LandPadParams, LandPadSettings
 from autopilot.config import ConfigError
 from autopilot.estimation.target import TargetEstimate
@@ -223,6 +223,29 @@ def test_px4_precland_interrupted_in_the_air_fails_the_step():
     out = _fly(land, 3.0, (PAD[0], PAD[1], -5.0), mode=FlightMode.HOLD)
     assert out.status is Status.FAILED
     assert "interrupted" in out.reason
+
+
+def test_a_refused_hand_over_is_flown_by_the_step_itself():
+    """The vehicle refuses its precision landing (ArduCopter with PLND_ENABLED 0): still over
+    the pad under this step's setpoints, the step descends onto it; any other refusal, or
+    one outside the hand-over, fails the step."""
+    land = _landing(method="vehicle_precland")
+    land.activate(BehaviorInputs(0.0, vehicle_state(0.0, pos=(0.0, 0.0, -6.0))))
+    _fly(land, 0.1, (PAD[0], PAD[1], -6.0), _pad(0.1))
+    out = _fly(land, 1.2, (PAD[0], PAD[1], -6.0), _pad(1.2))
+    handed = out.requests[-1]
+    assert handed.kind is RequestKind.PRECISION_LAND
+    out = land.request_failed(handed, "precision land denied: PLND_ENABLED is 0")
+    assert out.status is Status.RUNNING
+    assert land.phase == "descending"
+    out = _fly(land, 1.3, (PAD[0], PAD[1], -6.0), _pad(1.3), mode=FlightMode.OFFBOARD)
+    assert out.status is Status.RUNNING
+    assert out.setpoint is not None
+    assert out.setpoint.velocity_m_s[2] > 0.0  # down, over the pad
+    assert out.setpoint.position_ned_m[:2] == pytest.approx(PAD[:2], abs=0.01)
+    assert RequestKind.PRECISION_LAND not in [r.kind for r in out.requests]
+    out = land.request_failed(VehicleRequest(RequestKind.LAND), "denied")
+    assert out.status is Status.FAILED
 
 
 def test_a_detector_that_cannot_find_the_pad_is_refused_before_flying():
