@@ -30,6 +30,7 @@ from autopilot.runtime import Runtime
 from autopilot.steps.metrics import mission_metrics
 from drivers.base import CameraUnavailable, Vehicle
 from drivers.capabilities import DeadReckoning, LinkTimeSync, SimulatorTruth, VideoInput
+from drivers.stages import STAGES
 from drivers.threads import set_background_nice
 
 
@@ -212,6 +213,12 @@ def make_ardrone_vehicle(plan: MissionPlan, *, connect: str | None = None,
                          drone_config=plan.config.link.ardrone_config), None
 
 
+def staged(stage: str, fn: Callable, *args):
+    """``fn(*args)``, its CPU time charged to ``stage`` (on the thread that runs it)."""
+    with STAGES.stage(stage):
+        return fn(*args)
+
+
 def check_vehicle_can_fly(plan: MissionPlan, vehicle: Vehicle) -> None:
     """Refuse (:class:`~autopilot.config.ConfigError`, before anything opens or flies) a
     mission with a step that needs what this vehicle does not have (a survey's geotagged
@@ -328,8 +335,11 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
               record_video: str | None = None, signing_key: Path | None = None,
               api: str | None = None, api_token: str | None = None,
               on_api: Callable[[object], None] | None = None, console: bool = False,
-              api_tls: tuple[str, str] | None = None) -> dict:
+              api_tls: tuple[str, str] | None = None, stages: bool = False) -> dict:
     """Fly ``plan`` and return its summary (also written to ``out_dir/summary.json``).
+
+    ``stages``: count where the process's CPU time goes (:mod:`drivers.stages`), into the
+    summary's ``stages``.
 
     ``record_video`` names a camera whose every frame is logged (for ``onboard.mp4``; "" is
     the followed camera). ``api`` (``HOST:PORT``) serves the goal API for the flight
@@ -356,7 +366,9 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
     if out_dir is not None:
         await asyncio.to_thread(out_dir.mkdir, parents=True, exist_ok=True)
     log = FlightLog(out_dir / "flight.mcap" if out_dir is not None else None)
-    wall_start = time.perf_counter()
+    if stages:
+        STAGES.start()
+    wall_start, cpu_start = time.perf_counter(), time.process_time()
     steal = StealMeter()
     runtime: Runtime | None = None
     loop = asyncio.get_running_loop()
@@ -426,7 +438,7 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
 
     records = await asyncio.to_thread(log.read_back)  # (from the file, as they are used)
     try:
-        metrics = await asyncio.to_thread(flight_metrics, records,
+        metrics = await asyncio.to_thread(staged, "metrics", flight_metrics, records,
                                           plan.config.failsafe.geofence)
     except Exception as exc:  # e.g. a log damaged on disk: the flight still gets its summary
         warn(f"the flight's metrics could not be computed from its log "
@@ -474,6 +486,11 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
         summary["video"] = {name: {"timing": source.timing.as_dict(),
                                    "stats": dataclasses.asdict(source.stats)}
                             for name, source in sources.items()}
+    if stages:
+        from autopilot.bench.speed import stage_summary
+
+        summary["stages"] = stage_summary(STAGES.stop(), STAGES.by_thread(), sim_time,
+                                          wall_time, time.process_time() - cpu_start)
     if log.error is not None:
         summary["log_error"] = f"{type(log.error).__name__}: {log.error}"
     if runtime is not None:  # frames the log took, and those it had to drop

@@ -86,6 +86,10 @@ def arguments(run: argparse.ArgumentParser) -> None:
                      "mission's first camera's); default vehicle.cameras.NAME.calibration, "
                      "else the nominal pinhole (with a warning). With the simulator: what "
                      "the simulated camera reports with its frames")
+    run.add_argument("--stages", action="store_true",
+                     help="count where the CPU time goes, stage by stage (physics, flight "
+                     "stack, rendering, camera model, codec, detection, estimation, control, "
+                     "logging, metrics): shown per simulated second, and in summary.json")
     add_config_options(run)
     add_fault_option(run)
 
@@ -231,7 +235,7 @@ def run(args: argparse.Namespace) -> int:
                               signing_key=Path(args.signing_key) if args.signing_key else None,
                               api=args.api, api_token=token, console=bool(args.console),
                               api_tls=(args.api_tls_cert, args.api_tls_key)
-                              if args.api_tls_cert else None))
+                              if args.api_tls_cert else None, stages=args.stages))
     if sys.stderr.isatty():
         sys.stderr.write("\n")
     lines = summary_lines(summary, out)
@@ -283,6 +287,10 @@ def summary_lines(summary: dict, out: Path) -> list[str]:
     if summary.get("photos") and summary["photos"].get("taken"):
         lines.append(f"photos: {summary['photos']['taken']} in {out / 'photos'} "
                      "(JPEG + EXIF GPS, photos.geojson)")
+    if summary.get("stages", {}).get("ms_per_sim_s"):
+        ranked = sorted(summary["stages"]["ms_per_sim_s"].items(), key=lambda kv: -kv[1])
+        lines.append("CPU per simulated second: " + ", ".join(f"{name} {ms:.0f} ms"
+                                                                 for name, ms in ranked))
     lat = metrics["latency_ms"]
     if lat.get("samples"):
         lines.append(f"latency (frame capture to setpoint): p50 {lat['p50']:.1f} ms, "

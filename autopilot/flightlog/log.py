@@ -33,6 +33,7 @@ from mcap.writer import Writer
 
 from autopilot.flightlog import records as ch
 from autopilot.flightlog.records import SCHEMAS
+from drivers.stages import STAGES
 
 log = logging.getLogger(__name__)
 
@@ -83,6 +84,8 @@ class FlightLog:
         self._lock = threading.Lock()
         self._wake = threading.Event()
         self._closing = False
+        self._sequence = 0
+        self._image_schema: int | None = None
         if path is not None:
             file = open(path, "wb")  # noqa: SIM115 - closed by the writer thread
             self._queue = deque()
@@ -93,10 +96,12 @@ class FlightLog:
     def write(self, topic: str, time_s: float, record: dict) -> None:
         """Log ``record`` (plain values, or numpy arrays: a large record — a planned path —
         is encoded from its arrays at C speed; kept in memory as read back, in plain lists)."""
-        data = encode(record)
-        if self._queue is not None and self._put(topic, time_s, data, None) and not self.keep:
-            return
-        self.records[topic].append(orjson.loads(data) if _has_arrays(record) else record)
+        with STAGES.stage("logging"):
+            data = encode(record)
+            if self._queue is not None and self._put(topic, time_s, data, None) and \
+                    not self.keep:
+                return
+            self.records[topic].append(orjson.loads(data) if _has_arrays(record) else record)
 
     def all_records(self) -> dict[str, list[dict]]:
         """Every record of the flight, after :meth:`close`: read back from the file (as
@@ -153,9 +158,35 @@ class FlightLog:
             self._wake.set()
         return True
 
-    def _write_all(self, file: IO[bytes]) -> None:
+    def _write_batch(self, writer: Writer, batch: deque, channels: dict[str, int]) -> None:
+        """Write ``batch``'s records, each taken off it once written (what is left was not)."""
         from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
         from mcap_protobuf.schema import register_schema
+
+        while batch:
+            topic, ns, data, camera = batch[0]
+            if camera is None and topic not in channels:  # a channel met late
+                schema = SCHEMAS.get(topic) or {"title": topic, "type": "object"}
+                schema_id = writer.register_schema(
+                    name=schema["title"], encoding="jsonschema",
+                    data=json.dumps(schema).encode())
+                channels[topic] = writer.register_channel(
+                    topic=topic, message_encoding="json", schema_id=schema_id)
+            if camera is not None:
+                if topic not in channels:
+                    if self._image_schema is None:
+                        self._image_schema = register_schema(writer, CompressedImage)
+                    channels[topic] = writer.register_channel(
+                        topic=topic, message_encoding="protobuf", schema_id=self._image_schema)
+                message = CompressedImage(frame_id=camera, data=data, format="jpeg")
+                message.timestamp.FromNanoseconds(ns)
+                data = message.SerializeToString()
+            self._sequence += 1
+            writer.add_message(channels[topic], log_time=ns, publish_time=ns,
+                               sequence=self._sequence, data=data)
+            batch.popleft()
+
+    def _write_all(self, file: IO[bytes]) -> None:
 
         batch: deque = deque()
         try:
@@ -169,36 +200,13 @@ class FlightLog:
                     name=schema["title"], encoding="jsonschema", data=json.dumps(schema).encode())
                 channels[topic] = writer.register_channel(
                     topic=topic, message_encoding="json", schema_id=schema_id)
-            image_schema: int | None = None
-            sequence = 0
             while True:
                 self._wake.wait(WAKE_S)
                 self._wake.clear()
                 closing = self._closing  # read first: what was written before close() is taken
                 batch = self._take_all()
-                while batch:
-                    topic, ns, data, camera = batch[0]
-                    if camera is None and topic not in channels:  # a channel met late
-                        schema = SCHEMAS.get(topic) or {"title": topic, "type": "object"}
-                        schema_id = writer.register_schema(
-                            name=schema["title"], encoding="jsonschema",
-                            data=json.dumps(schema).encode())
-                        channels[topic] = writer.register_channel(
-                            topic=topic, message_encoding="json", schema_id=schema_id)
-                    if camera is not None:
-                        if topic not in channels:
-                            if image_schema is None:
-                                image_schema = register_schema(writer, CompressedImage)
-                            channels[topic] = writer.register_channel(
-                                topic=topic, message_encoding="protobuf",
-                                schema_id=image_schema)
-                        message = CompressedImage(frame_id=camera, data=data, format="jpeg")
-                        message.timestamp.FromNanoseconds(ns)
-                        data = message.SerializeToString()
-                    sequence += 1
-                    writer.add_message(channels[topic], log_time=ns, publish_time=ns,
-                                       sequence=sequence, data=data)
-                    batch.popleft()
+                with STAGES.stage("logging"):
+                    self._write_batch(writer, batch, channels)
                 if closing:
                     break
             writer.finish()

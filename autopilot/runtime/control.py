@@ -25,6 +25,7 @@ from autopilot.runtime.readout import Readout
 from autopilot.runtime.recorder import MissionRecorder
 from autopilot.runtime.telemetry import TelemetryIntake
 from drivers.base import FlightMode, VehicleError, VehicleState
+from drivers.stages import STAGES
 
 log = logging.getLogger(__name__)
 
@@ -112,7 +113,8 @@ class ControlLoop:
             failsafes.last_tick_s = now = clock.now()
             next_tick_s = next_tick_due(next_tick_s, now, period, estimate=source is not None,
                                         lockstep=clock.lockstep)
-            inputs = self.inputs(f.state)
+            with STAGES.stage("control"):
+                inputs = self.inputs(f.state)
             r.recorder.control_target(inputs)
             verdict, taken = await failsafes.check_link(inputs)
             if verdict is Verdict.GO_ON:
@@ -140,7 +142,8 @@ class ControlLoop:
                 out = executor.reactivate(inputs, "back from manual flight")
             else:
                 try:
-                    out = r.desk.serve(inputs) or executor.update(inputs)
+                    with STAGES.stage("control"):
+                        out = r.desk.serve(inputs) or executor.update(inputs)
                 except Exception as exc:  # a bug in the step: it fails, the fallback flies
                     if executor.in_fallback:
                         raise

@@ -23,6 +23,7 @@ from autopilot.pipeline import KeepsRecords, Pipeline, PipelineSpec, SensorFed, 
 from autopilot.runtime.flight import Flight, Lane, ProcessedFrame, Track
 from drivers.base import Frame, VehicleState
 from drivers.capabilities import SENSOR_STREAMS
+from drivers.stages import STAGES
 from drivers.threads import lower_this_thread
 
 if TYPE_CHECKING:
@@ -57,7 +58,8 @@ def detect_all(pipelines: list[Pipeline], frame: Frame, hints: list[object | Non
         started = time.perf_counter()
         error = None
         try:
-            det = pipeline.detect(frame.image, frame.camera, frame.time_s, hint)
+            with STAGES.stage(f"detection.{pipeline.name}"):
+                det = pipeline.detect(frame.image, frame.camera, frame.time_s, hint)
         except Exception as exc:
             log.exception("the %s detector raised on frame %d", pipeline.name, frame.seq)
             det, error = None, f"{type(exc).__name__}: {exc}"
@@ -117,9 +119,10 @@ class PerceptionLanes:
         return self.tracks[self.active[0]] if self.active else None
 
     def add_state(self, state: VehicleState) -> None:
-        for pipeline in self.pipelines.values():
-            pipeline.add_state(state)
-            self.log_relative(pipeline)
+        with STAGES.stage("estimation"):
+            for pipeline in self.pipelines.values():
+                pipeline.add_state(state)
+                self.log_relative(pipeline)
 
     def overlay(self, camera: str, frame: Frame, now: float) -> tuple[dict | None, dict | None]:
         """The detection record of ``frame`` when the running step's pipeline on ``camera``
@@ -237,7 +240,9 @@ class PerceptionLanes:
                     track.detections += 1
                     track.last_detection = det
                     try:
-                        record = track.pipeline.estimate(item.time_s, item.frame.camera, det)
+                        with STAGES.stage("estimation"):
+                            record = track.pipeline.estimate(item.time_s, item.frame.camera,
+                                                             det)
                     except Exception as exc:  # the step cannot fly on it: it fails
                         log.exception("the %s estimator raised", track.pipeline.name)
                         self.fail_step(f"the {track.pipeline.name} estimator raised "

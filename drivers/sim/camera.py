@@ -102,6 +102,7 @@ from drivers.sim.camera_effects import (
     blur_kernel,
     image_motion_px_s,
 )
+from drivers.stages import STAGES
 
 
 class SimCamera:
@@ -279,6 +280,22 @@ class CameraRig:
                 raise _unavailable(exc) from exc
             _fast_texture_filtering(target.context)
         context = target.context
+        name, effects, jpeg = target.cam.info.name, target.cam.effects, None
+        with STAGES.stage(f"render.{name}"):
+            bgr = self._draw(target, context)
+            if effects is None:
+                image = cv2.flip(bgr, 0)  # OpenGL rows run bottom-up
+        if effects is not None:
+            with STAGES.stage(f"camera model.{name}"):
+                image = self._realistic(target, effects, bgr, motion, seq, gain)
+            with STAGES.stage(f"codec.{name}"):
+                image, jpeg = self._codec(target, effects, image)
+        image.flags.writeable = False
+        return image, jpeg
+
+    @staticmethod
+    def _draw(target: _CameraTarget, context: mujoco.MjrContext) -> np.ndarray:
+        """Draw the snapshot and read it back (rows bottom-up, the sky painted)."""
         # every camera has its own render context and framebuffer on the one OpenGL context;
         # the bound framebuffer is OpenGL state, so bind this camera's before drawing (else a
         # second camera draws into the first one's buffer and each reads the other's image)
@@ -300,21 +317,13 @@ class CameraRig:
             else:
                 bgr = cv2.cvtColor(target.bgra, cv2.COLOR_BGRA2BGR)
                 cv2.copyTo(target.sky, background, bgr)
-        effects = target.cam.effects
-        jpeg = None
-        if effects is None:
-            image = cv2.flip(bgr, 0)  # OpenGL rows run bottom-up
-        else:
-            image, jpeg = self._realistic(target, effects, bgr, motion, seq, gain)
-        image.flags.writeable = False
-        return image, jpeg
+        return bgr
 
     @staticmethod
     def _realistic(target: _CameraTarget, effects: CameraEffects, bottom_up: np.ndarray,
-                   motion: VehicleMotion | None, seq: int, gain: float = 1.0
-                   ) -> tuple[np.ndarray, bytes | None]:
-        """Distortion (and rolling shutter), motion blur, exposure, read noise and the codec;
-        see the module notes."""
+                   motion: VehicleMotion | None, seq: int, gain: float = 1.0) -> np.ndarray:
+        """Distortion (and rolling shutter), motion blur, exposure and read noise; see the
+        module notes."""
         info = target.cam.info
         rate_u, rate_v = image_motion_px_s(info, motion) if motion is not None else (0.0, 0.0)
         if target.warp:
@@ -356,6 +365,12 @@ class CameraRig:
             up, down = (part[offset:offset + n].reshape(image.shape) for part in target.noise)
             image = cv2.add(image, up)
             cv2.subtract(image, down, dst=image)
+        return image
+
+    @staticmethod
+    def _codec(target: _CameraTarget, effects: CameraEffects, image: np.ndarray
+               ) -> tuple[np.ndarray, bytes | None]:
+        """The codec's round trip (JPEG or H.264), with the JPEG the image was decoded from."""
         jpeg = None
         if effects.jpeg_quality:
             _, data = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY,
@@ -364,7 +379,7 @@ class CameraRig:
             jpeg = data.tobytes()
         if effects.h264_bitrate_bps:
             if target.h264 is None:
-                intr = info.intrinsics
+                intr = target.cam.info.intrinsics
                 target.h264 = H264RoundTrip(intr.width_px, intr.height_px, effects.rate_hz,
                                             effects.h264_bitrate_bps)
             image, jpeg = target.h264(image), None
@@ -379,6 +394,7 @@ class CameraRig:
             self._gl = None
 
     def close(self) -> None:
+        STAGES.sample_rasteriser()  # (its threads end with the OpenGL context)
         for target in self._targets.values():
             if target.pending is not None:
                 target.pending.image.cancel()

@@ -45,6 +45,7 @@ from drivers.sim.scenario import BodyTruth, ScenarioObject
 from drivers.sim.schedule import Schedule
 from drivers.sim.vehicle_sensors import FAILURE_NAMES, VehicleSensors
 from drivers.sim.wind import DragModel, WindModel
+from drivers.stages import STAGES
 
 __all__ = ["FAILURE_NAMES", "GroundTruth", "OutputKind", "Photo", "SimOutput", "SimulationDiverged",
            "Simulator"]
@@ -78,6 +79,15 @@ class GroundTruth:
     armed: bool | None = None  # the flight stack's own state (not as telemetry last told it)
     mode: str | None = None
     landed_state: str | None = None  # its land detector's (on_ground on a deck or a pad too)
+
+
+def _staged(stage: str, fn, *args) -> None:
+    """``fn(*args)``, its CPU time charged to ``stage`` (not to the physics')."""
+    if not STAGES.on:
+        fn(*args)
+        return
+    with STAGES.stage(stage):
+        fn(*args)
 
 
 class Simulator:
@@ -164,8 +174,9 @@ class Simulator:
     def advance_to(self, time_s: float) -> list[SimOutput]:
         """Step until ``time_s`` (rounded up to a physics step); return outputs now due."""
         target = math.ceil(time_s / self.dt - _EPS)
-        while self._step < target:
-            self._step_once()
+        with STAGES.stage("physics"):  # (the control ticks and captures charged within)
+            while self._step < target:
+                self._step_once()
         return self.pop_due()
 
     def pop_due(self) -> list[SimOutput]:
@@ -174,9 +185,8 @@ class Simulator:
 
     def _faulted(self, frame: Frame) -> Frame:
         """A frame as the injected faults leave it."""
-        if not self.faults:
-            return frame
-        return self.fault_effects.frame(frame, self._fault_time(frame.time_s))
+        return self.fault_effects.frame(frame, self._fault_time(frame.time_s)) if self.faults \
+            else frame
 
     def next_event_s(self, include_truth: bool = False) -> float:
         """Earliest time at which telemetry or a frame can become due (a lower bound).
@@ -216,10 +226,10 @@ class Simulator:
                 obj.update(t, d)
         mujoco.mj_step1(m, d)
         if control:
-            self._control_tick()
+            _staged("flight stack", self._control_tick)
         self.body.spin(self.fault_effects.motor_scale)
         if k >= self._next_capture:
-            self._captures(k)
+            _staged("sensors", self._captures, k)
         mujoco.mj_step2(m, d)
         self._step = k + 1
 
