@@ -489,7 +489,7 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
     if stages:
         from autopilot.bench.speed import stage_summary
 
-        summary["stages"] = stage_summary(STAGES.stop(), STAGES.by_thread(), sim_time,
+        summary["stages"] = stage_summary(STAGES.stop(), STAGES.threads(), sim_time,
                                           wall_time, time.process_time() - cpu_start)
     if log.error is not None:
         summary["log_error"] = f"{type(log.error).__name__}: {log.error}"

@@ -46,6 +46,9 @@ class Stages:
         self._local = threading.local()
         self._raster_start_ns = 0
         self._raster_ns = 0
+        #: each thread's whole CPU time: at the start (by thread id), and the latest seen
+        self._thread_start_ns: dict[int, int] = {}
+        self._thread_ns: dict[int, tuple[str, int]] = {}
 
     def start(self) -> None:
         """Count from now (what was counted before is forgotten)."""
@@ -55,17 +58,33 @@ class Stages:
             for _, table, _ in self._tables:
                 table.clear()
         self._raster_start_ns, self._raster_ns = rasteriser_cpu_ns(), 0
+        self._thread_ns = {}
+        self._thread_start_ns = {ident: ns for ident, (_, ns) in _threads_cpu_ns().items()}
         self.on = True
 
-    def sample_rasteriser(self) -> None:
-        """Read the rasteriser's threads now: they end with their OpenGL context, taking
-        their CPU time with them (called before a renderer is released)."""
-        if self.on:
-            self._raster_ns = max(self._raster_ns, rasteriser_cpu_ns() - self._raster_start_ns)
+    def sample_threads(self) -> None:
+        """Read every thread's CPU time now, the rasteriser's too: threads end (a renderer
+        released takes Mesa's with it, a pool shut down its workers) taking theirs with them.
+        Called before such a release, and by :meth:`stop`."""
+        if not self.on:
+            return
+        self._raster_ns = max(self._raster_ns, rasteriser_cpu_ns() - self._raster_start_ns)
+        for ident, (name, ns) in _threads_cpu_ns().items():
+            ns -= self._thread_start_ns.get(ident, 0)
+            if ns > self._thread_ns.get(ident, ("", -1))[1]:
+                self._thread_ns[ident] = (name, ns)
+
+    def threads(self) -> dict[str, float]:
+        """Each thread's whole CPU time while counting, counted in a stage or not (by name; a
+        pool's threads together), as last sampled."""
+        out: defaultdict[str, float] = defaultdict(float)
+        for name, ns in self._thread_ns.values():
+            out[name] += ns / 1e9
+        return dict(out)
 
     def stop(self) -> dict[str, float]:
         """Stop counting; each stage's CPU seconds, the rasteriser's included."""
-        self.sample_rasteriser()
+        self.sample_threads()
         self.on = False
         out = self.totals()
         if self._raster_ns > 0:
@@ -80,15 +99,6 @@ class Stages:
         for _, table, _ in tables:
             for name, ns in list(table.items()):
                 out[name] += ns / 1e9
-        return dict(out)
-
-    def by_thread(self) -> dict[str, float]:
-        """The CPU seconds counted on each thread (by name; a pool's threads together)."""
-        out: defaultdict[str, float] = defaultdict(float)
-        with self._lock:
-            tables = list(self._tables)
-        for thread, table, _ in tables:
-            out[thread] += sum(table.values()) / 1e9
         return dict(out)
 
     @contextlib.contextmanager
@@ -125,6 +135,17 @@ class Stages:
 
 #: the process's stages
 STAGES = Stages()
+
+
+def _threads_cpu_ns() -> dict[int, tuple[str, int]]:
+    """Each live Python thread's CPU time so far: id → (name, a pool's without its number)."""
+    out = {}
+    for thread in threading.enumerate():
+        with contextlib.suppress(OSError, OverflowError, TypeError):
+            clock = time.pthread_getcpuclockid(thread.ident)
+            out[thread.ident] = (thread.name.rsplit("_", 1)[0] if thread.name[-1].isdigit()
+                                 else thread.name, time.clock_gettime_ns(clock))
+    return out
 
 
 def rasteriser_cpu_ns() -> int:

@@ -249,6 +249,7 @@ class FlightLog:
     def close(self) -> None:
         """Write what is queued, finish the file (its summary and footer) and close it."""
         if self._thread is not None:
+            STAGES.sample_threads()  # (the writer's thread takes its CPU time with it)
             self._closing = True
             self._wake.set()
             self._thread.join()

@@ -100,6 +100,7 @@ class PerceptionLanes:
             self.late_tasks += self.sensor_tasks(self.group)
 
     def close(self) -> None:
+        STAGES.sample_threads()  # (the pool's thread takes its CPU time with it)
         self._pool.shutdown(wait=True, cancel_futures=True)
 
     # -- what the behaviours and the console read ------------------------------------------

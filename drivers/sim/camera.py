@@ -394,7 +394,7 @@ class CameraRig:
             self._gl = None
 
     def close(self) -> None:
-        STAGES.sample_rasteriser()  # (its threads end with the OpenGL context)
+        STAGES.sample_threads()  # (they end with the OpenGL context and the pool)
         for target in self._targets.values():
             if target.pending is not None:
                 target.pending.image.cancel()
