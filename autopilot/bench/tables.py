@@ -23,7 +23,7 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
-from autopilot.bench import down, follow, landing, load_figures, mavlink, offboard
+from autopilot.bench import down, follow, landing, load_figures, mavlink, offboard, speed
 
 
 def _preformatted(bench: str, format_table: Callable[[dict], str],
@@ -59,6 +59,13 @@ FORMATTERS: dict[str, Callable[[dict], list[str]]] = {
         "Every shipped mission through each MAVLink driver against `autopilot sim` as PX4 "
         "SITL and as ArduCopter SITL, in real time, each part its own process (H.264 video, "
         "the simulator's calibrations), scored against truth: the step's headline figures"),
+    "speed": _preformatted(
+        "speed", speed.format_table,
+        "Lockstep runs, each mission alone in a process of its own (`autopilot run --stages`): "
+        "the real-time factor, the process's CPU per simulated second and its costliest "
+        "stages (CPU on the thread that did the work; the rasteriser is Mesa llvmpipe's "
+        "threads; `other`: what no stage counts — the event loop, hand-overs, modules loaded "
+        "during the run), and what bounds the wall time"),
     "load": _preformatted(
         "load", load_figures.format_table,
         "Real-time follow_ball on a busy CPU: `autopilot sim` on a core of its own, the "
@@ -77,6 +84,12 @@ def command_of(result: dict) -> str:
     elif result["bench"] == "load":
         parts += ["--hogs " + ",".join(str(n) for n in result["hogs"]),
                   f"--follow-s {result['follow_s']:g}", f"--driver {result['driver']}"]
+    elif result["bench"] == "speed":
+        missions = list(result["missions"])
+        if set(missions) != set(speed.DEFAULT_MISSIONS):
+            parts += [f"--mission {m}" for m in missions]
+        if set(result["profiles"]) != set(speed.PROFILES):
+            parts += [f"--profile {p}" for p in result["profiles"]]
     elif result["bench"] == "mavlink":
         cells = result["cells"]
         for flag, key, every in (("--mission", "mission", mavlink.MISSIONS),
