@@ -287,3 +287,37 @@ def test_a_refused_hand_over_in_flight_lands_with_our_descent(tmp_path, monkeypa
     assert landing["error_m"] <= 0.1
     events = [r["text"] for r in read_log(tmp_path / "flight.mcap")["/mission/events"]]
     assert any("precision_land refused" in t and "PLND_ENABLED is 0" in t for t in events)
+
+
+def test_armed_on_the_ground_it_stays_landed_and_takes_off(tmp_path):
+    """On the realistic profile the rangefinder gives outliers (its 12 m for a missed return):
+    the flight stack gates them, so an ArduCopter armed on the ground stays landed (it used to
+    read "in the air" for half a second now and then, and NAV_TAKEOFF was refused with
+    "already flying"), and takes off when asked."""
+    from autopilot.mission import load_mission
+    from autopilot.run import make_sim_vehicle
+
+    plan = load_mission("standby", ["sim.firmware=ardupilot",
+                                    "sim.rangefinder.outlier_fraction=0.2"])
+    vehicle, _ = make_sim_vehicle(plan)
+
+    async def main():
+        await vehicle.connect()
+        try:
+            await armable(vehicle)
+            await vehicle.firmware_command("set_copter_mode", GUIDED)
+            await vehicle.arm()
+            stack = vehicle.simulator.flight.stack
+            t0, landed = vehicle.clock.now(), []
+            while vehicle.clock.now() - t0 < 3.0:
+                await vehicle.clock.sleep(0.02)
+                landed.append(stack.land_detector.landed)
+            assert all(landed)
+            assert stack.range_gate.rejected > 0  # (the outliers were there)
+            await vehicle.takeoff(3.0)
+            await wait_for_state(vehicle, lambda s: -s.position_ned_m[2] > 2.5, 20.0,
+                                 "takeoff")
+        finally:
+            await vehicle.close()
+
+    run(main())

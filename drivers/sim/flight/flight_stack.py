@@ -45,6 +45,7 @@ from drivers.sim.flight.position_control import (
     GRAVITY_M_S2,
 )
 from drivers.sim.flight.position_loop import PositionLoop
+from drivers.sim.flight.range_gate import RangeGate
 from drivers.sim.flight.rate_loop import RateLoop
 
 __all__ = ["Airframe", "CommandRejected", "EstimatedState", "FlightStack"]
@@ -80,8 +81,7 @@ class EstimatedState:
 
 class FlightStack:
     def __init__(self, cfg: FlightStackConfig, airframe: Airframe, motor_idle_fraction: float,
-                 params: Parameters | None = None,
-                 origin: GlobalOrigin | None = None) -> None:
+                 params: Parameters | None = None, origin: GlobalOrigin | None = None) -> None:
         self.cfg = cfg
         self.airframe = airframe
         self.params = params if params is not None else Parameters()
@@ -93,6 +93,7 @@ class FlightStack:
         self.rate_loop = RateLoop(cfg, airframe, motor_idle_fraction)
         self.position_loop = PositionLoop(cfg, hover, self.rate_loop, self._event)
         self.land_detector = self.position_loop.land_detector
+        self.range_gate = RangeGate()  # the rangefinder as the estimator takes it
         self.offboard = OffboardInput()
         self.commander = Commander(self.params, self._event)
         self.navigator = Navigator(self.params, self.origin, request_mode=self._auto_mode,
@@ -105,8 +106,7 @@ class FlightStack:
         self._now = 0.0
         self._est: EstimatedState | None = None
         self.health = Health(local_position_ok=False)  # as last observed
-        self._battery_fraction = 1.0
-        self._gcs_heard_s = _GCS_NEVER
+        self._battery_fraction, self._gcs_heard_s = 1.0, _GCS_NEVER
         self._surface_velocity: np.ndarray | None = None
         #: why the vehicle is outside its geofence now (None: inside, or no fence)
         self.geofence_breach: str | None = None
@@ -311,13 +311,14 @@ class FlightStack:
     def update_outer(self, now_s: float, dt_s: float, est: EstimatedState, health: Health,
                      height_agl_m: float, battery: Battery,
                      surface_velocity_ned_m_s: np.ndarray | None = None) -> None:
-        """Position-loop tick: commander, mode logic, position/velocity control.
-        ``surface_velocity_ned_m_s``: the velocity of the surface under the vehicle (a moving
-        deck), which the land detector judges the vehicle's motion against."""
+        """Position-loop tick: commander, mode logic, position/velocity control, on the range
+        gated (:mod:`~drivers.sim.flight.range_gate`). ``surface_velocity_ned_m_s``: the
+        surface's under the vehicle (a moving deck), for the land detector."""
         self.observe(now_s, est, health)
         self._battery_fraction = battery.remaining_fraction
         self._surface_velocity = surface_velocity_ned_m_s
-        self._outer(now_s, dt_s, est, height_agl_m)
+        self._outer(now_s, dt_s, est, self.range_gate.height(now_s, height_agl_m, est,
+                                                             self.navigator.home))
 
     def _outer(self, now: float, dt: float, est: EstimatedState, height_agl: float) -> None:
         nav_est = Estimate(est.position_ned_m, est.velocity_ned_m_s, yaw_from_quat(est.q_ned_frd))
