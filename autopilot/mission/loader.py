@@ -4,7 +4,7 @@ behaviour that flies a step."""
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -121,7 +121,37 @@ def load_mission(name_or_path: str, overrides: list[str] = (),
         raise ConfigError(problems)
     warnings = tuple(f"steps[{i}].{step.name}: {text}" for i, step in enumerate(steps)
                      for text in step_kind(step.name).warnings(step.params, config))
-    return MissionPlan(mission, steps, config, path, warnings)
+    return MissionPlan(command_line_wins(mission, config, overrides), steps, config, path,
+                       warnings)
+
+
+#: the simulator's keys a mission's scenario sets (autopilot.scenario.build_world lays the
+#: scenario's over the configuration's), by their place in the scenario
+SCENARIO_OWNED = {"sim.seed": ("seed",), "sim.wind.gust_mps": ("wind", "gust_mps"),
+                  "sim.wind.steady_ned_m_s": ("wind", "steady_ned_m_s")}
+
+
+def command_line_wins(mission: Mission, config: AppConfig, overrides: Sequence[str]
+                      ) -> Mission:
+    """A ``--set`` of one of :data:`SCENARIO_OWNED`'s keys flies as given, although the
+    mission's scenario sets it too (every shipped mission has a seed and a wind): it is laid
+    over the scenario, unless the scenario's own key is set on the command line as well."""
+    if mission.scenario is None:
+        return mission
+    keys = {item.split("=", 1)[0].strip() for item in overrides}
+    scenario = mission.scenario
+    for key, place in SCENARIO_OWNED.items():
+        given = key in keys or (key.startswith("sim.wind.") and "sim.wind" in keys)
+        if not given or ".".join(("scenario", *place)) in keys:
+            continue
+        value = getattr(config.sim.wind, place[1]) if place[0] == "wind" else config.sim.seed
+        if place[0] == "wind":
+            scenario = scenario.model_copy(update={"wind": scenario.wind.model_copy(
+                update={place[1]: value})})
+        else:
+            scenario = scenario.model_copy(update={place[0]: value})
+    return mission if scenario is mission.scenario else \
+        mission.model_copy(update={"scenario": scenario})
 
 
 def is_mission_file(path: str | Path) -> bool:
