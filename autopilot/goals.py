@@ -150,9 +150,11 @@ class GoalManager:
 
     def submit(self, step: Step, now_s: float, status: MissionStatus,
                waiting_for_goals: bool, in_air: bool,
-               cameras: Sequence[str] | None = None) -> Goal:
+               cameras: Sequence[str] | None = None, vehicle: object | None = None) -> Goal:
         """Queue a validated goal (:func:`validate_goal`), or :class:`GoalError` (409) saying
-        why not now. ``cameras``: the vehicle's (a goal needing another is refused)."""
+        why not now. ``cameras``: the vehicle's (a goal needing another is refused);
+        ``vehicle``: a goal needing what it lacks (:data:`drivers.capabilities.NEEDS`: a
+        survey's geotagged photos without GNSS) is refused, as a mission is before it flies."""
         running = self.running()
         if running is not None:
             raise GoalError(409, f"goal {running.id} ({running.step.name}) is {running.state}: "
@@ -175,6 +177,13 @@ class GoalManager:
             if missing:
                 raise GoalError(409, f"this vehicle has no camera {missing[0]!r} attached "
                                 f"(attached: {', '.join(cameras) or 'none'})")
+        if vehicle is not None:
+            from drivers.capabilities import NEEDS, lacks
+
+            missing = lacks(vehicle, STEP_KINDS[step.name].needs(step.params, self.config))
+            if missing:
+                raise GoalError(409, f"a {step.name} goal needs {NEEDS[missing[0]][1]} "
+                                f"({missing[0]}), which this vehicle does not have")
         goal = Goal(f"g{next(self._counter)}-{secrets.token_hex(3)}", step, now_s)
         self.goals[goal.id] = goal
         return goal

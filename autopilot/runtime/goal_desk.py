@@ -75,7 +75,7 @@ class GoalDesk:
         f = self.flight
         return self.goals.submit(step, f.clock.now(), self.recorder.status_code,
                                  self.waiting_for_goals, f.in_air,
-                                 cameras=list(f.vehicle.cameras))
+                                 cameras=list(f.vehicle.cameras), vehicle=f.vehicle)
 
     def abort(self, reason: str) -> None:
         """The goal API's abort: no more goals; the safe stop (hold, land, disarm), bounded by
