@@ -213,12 +213,6 @@ def make_ardrone_vehicle(plan: MissionPlan, *, connect: str | None = None,
                          drone_config=plan.config.link.ardrone_config), None
 
 
-def staged(stage: str, fn: Callable, *args):
-    """``fn(*args)``, its CPU time charged to ``stage`` (on the thread that runs it)."""
-    with STAGES.stage(stage):
-        return fn(*args)
-
-
 def check_vehicle_can_fly(plan: MissionPlan, vehicle: Vehicle) -> None:
     """Refuse (:class:`~autopilot.config.ConfigError`, before anything opens or flies) a
     mission with a step that needs what this vehicle does not have (a survey's geotagged
@@ -438,7 +432,7 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
 
     records = await asyncio.to_thread(log.read_back)  # (from the file, as they are used)
     try:
-        metrics = await asyncio.to_thread(staged, "metrics", flight_metrics, records,
+        metrics = await asyncio.to_thread(STAGES.call, "metrics", flight_metrics, records,
                                           plan.config.failsafe.geofence)
     except Exception as exc:  # e.g. a log damaged on disk: the flight still gets its summary
         warn(f"the flight's metrics could not be computed from its log "

@@ -107,6 +107,13 @@ class Stages:
         that does nothing, for a fraction of a microsecond.)"""
         return self._counted(name) if self.on else _NOTHING
 
+    def call(self, name: str, fn, *args):
+        """``fn(*args)`` (its result), its CPU time charged to ``name`` when counting."""
+        if not self.on:
+            return fn(*args)
+        with self._counted(name):
+            return fn(*args)
+
     @contextlib.contextmanager
     def _counted(self, name: str) -> Iterator[None]:
         table, stack = self._thread_state()

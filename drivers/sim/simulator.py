@@ -81,15 +81,6 @@ class GroundTruth:
     landed_state: str | None = None  # its land detector's (on_ground on a deck or a pad too)
 
 
-def _staged(stage: str, fn, *args) -> None:
-    """``fn(*args)``, its CPU time charged to ``stage`` (not to the physics')."""
-    if not STAGES.on:
-        fn(*args)
-        return
-    with STAGES.stage(stage):
-        fn(*args)
-
-
 class Simulator:
     def __init__(self, config: SimConfig, scenario: Sequence[ScenarioObject] = (),
                  seed: int | None = None) -> None:
@@ -226,10 +217,10 @@ class Simulator:
                 obj.update(t, d)
         mujoco.mj_step1(m, d)
         if control:
-            _staged("flight stack", self._control_tick)
+            STAGES.call("flight stack", self._control_tick)
         self.body.spin(self.fault_effects.motor_scale)
         if k >= self._next_capture:
-            _staged("sensors", self._captures, k)
+            STAGES.call("sensors", self._captures, k)
         mujoco.mj_step2(m, d)
         self._step = k + 1
 

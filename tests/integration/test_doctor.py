@@ -100,26 +100,31 @@ def test_doctor_fails_clearly_without_a_vehicle(capsys):
     assert "no autopilot heartbeat" in link["detail"]
 
 
-def test_doctor_recognises_an_arducopter_and_reads_what_a_companion_needs():
+def _doctor_on_arducopter(plan, overrides, duration_s: float) -> dict:
+    """``autopilot doctor`` for ``plan`` against the simulator served as ArduCopter SITL (its
+    configuration with ``overrides``): the checks by item."""
     from drivers.mavlink.face_ardupilot import ArduPilotFace, serial0_port
-
-    plan = load_mission("follow_ball", ["driver=pymavlink"])
-    serial0 = serial0_port(INSTANCE)
 
     async def main_():
         stop = asyncio.Event()
         server = asyncio.ensure_future(serve(
-            load_config(overrides=["sim.firmware=ardupilot"]), None, instance=INSTANCE,
-            videos={}, log=lambda line: None, stop=stop, face_class=ArduPilotFace))
+            load_config(overrides=["sim.firmware=ardupilot", *overrides]), None,
+            instance=INSTANCE, videos={}, log=lambda line: None, stop=stop,
+            face_class=ArduPilotFace))
         try:
             await asyncio.sleep(3.0)
-            return await run_doctor(plan, connect=f"tcpout://127.0.0.1:{serial0}",
-                                    duration_s=3.0)
+            return await run_doctor(plan, connect=f"tcpout://127.0.0.1:{serial0_port(INSTANCE)}",
+                                    duration_s=duration_s)
         finally:
             stop.set()
             await server
 
-    checks = {c.item: c for c in asyncio.run(main_())}
+    return {c.item: c for c in asyncio.run(main_())}
+
+
+def test_doctor_recognises_an_arducopter_and_reads_what_a_companion_needs():
+    plan = load_mission("follow_ball", ["driver=pymavlink"])
+    checks = _doctor_on_arducopter(plan, [], duration_s=3.0)
     assert checks["link"].detail.startswith("ArduPilot vehicle"), checks["link"]
     for item in ("telemetry", "vehicle", "estimator", "param GUID_TIMEOUT",
                  "param SERIAL1_PROTOCOL", "param SERIAL2_PROTOCOL"):
@@ -138,26 +143,9 @@ def test_doctor_says_whether_an_arducopter_would_take_a_landing_handed_to_it(dri
     ArduCopter only with PLND_ENABLED 1 and PLND_TYPE 1 (its PLND_ENABLED is 0 by default):
     FAIL naming the parameter, as ``autopilot run`` refuses the mission, or PASS — read
     through either driver (MAVSDK's param plugin, pymavlink's PARAM_REQUEST_READ)."""
-    from drivers.mavlink.face_ardupilot import ArduPilotFace, serial0_port
-
     plan = load_mission("land_pad", [f"driver={driver}",
                                      "steps.1.land_pad.method=vehicle_precland"])
-    serial0 = serial0_port(INSTANCE)
-
-    async def main_():
-        stop = asyncio.Event()
-        server = asyncio.ensure_future(serve(
-            load_config(overrides=["sim.firmware=ardupilot", *plnd]), None, instance=INSTANCE,
-            videos={}, log=lambda line: None, stop=stop, face_class=ArduPilotFace))
-        try:
-            await asyncio.sleep(3.0)
-            return await run_doctor(plan, connect=f"tcpout://127.0.0.1:{serial0}",
-                                    duration_s=1.0)
-        finally:
-            stop.set()
-            await server
-
-    checks = {c.item: c for c in asyncio.run(main_())}
+    checks = _doctor_on_arducopter(plan, plnd, duration_s=1.0)
     check = checks["precision_landing"]
     assert check.status == status, check
     assert "steps[1].land_pad" in check.detail

@@ -10,19 +10,7 @@ from autopilot.goals import GoalError, GoalManager, validate_goal
 from autopilot.mission import load_mission
 from autopilot.status import MissionStatus
 
-
-class NoGnss:
-    """As the AR.Drone: no global position, no precision landing."""
-
-    has_global_position = False
-
-
-class Px4Like:
-    has_global_position = True
-
-    async def precision_land(self) -> None: ...
-
-    async def send_landing_target(self, target) -> None: ...
+from .test_vehicle_needs import NoGnss, Px4Like
 
 
 def test_a_goal_needing_what_the_vehicle_lacks_is_refused_naming_it() -> None:
