@@ -82,7 +82,9 @@ def pytest_addoption(parser):
                           "the doctor on two camera streams): several minutes")
 
 
+@pytest.hookimpl(trylast=True)  # (after pytest's faulthandler plugin)
 def pytest_configure(config):
+    _crash_dump_current_thread_only(config)
     config.addinivalue_line("markers", "long: a long case (a real-time flight, a heavy closed "
                             "loop); runs with --run-long")
     config.addinivalue_line("markers", "serial: runs on the wall clock, measures time or "
@@ -124,8 +126,25 @@ def pytest_xdist_make_scheduler(config, log):
     return SerialGroupScheduling(config, log)
 
 
+def _crash_dump_current_thread_only(config) -> None:
+    """A crash (a segfault in native code) prints the stack of the thread that crashed only:
+    with every thread's (pytest's default) a worker's dump is long enough for the lines that
+    matter to be cut from a CI log."""
+    import faulthandler
+
+    try:
+        from _pytest.faulthandler import fault_handler_stderr_fd_key  # (pytest's own fd)
+        fd = config.stash[fault_handler_stderr_fd_key]
+    except (ImportError, KeyError):
+        return
+    faulthandler.enable(file=fd, all_threads=False)
+
+
 def pytest_collection_modifyitems(config, items):
     if config.getoption("--run-long"):
+        for item in items:  # longer than a CI case may take
+            if "long" in item.keywords and item.get_closest_marker("timeout") is None:
+                item.add_marker(pytest.mark.timeout(900))
         return
     skip = pytest.mark.skip(reason="long case: run with --run-long (the default run keeps "
                                    "CI short; a shorter sibling covers the same code)")

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import os
+import signal
 import subprocess
 import sys
 import threading
@@ -11,6 +13,19 @@ import time
 from collections.abc import Iterator, Sequence
 
 import pytest
+
+try:  # looked up here: between fork and exec, the child loads nothing
+    _prctl = ctypes.CDLL(None, use_errno=True).prctl
+except (OSError, AttributeError):  # not Linux
+    _prctl = None
+
+
+def die_with_parent() -> None:
+    """``preexec_fn`` for a test's child process: it gets SIGTERM when the test's process dies
+    (Linux's PR_SET_PDEATHSIG), so a worker that crashes leaves no simulator or client running
+    on the fixed ports the next tests use."""
+    if _prctl is not None:
+        _prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
 
 
 @contextlib.contextmanager
@@ -21,7 +36,8 @@ def sim_process(args: Sequence[str], ready: str, timeout_s: float = 180.0
     read on to the end, so that a full pipe never stalls it."""
     proc = subprocess.Popen([sys.executable, "-m", "autopilot", "sim", *args],
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                            env={**os.environ, "PYTHONUNBUFFERED": "1"})
+                            env={**os.environ, "PYTHONUNBUFFERED": "1"},
+                            preexec_fn=die_with_parent)
     lines: list[str] = []
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:

@@ -165,9 +165,10 @@ def test_parameters_and_missions_as_arducopter_speaks_them(copter):
     asyncio.run(main())
 
 
+# (MAVSDK flies an ArduCopter in CI through test_ardupilot_goals_console; here with --run-long)
 @pytest.mark.parametrize("driver_class", [
     PymavlinkDriver,
-    pytest.param(MavsdkDriver, id="MavsdkDriver")])
+    pytest.param(MavsdkDriver, id="MavsdkDriver", marks=pytest.mark.long)])
 def test_both_drivers_fly_an_arducopter_from_its_firmware_profile(copter, driver_class):
     """Each driver on SERIAL0 (no stream unasked: the driver asks), the firmware known from the
     heartbeat: GUIDED takeoff, velocity targets in GUIDED, BRAKE, LAND to a disarm, and arming

@@ -33,7 +33,8 @@ def copter():
         yield proc
 
 
-@pytest.mark.parametrize("driver", ["pymavlink", "mavsdk"])
+# (pymavlink flies an ArduCopter in CI through test_ardupilot_face; here with --run-long)
+@pytest.mark.parametrize("driver", [pytest.param("pymavlink", marks=pytest.mark.long), "mavsdk"])
 def test_goals_and_keys_fly_an_arducopter_through_each_driver(copter, tmp_path, driver):
     plan = load_mission("standby", [f"driver={driver}"])
     seen: dict = {}

@@ -11,6 +11,8 @@ import sys
 
 import pytest
 
+from .sim_process import die_with_parent
+
 pytestmark = pytest.mark.serial  # fixed MAVLink ports, a run's wall time
 
 PORT = 14549  # clear of a running SITL and of the other tests' instances
@@ -155,7 +157,8 @@ def test_an_early_ctrl_c_flew_nothing_and_says_so(tmp_path):
     mission.write_text("name: ground\nsteps:\n  - standby: {timeout_s: 3000}\n")
     proc = subprocess.Popen([sys.executable, "-m", "autopilot", "run", "--mission",
                              str(mission), "--out", str(tmp_path / "run")],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=die_with_parent)
     try:
         for line in proc.stderr:  # the run has begun once its first step starts
             if "step standby started" in line:

@@ -19,6 +19,7 @@ from drivers.mavlink.mavsdk_driver import MavsdkDriver
 from drivers.mavlink.pymavlink_driver import PymavlinkDriver
 
 from .mavtools import CLIENT_URL, collected, served
+from .sim_process import die_with_parent
 
 pytestmark = pytest.mark.serial  # the simulator's MAVLink face in real time
 
@@ -124,7 +125,7 @@ def test_killing_the_client_mid_offboard_lands_after_com_of_loss_t(no_camera_con
             loss_s = vehicle.param("COM_OF_LOSS_T")
             proc = await asyncio.create_subprocess_exec(
                 sys.executable, "-c", _KILLED_CLIENT, CLIENT_URL, stdout=subprocess.PIPE,
-                env={**os.environ, "PYTHONUNBUFFERED": "1"})
+                env={**os.environ, "PYTHONUNBUFFERED": "1"}, preexec_fn=die_with_parent)
             try:
                 line = await asyncio.wait_for(proc.stdout.readline(), 60.0)
                 assert line.strip() == b"OFFBOARD"

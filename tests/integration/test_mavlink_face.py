@@ -31,6 +31,7 @@ async def _first(gen, predicate, what: str, timeout_s: float = 30.0):
     raise AssertionError(f"stream ended before {what}")
 
 
+@pytest.mark.long  # (MAVSDK's own examples fly the same calls in CI: test_mavsdk_examples)
 def test_mavsdk_flies_the_simulator_connect_arm_takeoff_offboard_land_disarm(no_camera_config):
     from mavsdk.asyncio import ComponentType, Configuration, Mavsdk
     from mavsdk.asyncio.plugins.action import ActionAsync

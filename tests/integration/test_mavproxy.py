@@ -23,6 +23,7 @@ from drivers.sim.flight.navigator import MissionState
 
 from ..conftest import sim_with
 from .mavtools import INSTANCE, LOSSY_LINK, served
+from .sim_process import die_with_parent
 
 pytestmark = pytest.mark.serial  # MAVProxy against the simulator in real time
 
@@ -80,7 +81,7 @@ def test_mavproxy_loads_a_wpl_mission_flies_it_and_returns_home(
         async with served(config) as (vehicle, face):
             proc = await asyncio.create_subprocess_exec(
                 sys.executable, MAVPROXY, f"--master=udpin:127.0.0.1:{GCS_PORT}",
-                "--source-system=255", "--nowait", cwd=tmp_path,
+                "--source-system=255", "--nowait", cwd=tmp_path, preexec_fn=die_with_parent,
                 stdin=asyncio.subprocess.PIPE, stdout=asyncio.subprocess.PIPE,
                 stderr=asyncio.subprocess.STDOUT)
             output: list[str] = []

@@ -23,6 +23,7 @@ from drivers.base import FlightMode
 
 from ..conftest import sim_with
 from .mavtools import CLIENT_URL, LOSSY_LINK, served
+from .sim_process import die_with_parent
 
 pytestmark = pytest.mark.serial  # MAVSDK's examples against the simulator in real time
 
@@ -32,7 +33,8 @@ EXAMPLES = Path(__file__).parent / "mavsdk_examples"
 async def _run_example(name: str, timeout_s: float, url: str = CLIENT_URL) -> tuple[int, str]:
     proc = await asyncio.create_subprocess_exec(
         sys.executable, str(EXAMPLES / name), url, stdout=asyncio.subprocess.PIPE,
-        stderr=asyncio.subprocess.STDOUT, env={**os.environ, "PYTHONUNBUFFERED": "1"})
+        stderr=asyncio.subprocess.STDOUT, env={**os.environ, "PYTHONUNBUFFERED": "1"},
+        preexec_fn=die_with_parent)
     out = bytearray()  # what it printed, kept as it comes (a killed example's output too)
 
     async def read() -> None:
@@ -172,6 +174,7 @@ def test_fly_mission_with_camera_pause_continue_and_rtl(sim_config):
     asyncio.run(main())
 
 
+@pytest.mark.long  # (offboard through MAVSDK in CI: test_offboard_position_ned)
 def test_offboard_velocity_ned(no_camera_config):
     async def main():
         async with served(no_camera_config) as (vehicle, _face):

@@ -17,7 +17,7 @@ from autopilot.api_server import ApiServer, ConnectionLimits
 
 pytestmark = pytest.mark.serial  # the API's timeouts on the wall clock
 
-LIMITS = ConnectionLimits(max_connections=24, max_per_client=12, header_timeout_s=3.0)
+LIMITS = ConnectionLimits(max_connections=24, max_per_client=12, header_timeout_s=2.0)
 
 
 def _closed(sock: socket.socket, wait_s: float) -> bool:
