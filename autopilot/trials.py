@@ -31,12 +31,12 @@ import re
 import shlex
 import time
 from collections.abc import Callable, Sequence
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
-from multiprocessing import get_context
 from pathlib import Path
 
 import numpy as np
+
+from autopilot.bench import schedule
 
 _HIGHER_IS_BETTER = re.compile(
     r"(coverage|within|on_deck|on_pad|landed|photos|detected|success|availability|rate$|"
@@ -273,8 +273,10 @@ def run_trials(mission: str, trials: int, *, seed_start: int = 0,
                overrides: Sequence[str] = (), varies: Sequence[Vary] = (),
                criteria: Sequence[Criterion] | None = None, workers: int | None = None,
                cluster: str | None = None, out_dir: Path | None = None,
-               progress: Callable[[str], None] | None = None) -> TrialsResult:
-    """Fly ``trials`` seeded runs and gather them (see the module's notes)."""
+               progress: Callable[[str], None] | None = None,
+               announce: Callable[[str], None] | None = None) -> TrialsResult:
+    """Fly ``trials`` seeded runs and gather them (see the module's notes); how long the local
+    runs will take goes to ``announce`` (default ``progress``) before they start."""
     if trials < 1:
         raise TrialsError("--trials must be at least 1")
     from autopilot.mission import load_mission
@@ -285,22 +287,26 @@ def run_trials(mission: str, trials: int, *, seed_start: int = 0,
     if out_dir is not None:
         out_dir = Path(out_dir).resolve()
     # nothing flies on an invalid mission: check it (and every varied value) here first
-    jobs = []
+    jobs, profiles = [], []
     for i in range(trials):
         seed = seed_start + i
         items, values = trial_overrides(overrides, varies, seed)
-        load_mission(mission, items)
+        profiles.append(load_mission(mission, items).config.sim.profile)
         jobs.append((seed, items, values))
-    workers = max(1, min(workers or os.cpu_count() or 1, trials))
+    workers = schedule.workers_for(workers, trials)
     result = TrialsResult(mission, list(overrides), list(varies), list(criteria or []),
                           backend="ray" if cluster else "local", workers=workers)
     started = time.perf_counter()
-    runner = _run_ray if cluster else _run_local
-    for job, run in runner(jobs, mission, workers, cluster, out_dir):
+    if cluster:
+        done = _run_ray(jobs, mission, workers, cluster, out_dir)
+    else:
+        done = _run_local(jobs, mission, workers, out_dir, profiles, progress,
+                          announce or progress)
+    for job, run in done:
         seed, items, values = job
         run.update(overrides=items, values=values)
         result.runs.append(run)
-        if progress is not None:
+        if progress is not None and cluster:
             progress(f"trial seed {seed}: {run['status']} ({len(result.runs)}/{trials}, "
                      f"{run['wall_s']:.1f} s)")
     result.runs.sort(key=lambda r: r["seed"])
@@ -314,15 +320,19 @@ def _out(out_dir: Path | None, seed: int) -> str | None:
     return str(out_dir / f"seed{seed}") if out_dir is not None else None
 
 
-def _run_local(jobs, mission, workers, cluster, out_dir):
-    ctx = get_context("spawn")  # MuJoCo's GL contexts do not survive a fork
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
-        pending = {pool.submit(run_trial, mission, items, seed, _out(out_dir, seed)):
-                   (seed, items, values) for seed, items, values in jobs}
-        while pending:
-            done, _ = wait(pending, return_when=FIRST_COMPLETED)
-            for future in done:
-                yield pending.pop(future), future.result()
+def _run_local(jobs, mission, workers, out_dir, profiles, progress, announce):
+    """The runs on local worker processes (:mod:`autopilot.bench.schedule`: how long they
+    will take is said before they start, the time left after each)."""
+    say = progress or (lambda _: None)
+    kinds = [schedule.kind_of(mission, p, "trial", workers) for p in profiles]
+    runs = [(mission, items, seed, _out(out_dir, seed)) for seed, items, _ in jobs]
+
+    def describe(i: int, run: dict) -> str:
+        return f"trial seed {jobs[i][0]}: {run['status']} ({run['wall_s']:.1f} s)"
+
+    for i, run in schedule.run_all(runs, kinds, workers, run_trial, announce=announce or say,
+                                   log=say, describe=describe):
+        yield jobs[i], run
 
 
 def _run_ray(jobs, mission, workers, cluster, out_dir):

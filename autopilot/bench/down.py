@@ -28,16 +28,15 @@ that the comparisons point the way the full bench finds them (:data:`QUICK`).
 
 from __future__ import annotations
 
-import asyncio
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from autopilot.bench import schedule
 from autopilot.bench.pooling import pool_runs
 from autopilot.mission import load_mission
-from autopilot.run import fly
 
 
 @dataclass(frozen=True)
@@ -113,25 +112,39 @@ TIE_M = 0.02
 def run_bench(bench: str, seeds: int = 3, overrides: Sequence[str] = (),
               log: Callable[[str], None] = lambda message: None,
               scenarios: Sequence[str] | None = None, *, quick: bool = False,
-              rows: Sequence[str] | None = None, seed_start: int = 1) -> dict:
+              rows: Sequence[str] | None = None, seed_start: int = 1,
+              workers: int | None = None,
+              announce: Callable[[str], None] | None = None) -> dict:
+    """Each scenario flown by each row over ``seeds`` scenario seeds, on ``workers`` processes
+    (default one per core, :mod:`autopilot.bench.schedule`); how long it will take goes to
+    ``announce`` (default ``log``) before the first flight starts."""
     spec = BENCHES[bench]
     if quick:
         seeds, scenarios, seed_start = 1, ["default"], 1
-    results: dict[str, dict] = {}
-    for scenario, scenario_overrides in spec.scenarios.items():
-        if scenarios is not None and scenario not in scenarios:
-            continue
-        runs: dict[str, list[dict]] = {}
-        for row, row_overrides in spec.rows.items():
-            if rows is not None and row not in rows:
-                continue
-            runs[row] = []
+    wanted = [(name, o) for name, o in spec.scenarios.items()
+              if scenarios is None or name in scenarios]
+    flown = [(name, o) for name, o in spec.rows.items() if rows is None or name in rows]
+    # every flight's mission checked here, before any flies
+    flights, jobs, profiles = [], [], []
+    for scenario, scenario_overrides in wanted:
+        for row, row_overrides in flown:
             for seed in range(seed_start, seed_start + seeds):
-                log(f"{scenario}: {row}, seed {seed} …")
-                plan = load_mission(spec.mission, [
-                    *scenario_overrides, *(spec.quick if quick else ()), f"scenario.seed={seed}",
-                    *overrides, *row_overrides])
-                summary = asyncio.run(fly(plan, None))
+                items = [*scenario_overrides, *(spec.quick if quick else ()),
+                         f"scenario.seed={seed}", *overrides, *row_overrides]
+                plan = load_mission(spec.mission, items)
+                flights.append((scenario, row, seed))
+                jobs.append((spec.mission, items))
+                profiles.append(plan.config.sim.profile)
+    workers = schedule.workers_for(workers, len(jobs))
+    variant = f"bench {bench}{' quick' if quick else ''}"
+    kinds = [schedule.kind_of(spec.mission, p, variant, workers) for p in profiles]
+    summaries = schedule.run_ordered(jobs, kinds, workers, announce=announce or log, log=log,
+                                     describe=lambda i, _: "{}: {}, seed {}".format(*flights[i]))
+    results: dict[str, dict] = {}
+    for scenario, scenario_overrides in wanted:
+        runs: dict[str, list[dict]] = {row: [] for row, _ in flown}
+        for (name, row, seed), summary in zip(flights, summaries, strict=True):
+            if name == scenario:
                 runs[row].append(score_run(spec, summary, seed))
         table = {r: summarise(v, spec) for r, v in runs.items()}
         first = next(iter(table))

@@ -19,16 +19,15 @@ still flies and that ours stays ahead; the figures of record come from the full 
 
 from __future__ import annotations
 
-import asyncio
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
+from autopilot.bench import schedule
 from autopilot.bench.pooling import pool_runs
 from autopilot.mission import load_mission
-from autopilot.run import fly
 
 
 @dataclass(frozen=True)
@@ -84,33 +83,45 @@ def run_bench(bench: str = "follow_ball", mission: str | None = None,
               overrides: Sequence[str] = (), log: Callable[[str], None] = lambda message: None,
               scenarios: Sequence[str] | None = None, quick: bool = False, *,
               seeds: int = 3, seed_start: int = 1,
-              controllers: Sequence[str] | None = None) -> dict:
+              controllers: Sequence[str] | None = None, workers: int | None = None,
+              announce: Callable[[str], None] | None = None) -> dict:
     """Each scenario flown by each controller over ``seeds`` scenario seeds from
     ``seed_start`` (``scenario.seed``: the target's path draws, noise, gusts); ``quick``: one
-    seed of the default scenario, the step shortened."""
+    seed of the default scenario, the step shortened. The flights go to ``workers`` processes
+    (default one per core, :mod:`autopilot.bench.schedule`); how long they will take goes to
+    ``announce`` (default ``log``) before the first starts."""
     spec = BENCHES[bench]
     mission = mission or spec.mission
     if quick:
         scenarios = scenarios or ("default",)
         seeds = 1
     flown = [c for c in spec.controllers if controllers is None or c in controllers]
-    results: dict[str, dict] = {}
-    for scenario, scenario_overrides in spec.scenarios.items():
-        if scenarios is not None and scenario not in scenarios:
-            continue
-        runs: dict[str, list[dict]] = {}
+    wanted = [(name, o) for name, o in spec.scenarios.items()
+              if scenarios is None or name in scenarios]
+    # every flight's mission checked here, before any flies
+    flights, jobs, profiles = [], [], []
+    for scenario, scenario_overrides in wanted:
+        base = load_mission(mission, [*scenario_overrides, *overrides])
+        key = f"steps.{_step_index(base, spec.step)}.{spec.step}"
+        shorten = [f"{key}.duration_s={QUICK_DURATION_S:g}"] if quick else []
         for controller in flown:
-            runs[controller] = []
             for seed in range(seed_start, seed_start + seeds):
-                base = load_mission(mission, [*scenario_overrides, *overrides])
-                step = _step_index(base, spec.step)
-                key = f"steps.{step}.{spec.step}"
-                shorten = [f"{key}.duration_s={QUICK_DURATION_S:g}"] if quick else []
-                plan = load_mission(mission, [*scenario_overrides, f"scenario.seed={seed}",
-                                              *overrides, *shorten,
-                                              f"{key}.controller={controller}"])
-                log(f"{scenario}: {controller}, seed {seed} …")
-                summary = asyncio.run(fly(plan, None))
+                items = [*scenario_overrides, f"scenario.seed={seed}", *overrides, *shorten,
+                         f"{key}.controller={controller}"]
+                plan = load_mission(mission, items)
+                flights.append((scenario, controller, seed))
+                jobs.append((mission, items))
+                profiles.append(plan.config.sim.profile)
+    workers = schedule.workers_for(workers, len(jobs))
+    variant = f"bench {bench}{' quick' if quick else ''}"
+    kinds = [schedule.kind_of(mission, p, variant, workers) for p in profiles]
+    summaries = schedule.run_ordered(jobs, kinds, workers, announce=announce or log, log=log,
+                                     describe=lambda i, _: "{}: {}, seed {}".format(*flights[i]))
+    results: dict[str, dict] = {}
+    for scenario, scenario_overrides in wanted:
+        runs: dict[str, list[dict]] = {c: [] for c in flown}
+        for (name, controller, seed), summary in zip(flights, summaries, strict=True):
+            if name == scenario:
                 runs[controller].append(score_run(summary, seed))
         results[scenario] = _scenario_result(list(scenario_overrides), runs, spec)
     return {"bench": bench, "mission": mission, "overrides": list(overrides),

@@ -88,7 +88,7 @@ def summarise(result: TrialsResult) -> dict:
 def run_bench(trials: int, rover_speed_m_s: float, overrides: Sequence[str] = (),
               log: Callable[[str], None] = lambda _: None, *, workers: int | None = None,
               cluster: str | None = None, strategies: Sequence[str] | None = None,
-              seed_start: int = 0) -> dict:
+              seed_start: int = 0, announce: Callable[[str], None] | None = None) -> dict:
     out: dict = {"bench": "landing", "mission": MISSION, "rover_speed_m_s": rover_speed_m_s,
                  "trials": trials,
                  "seeds": [seed_start, seed_start + trials - 1], "overrides": list(overrides)}
@@ -98,7 +98,8 @@ def run_bench(trials: int, rover_speed_m_s: float, overrides: Sequence[str] = ()
             MISSION, trials, seed_start=seed_start,
             overrides=[f"scenario.rover.speed_mps={rover_speed_m_s}", *STRATEGIES[name],
                        *overrides],
-            criteria=CRITERIA, workers=workers, cluster=cluster, progress=log)
+            criteria=CRITERIA, workers=workers, cluster=cluster, progress=log,
+            announce=announce)
         out[name] = summarise(result)
     return out
 

@@ -91,6 +91,12 @@ def stderr_progress(message: str) -> None:
     print(f"  {message}", file=sys.stderr, flush=True)
 
 
+def add_workers_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--workers", type=int, default=None, metavar="N",
+                        help="flights at once, each in a process of its own (default: one per "
+                        "core; 1: one after the other in this process)")
+
+
 def quiet(message: str) -> None:
     """Progress nobody reads (``--json``)."""
 

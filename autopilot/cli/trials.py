@@ -12,6 +12,7 @@ from autopilot.cli.common import (
     add_fault_option,
     add_set_option,
     progress_for,
+    stderr_progress,
 )
 from autopilot.config import InputError
 
@@ -63,7 +64,7 @@ def run(args: argparse.Namespace) -> int:
                             overrides=args.overrides, varies=varies, criteria=criteria,
                             workers=args.workers, cluster=args.cluster,
                             out_dir=Path(args.out) if args.out else None,
-                            progress=progress_for(args))
+                            progress=progress_for(args), announce=stderr_progress)
     except TrialsError as exc:
         raise InputError(str(exc)) from None
     print_result(result, args.json)

@@ -100,6 +100,8 @@ def test_out_onto_a_previous_run_is_refused_unless_overwrite(tmp_path):
      "--set: sim.wind.steady_ned_m_s[2]: missing item 2: too few items"),
     (["bench", "follow_ball", "--scenario", "defalt"],
      "--scenario defalt: no such scenario (did you mean 'default'?)"),
+    (["bench", "follow_ball", "--workers", "0"], "--workers"),
+    (["bench", "land_pad", "--workers", "0"], "--workers"),
     (["run", "--mission", "follow_ball", "--calibration", "/nonexistent/cam.yaml"],
      "--calibration: /nonexistent/cam.yaml: no such calibration file"),
     (["run", "--mission", "follow_ball", "--calibration", "belly=/nonexistent/cam.yaml"],

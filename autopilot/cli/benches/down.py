@@ -10,9 +10,11 @@ from autopilot.cli.common import (
     Command,
     add_json_option,
     add_set_option,
+    add_workers_option,
     at_least,
     check_choices,
     progress_for,
+    stderr_progress,
 )
 
 BASELINES = {
@@ -35,6 +37,7 @@ def arguments(down: argparse.ArgumentParser) -> None:
                       help="only this row (ours or a baseline; repeatable)")
     down.add_argument("--seed-start", type=int, default=1, metavar="S",
                       help="the first scenario seed (default 1)")
+    add_workers_option(down)
     add_set_option(down, "override a mission or configuration key")
 
 
@@ -45,9 +48,12 @@ def run(args: argparse.Namespace) -> int:
     check_choices("--scenario", args.scenarios, bench.scenarios, "no such scenario")
     at_least("--seeds", args.seeds, 1)
     check_choices("--row", args.rows, bench.rows, "no such row")
+    if args.workers is not None:
+        at_least("--workers", args.workers, 1)
     result = down.run_bench(args.bench, args.seeds, args.overrides, progress_for(args),
                             args.scenarios, quick=args.quick, rows=args.rows,
-                            seed_start=args.seed_start)
+                            seed_start=args.seed_start, workers=args.workers,
+                            announce=stderr_progress)
     print(json.dumps(result) if args.json else down.format_table(result))
     return EXIT_OK
 

@@ -10,9 +10,11 @@ from autopilot.cli.common import (
     Command,
     add_json_option,
     add_set_option,
+    add_workers_option,
     at_least,
     check_choices,
     progress_for,
+    stderr_progress,
 )
 
 BASELINES = {"follow_ball": "the seed 001 and 003 rules", "follow_marker": "the seed 002 rule"}
@@ -34,6 +36,7 @@ def arguments_for(name: str):
         follow.add_argument("--row", dest="rows", action="append", default=None,
                             metavar="NAME", help="only this controller (ours or a seed rule; "
                             "repeatable)")
+        add_workers_option(follow)
         add_set_option(follow, "override a mission or configuration key")
     return arguments
 
@@ -45,9 +48,12 @@ def run(args: argparse.Namespace) -> int:
     check_choices("--scenario", args.scenarios, bench.scenarios, "no such scenario")
     at_least("--seeds", args.seeds, 1)
     check_choices("--row", args.rows, bench.controllers, "no such controller")
+    if args.workers is not None:
+        at_least("--workers", args.workers, 1)
     result = follow.run_bench(args.bench, args.mission, args.overrides, progress_for(args),
                               args.scenarios, quick=args.quick, seeds=args.seeds,
-                              seed_start=args.seed_start, controllers=args.rows)
+                              seed_start=args.seed_start, controllers=args.rows,
+                              workers=args.workers, announce=stderr_progress)
     print(json.dumps(result) if args.json else follow.format_table(result))
     return EXIT_OK
 

@@ -12,6 +12,7 @@ from autopilot.cli.common import (
     add_set_option,
     at_least,
     progress_for,
+    stderr_progress,
 )
 from autopilot.config import InputError
 
@@ -42,7 +43,7 @@ def run(args: argparse.Namespace) -> int:
         at_least("--workers", args.workers, 1)
     result = landing.run_bench(args.trials, args.rover_speed, args.overrides, progress_for(args),
                                workers=args.workers, cluster=args.cluster,
-                               strategies=args.strategies)
+                               strategies=args.strategies, announce=stderr_progress)
     print(json.dumps(result) if args.json else landing.format_table(result))
     return EXIT_OK
 
