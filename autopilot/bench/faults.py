@@ -20,14 +20,12 @@ worst seeds (unsafe first, then safe) with the command that replays each.
 from __future__ import annotations
 
 import json
-import os
 import shlex
 import time
 from collections.abc import Callable, Sequence
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass
-from multiprocessing import get_context
 
+from autopilot.bench import schedule
 from autopilot.flightlog.safety import outcome
 from autopilot.trials import run_trial, trial_overrides
 
@@ -109,45 +107,48 @@ def cells(missions: Sequence[str] | None = None, kinds: Sequence[str] | None = N
 def run_bench(seeds: int = 2, missions: Sequence[str] | None = None,
               kinds: Sequence[str] | None = None, overrides: Sequence[str] = (),
               progress: Callable[[str], None] | None = None, workers: int | None = None,
-              seed_start: int = 0) -> dict:
+              seed_start: int = 0, announce: Callable[[str], None] | None = None) -> dict:
     """Every (cell, seed) run is one :func:`autopilot.trials.run_trial` (a whole lockstep
-    ``autopilot run`` in a worker process), all in one pool so that both cores stay busy."""
+    ``autopilot run`` in a worker process), all in one pool so that both cores stay busy
+    (:mod:`autopilot.bench.schedule`: how long they will take goes to ``announce``, default
+    ``progress``, before the first starts)."""
     from autopilot.mission import load_mission
 
     plan = cells(missions, kinds)
-    jobs = []
+    jobs, profiles = [], []
     for index, (mission, _case, fault) in enumerate(plan):
         items = [*FENCE, *MISSIONS[mission][2], *overrides,
                  "scenario.faults=" + json.dumps([fault], separators=(",", ":"))]
         for seed in range(seed_start, seed_start + seeds):
             seeded, _ = trial_overrides(items, (), seed)
-            load_mission(mission, seeded)  # nothing flies on an invalid mission
+            # nothing flies on an invalid mission
+            profiles.append(load_mission(mission, seeded).config.sim.profile)
             jobs.append((index, mission, seed, seeded))
     started = time.perf_counter()
     results: dict[int, list[dict]] = {i: [] for i in range(len(plan))}
-    workers = max(1, min(workers or os.cpu_count() or 1, len(jobs)))
-    done = 0
-    with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
-        pending = {pool.submit(run_trial, mission, seeded, seed): (index, seed, seeded)
-                   for index, mission, seed, seeded in jobs}
-        while pending:
-            finished, _ = wait(pending, return_when=FIRST_COMPLETED)
-            for future in finished:
-                index, seed, seeded = pending.pop(future)
-                try:
-                    run = future.result()
-                except Exception as exc:  # a worker that died (a crash in MuJoCo, memory)
-                    run = {"seed": seed, "status": "error", "metrics": {},
-                           "reason": f"{type(exc).__name__}: {exc}"}
-                run["overrides"] = seeded
-                results[index].append(run)
-                done += 1
-                if progress is not None and len(results[index]) == seeds:
-                    mission, case, _ = plan[index]
-                    kinds_ = [outcome(r["status"], r["metrics"])[0] for r in results[index]]
-                    progress(f"[{done}/{len(jobs)} runs, {time.perf_counter() - started:.0f} s]"
-                             f" {mission} × {case.name}: {kinds_.count('completed')} completed, "
-                             f"{kinds_.count('safe')} safe, {kinds_.count('unsafe')} unsafe")
+    workers = schedule.workers_for(workers, len(jobs))
+    say = progress or (lambda _: None)
+    kinds = [schedule.kind_of(mission, profile, "bench faults", workers)
+             for (_, mission, _, _), profile in zip(jobs, profiles, strict=True)]
+
+    def died(i: int, exc: BaseException) -> dict:  # a worker that died (a crash, memory)
+        return {"seed": jobs[i][2], "status": "error", "metrics": {},
+                "reason": f"{type(exc).__name__}: {exc}"}
+
+    def describe(i: int, run: dict) -> str:
+        index = jobs[i][0]
+        mission, case, _ = plan[index]
+        if len(results[index]) < seeds:
+            return f"{mission} × {case.name}, seed {jobs[i][2]}: {run['status']}"
+        kinds_ = [outcome(r["status"], r["metrics"])[0] for r in results[index]]
+        return (f"{mission} × {case.name}: {kinds_.count('completed')} completed, "
+                f"{kinds_.count('safe')} safe, {kinds_.count('unsafe')} unsafe")
+
+    runs = [(mission, seeded, seed) for _, mission, seed, seeded in jobs]
+    for i, run in schedule.run_all(runs, kinds, workers, run_trial, announce=announce or say,
+                                   log=say, describe=describe, on_error=died):
+        run["overrides"] = jobs[i][3]
+        results[jobs[i][0]].append(run)
     rows = []
     for index, (mission, case, fault) in enumerate(plan):
         counts = {"completed": 0, "safe": 0, "unsafe": 0}

@@ -125,9 +125,11 @@ class Progress:
         self.done = 0
         self.started = time.perf_counter()
 
-    def flown(self, index: int, wall_s: float) -> str:
+    def flown(self, index: int, wall_s: float | None) -> str:
+        """``wall_s`` None: a flight that failed (its time is not kept)."""
         self.done += 1
-        self.times.add(self.kinds[index], wall_s)
+        if wall_s is not None:
+            self.times.add(self.kinds[index], wall_s)
         left = len(self.kinds) - self.done
         if left == 0:
             return f"{self.done}/{len(self.kinds)} done in " \
@@ -155,14 +157,18 @@ def run_all(jobs: Sequence[tuple], kinds: Sequence[str], workers: int,
             fn: Callable = fly_summary, *, announce: Callable[[str], None] = lambda _: None,
             log: Callable[[str], None] = lambda _: None,
             describe: Callable[[int, object], str] | None = None,
+            on_error: Callable[[int, BaseException], object] | None = None,
             times: FlightTimes | None = None) -> Iterator[tuple[int, object]]:
     """``fn(*job)`` for each job (``fn`` importable by a worker process), on ``workers``
     processes (1: here); yields ``(index, result)`` as they end. ``kinds[i]`` is job i's kind
     of flight: the estimate goes to ``announce`` before the first starts, the time left to
-    ``log`` after each (after ``describe(i, result)``, if given)."""
+    ``log`` after each, once the caller has taken its result (after ``describe(i, result)``,
+    if given). A job that raises (or whose
+    worker died) ends the batch with its error, unless ``on_error(i, error)`` makes a result of
+    it."""
     times = times or FlightTimes()
 
-    def flown(i: int, result: object, wall_s: float) -> None:
+    def flown(i: int, result: object, wall_s: float | None) -> None:
         line = progress.flown(i, wall_s)
         log(f"{describe(i, result)}; {line}" if describe else line)
 
@@ -171,9 +177,14 @@ def run_all(jobs: Sequence[tuple], kinds: Sequence[str], workers: int,
     try:
         if workers <= 1:
             for i, job in enumerate(jobs):
-                result, wall_s = _timed(fn, job)
-                flown(i, result, wall_s)
+                try:
+                    result, wall_s = _timed(fn, job)
+                except Exception as exc:
+                    if on_error is None:
+                        raise
+                    result, wall_s = on_error(i, exc), None
                 yield i, result
+                flown(i, result, wall_s)
             return
         ctx = get_context("spawn")  # MuJoCo's GL contexts do not survive a fork
         with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
@@ -183,9 +194,14 @@ def run_all(jobs: Sequence[tuple], kinds: Sequence[str], workers: int,
                     done, _ = wait(pending, return_when=FIRST_COMPLETED)
                     for future in done:
                         i = pending.pop(future)
-                        result, wall_s = future.result()
-                        flown(i, result, wall_s)
+                        try:
+                            result, wall_s = future.result()
+                        except Exception as exc:  # (a worker that died: a crash, memory)
+                            if on_error is None:
+                                raise
+                            result, wall_s = on_error(i, exc), None
                         yield i, result
+                        flown(i, result, wall_s)
             finally:
                 for future in pending:
                     future.cancel()

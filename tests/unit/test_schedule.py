@@ -94,3 +94,20 @@ def test_a_flight_that_fails_ends_the_batch_with_its_error(tmp_path):
     with pytest.raises(ValueError, match="math domain error"):
         run_ordered([(4.0,), (-1.0,)], ["k", "k"], 1, math.sqrt,
                     times=FlightTimes(tmp_path / "t.json"))
+
+
+def test_a_worker_that_dies_is_a_result_when_asked_for(tmp_path):
+    """(bench faults counts a crashed run as an error run, and goes on)"""
+    import os
+
+    errors: list[int] = []
+
+    def died(i, exc):
+        errors.append(i)
+        return f"died: {type(exc).__name__}"
+
+    out = run_ordered([(3,)], ["k"], 2, os._exit, on_error=died,
+                      times=FlightTimes(tmp_path / "t.json"))
+    assert out == ["died: BrokenProcessPool"]
+    assert errors == [0]
+    assert FlightTimes(tmp_path / "t.json").get("k") is None  # no time kept for it
