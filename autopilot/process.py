@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import faulthandler
 import sys
 
 # glibc mallopt() parameters (malloc.h)
@@ -58,9 +59,15 @@ def configure_for_flight() -> None:
     before handing it to a thread that wants it back (one returning from OpenCV, MuJoCo or a
     socket); with the simulator's flight stack, the detector and the event loop in one
     process, those waits land on the frame-to-setpoint path. 1 ms bounds them (measured on a
-    2-core machine in real time: latency p95 36.6–37.9 ms instead of 36.3–40.1 ms)."""
+    2-core machine in real time: latency p95 36.6–37.9 ms instead of 36.3–40.1 ms). And a
+    crash in native code (MuJoCo, OpenCV, MAVSDK's C++ core, FFmpeg) prints every thread's
+    Python stack on stderr before the process dies (Python's faulthandler), so that a flight's
+    output says where it died."""
     keep_large_buffers_in_heap()
     sys.setswitchinterval(GIL_SWITCH_INTERVAL_S)
+    if not faulthandler.is_enabled() and sys.stderr is not None:
+        with contextlib.suppress(AttributeError, ValueError, OSError):  # (no real stderr)
+            faulthandler.enable(all_threads=True)
 
 
 class StealMeter:

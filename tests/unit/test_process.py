@@ -1,5 +1,8 @@
 """Process and host measurements."""
 
+import subprocess
+import sys
+
 import pytest
 
 from autopilot import process
@@ -22,3 +25,19 @@ def test_cpu_ticks_parse_this_machine():
         pytest.skip("no /proc/stat here")
     total, stolen = ticks
     assert 0 <= stolen <= total
+
+
+def test_a_native_crash_in_flight_prints_the_stacks():
+    """(configure_for_flight turns on Python's faulthandler: a flight that dies in native
+    code says where)"""
+    code = ("import ctypes\n"
+            "from autopilot.process import configure_for_flight\n"
+            "configure_for_flight()\n"
+            "def in_flight():\n"
+            "    ctypes.string_at(0)\n"
+            "in_flight()\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=60)
+    assert out.returncode != 0
+    assert "Fatal Python error: Segmentation fault" in out.stderr
+    assert "in in_flight" in out.stderr
