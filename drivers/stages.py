@@ -147,33 +147,66 @@ _NOTHING = contextlib.nullcontext()
 
 
 def _threads_cpu_ns() -> dict[int, tuple[str, int]]:
-    """Each live Python thread's CPU time so far: id → (name, a pool's without its number)."""
+    """Each live Python thread's CPU time so far: id → (name, a pool's without its number).
+
+    Read from ``/proc`` by the thread's kernel id, never through ``pthread_getcpuclockid``:
+    a thread may end between listing it and asking, and asking for a thread that has ended
+    reads freed memory (it crashed ``autopilot run --stages`` with SIGSEGV as its pools shut
+    down); a thread gone from ``/proc`` is simply not counted. Linux only (elsewhere: none)."""
+    if not sys.platform.startswith("linux"):
+        return {}
     out = {}
     for thread in threading.enumerate():
-        with contextlib.suppress(OSError, OverflowError, TypeError):
-            clock = time.pthread_getcpuclockid(thread.ident)
-            out[thread.ident] = (thread.name.rsplit("_", 1)[0] if thread.name[-1].isdigit()
-                                 else thread.name, time.clock_gettime_ns(clock))
+        tid = thread.native_id
+        if tid is None or thread.ident is None:
+            continue
+        ns = _task_cpu_ns(tid)
+        if ns is not None:
+            out[thread.ident] = (thread.name.rsplit("_", 1)[0] if thread.name[-1:].isdigit()
+                                 else thread.name, ns)
     return out
+
+
+def _task_stat(tid: int | str) -> tuple[str, list[str]] | None:
+    """A thread's name and the fields after it in ``/proc/self/task/TID/stat`` (None: gone)."""
+    try:
+        with open(f"/proc/self/task/{tid}/stat") as f:
+            stat = f.read()
+    except OSError:
+        return None
+    return stat[stat.index("(") + 1:stat.rindex(")")], stat[stat.rindex(")") + 2:].split()
+
+
+def _ticks_ns(fields: list[str]) -> int:
+    """utime + stime (clock ticks) in nanoseconds."""
+    return (int(fields[11]) + int(fields[12])) * 1_000_000_000 // os.sysconf("SC_CLK_TCK")
+
+
+def _task_cpu_ns(tid: int | str) -> int | None:
+    """A thread's CPU time: the scheduler's nanosecond count (``/proc/…/sched``, kernels with
+    scheduler debugging, most) or else ``stat``'s clock ticks (10 ms); None: gone."""
+    try:
+        with open(f"/proc/self/task/{tid}/sched") as f:
+            for line in f:
+                if line.startswith("se.sum_exec_runtime"):
+                    return round(float(line.split(":", 1)[1]) * 1e6)  # (ms)
+    except (OSError, ValueError):
+        pass
+    found = _task_stat(tid)
+    return None if found is None else _ticks_ns(found[1])
 
 
 def rasteriser_cpu_ns() -> int:
     """CPU time of Mesa's llvmpipe threads so far (Linux: /proc; 0 where it cannot be read)."""
     if not sys.platform.startswith("linux"):
         return 0
-    total, tick = 0, os.sysconf("SC_CLK_TCK")
     try:
         tids = os.listdir("/proc/self/task")
     except OSError:
         return 0
+    total = 0
     for tid in tids:
-        try:
-            with open(f"/proc/self/task/{tid}/stat") as f:
-                stat = f.read()
-        except OSError:
-            continue
-        name = stat[stat.index("(") + 1:stat.rindex(")")]
-        if name.startswith("llvmpipe"):
-            fields = stat[stat.rindex(")") + 2:].split()
-            total += (int(fields[11]) + int(fields[12])) * 1_000_000_000 // tick
+        found = _task_stat(tid)
+        if found is not None and found[0].startswith("llvmpipe"):
+            total += _task_cpu_ns(tid) or 0
     return total

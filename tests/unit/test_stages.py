@@ -104,3 +104,31 @@ def test_the_table_ranks_the_stages_and_says_a_failed_flight() -> None:
     assert "follow_ball (realistic): × 3.00 real time, 500 ms CPU" in text
     assert "rasteriser 150 (30 %), other 100 (20 %), physics 50 (10 %)" in text
     assert "follow_ball (ideal): error (exit 1)" in text
+
+
+def test_a_thread_that_has_ended_is_not_a_crash() -> None:
+    """Sampling every thread's CPU time while threads end (pools shutting down at the end of a
+    flight) once crashed ``autopilot run --stages`` (SIGSEGV in pthread_getcpuclockid, asked
+    for a thread ending as it was asked: a race no test makes happen at will). Threads are now
+    read in /proc by their kernel id: one listed that has ended is skipped, the others are
+    counted. In a process of its own, so that a crash would be a failure."""
+    import subprocess
+    import sys
+
+    code = """if True:
+        import threading
+        from drivers import stages as module
+        ended = threading.Thread(target=lambda: None)
+        ended.start()
+        ended.join()
+        listed = threading.enumerate
+        module.threading.enumerate = lambda: [*listed(), ended]
+        s = module.Stages()
+        s.start()
+        s.sample_threads()
+        print(sorted(name for name, _ in s._thread_ns.values()))
+    """
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=60)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert "MainThread" in out.stdout
