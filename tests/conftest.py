@@ -10,9 +10,18 @@ and GNSS wander would blur. Tests of the realistic world (the shipped default) u
 
 from __future__ import annotations
 
+import os
+import tempfile
+
 import pytest
 
 from autopilot.config import AppConfig, load_config
+
+# the benches' flight times (autopilot.bench.schedule) go to a file of the test session's, not
+# to the user's cache (the tests' flights, on a machine shared by the workers, would make the
+# user's estimates wrong); workers and the processes they start inherit it
+os.environ.setdefault("AUTOPILOT_FLIGHT_TIMES", os.path.join(
+    tempfile.mkdtemp(prefix="autopilot-test-times-"), "flight_times.json"))
 
 #: what the geometry tests pin (see the module's docstring)
 IDEAL = ("sim.profile=ideal",)

@@ -10,7 +10,8 @@ core partly idle, one per core keeps both busy.
 
 How long: each flight's wall time on this machine is kept, per kind of flight (its mission and
 sensor profile, the variant and the number of workers it shared the machine with), in the
-user's cache (``$XDG_CACHE_HOME/autopilot/flight_times.json``); the estimate before a batch
+user's cache (``$XDG_CACHE_HOME/autopilot/flight_times.json``, or the file
+``$AUTOPILOT_FLIGHT_TIMES`` names); the estimate before a batch
 starts is the sum of the kinds' last times over the workers, and after each flight it is
 re-made from the flights done. A kind never flown here has no estimate until its first flight
 ends (the line says so).
@@ -20,6 +21,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import heapq
 import json
 import os
 import time
@@ -46,6 +48,9 @@ def workers_for(workers: int | None, flights: int) -> int:
 
 
 def _history_path() -> Path:
+    """``$AUTOPILOT_FLIGHT_TIMES`` if set (the tests' own), else the user's cache."""
+    if os.environ.get("AUTOPILOT_FLIGHT_TIMES"):
+        return Path(os.environ["AUTOPILOT_FLIGHT_TIMES"])
     base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
     return Path(base) / "autopilot" / "flight_times.json"
 
@@ -110,32 +115,46 @@ class Estimate:
         return f"{head}: about {duration_text(self.seconds)}{more} (from earlier flights here)"
 
 
+def makespan(durations: Sequence[float], workers: int) -> float:
+    """How long ``durations`` take on ``workers``, each flight taken in order by the first
+    worker free (as a process pool takes them)."""
+    free = [0.0] * max(1, workers)
+    for d in durations:
+        heapq.heapreplace(free, free[0] + d)
+    return max(free)
+
+
 def estimate(kinds: Sequence[str], workers: int, times: FlightTimes) -> Estimate:
     known = [times.get(k) for k in kinds]
-    total = sum(t for t in known if t is not None)
-    return Estimate(len(kinds), workers, total / workers, sum(t is None for t in known))
+    return Estimate(len(kinds), workers, makespan([t for t in known if t is not None], workers),
+                    sum(t is None for t in known))
 
 
 class Progress:
-    """The time left after each flight: from the flights done (their mean wall time per
-    flight and worker), falling back on the history for kinds not yet flown."""
+    """The time left after each flight: the flights not yet done laid out on the workers,
+    each taking its kind's time (this batch's flights counted in), a kind with none the mean
+    of the flights done. It counts the flights in the air as not begun: an upper figure."""
 
     def __init__(self, kinds: Sequence[str], workers: int, times: FlightTimes):
         self.kinds, self.workers, self.times = list(kinds), workers, times
-        self.done = 0
+        self.pending = set(range(len(self.kinds)))
+        self.walls: list[float] = []
         self.started = time.perf_counter()
 
     def flown(self, index: int, wall_s: float | None) -> str:
         """``wall_s`` None: a flight that failed (its time is not kept)."""
-        self.done += 1
+        self.pending.discard(index)
         if wall_s is not None:
             self.times.add(self.kinds[index], wall_s)
-        left = len(self.kinds) - self.done
-        if left == 0:
-            return f"{self.done}/{len(self.kinds)} done in " \
-                   f"{duration_text(time.perf_counter() - self.started)}"
-        per_flight = (time.perf_counter() - self.started) / self.done  # (with the workers)
-        return f"{self.done}/{len(self.kinds)} done, about {duration_text(per_flight * left)} left"
+            self.walls.append(wall_s)
+        done, total = len(self.kinds) - len(self.pending), len(self.kinds)
+        if not self.pending:
+            return f"{done}/{total} done in {duration_text(time.perf_counter() - self.started)}"
+        mean = sum(self.walls) / len(self.walls) if self.walls else None
+        left = [self.times.get(self.kinds[i]) or mean for i in sorted(self.pending)]
+        if any(t is None for t in left):
+            return f"{done}/{total} done"
+        return f"{done}/{total} done, about {duration_text(makespan(left, self.workers))} left"
 
 
 def fly_summary(mission: str, overrides: Sequence[str]) -> dict:

@@ -111,3 +111,16 @@ def test_a_worker_that_dies_is_a_result_when_asked_for(tmp_path):
     assert out == ["died: BrokenProcessPool"]
     assert errors == [0]
     assert FlightTimes(tmp_path / "t.json").get("k") is None  # no time kept for it
+
+
+def test_the_time_is_the_flights_laid_out_on_the_workers(tmp_path):
+    assert schedule.makespan([15.0, 15.0, 15.0], 2) == 30.0  # (the third waits for a worker)
+    assert schedule.makespan([30.0, 10.0, 10.0, 10.0], 2) == 30.0
+    assert schedule.makespan([], 2) == 0.0
+    times = FlightTimes(tmp_path / "t.json")
+    times.add("k", 15.0)
+    assert estimate(["k"] * 3, 2, times).seconds == 30.0
+    progress = schedule.Progress(["k", "k", "k"], 2, times)
+    assert progress.flown(0, 15.0) == "1/3 done, about 15 s left"  # two left, on two workers
+    new = schedule.Progress(["a", "b"], 1, FlightTimes(tmp_path / "u.json"))
+    assert new.flown(0, None) == "1/2 done"  # (nothing known to tell the time by)
