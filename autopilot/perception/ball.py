@@ -437,6 +437,10 @@ def _edge_offset(image_bgr: np.ndarray, c: BallCandidate) -> float | None:
     r = c.radius_px + EDGE_SEARCH_PX + 2.0
     x0, y0 = max(0, int(c.u_px - r)), max(0, int(c.v_px - r))
     x1, y1 = min(width, int(c.u_px + r) + 2), min(height, int(c.v_px + r) + 2)
+    if x1 - x0 < 2 or y1 - y0 < 2:
+        # a fit whose centre lies off the image (a sliver at its border): nothing to measure
+        # (cv2.remap refuses an empty crop; its error failed the step once)
+        return None
     crop = image_bgr[y0:y1, x0:x1].astype(np.float32)
     # outline points are pixel centres half a pixel inside the mask's edge
     steps = np.arange(-EDGE_SEARCH_PX, EDGE_SEARCH_PX + 1e-9, 0.25) + 0.5
