@@ -46,6 +46,12 @@ def drone():
 EXIT_WITHOUT_FINALIZING = "\nimport os, sys\nsys.stdout.flush()\nos._exit(0)\n"
 
 
+def assert_fresh_battery(percent: int) -> None:
+    """A full pack, less what this module's earlier flights drew from it: the module shares
+    one drone, and how long each flight lasts in real time depends on the machine's load."""
+    assert 90 <= percent <= 100, percent
+
+
 def _run(script: str, timeout_s: float = 150) -> dict:
     script = textwrap.dedent(script) + EXIT_WITHOUT_FINALIZING
     result = subprocess.run([sys.executable, "-c", script],
@@ -102,7 +108,7 @@ print(json.dumps(seen))
 
 def test_pyardrone_flies_it_unmodified(drone) -> None:
     seen = _run(PYARDRONE)
-    assert seen["battery_percent"] == 100
+    assert_fresh_battery(seen["battery_percent"])
     assert not seen["fly_before"]
     assert seen["altitude_before_mm"] < 200
     assert 700 < seen["altitude_flying_mm"] < 1400
@@ -201,7 +207,7 @@ print(json.dumps(seen))
 
 def test_ardrone_sdk_flies_it_unmodified(drone) -> None:
     seen = _run(ARDRONE_SDK)
-    assert seen["battery_percent"] == 100
+    assert_fresh_battery(seen["battery_percent"])
     assert 700 < seen["altitude_flying_mm"] < 1400
     assert seen["max_vx_mm_s"] > 300
     assert seen["altitude_landed_mm"] < 200
