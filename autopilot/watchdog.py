@@ -31,12 +31,14 @@ log = logging.getLogger(__name__)
 
 class LoopWatchdog:
     def __init__(self, stall_s: float, on_stall: Callable[[float], None] | None = None, *,
-                 period_s: float = 0.05, history: int = 72000, quiet: bool = False) -> None:
+                 period_s: float = 0.05, history: int = 72000, quiet: bool = False,
+                 on_beat: Callable[[float], None] | None = None) -> None:
         self.stall_s = stall_s
         #: stalls logged at debug level only (lockstep: simulated time waits for the loop, so
         #: a stall costs the flight nothing)
         self._level = logging.DEBUG if quiet else logging.WARNING
         self.on_stall = on_stall
+        self.on_beat = on_beat  # (each beat's lag, s)
         self.period_s = period_s
         #: the loop's lag at each beat (s), the newest ``history`` (an hour at 20 Hz)
         self.lags_s: deque[float] = deque(maxlen=history)
@@ -66,6 +68,8 @@ class LoopWatchdog:
                 lag = max(now - due, 0.0)
                 self.lags_s.append(lag)
                 self._beat = now
+                if self.on_beat is not None:
+                    self.on_beat(lag)
                 if lag >= self.stall_s:
                     self.stalls_s.append(lag)
                     log.log(self._level, "the event loop was stalled for %.2f s", lag)

@@ -26,6 +26,20 @@ from autopilot.config.base import (
 from drivers.sim.config import CameraConfig
 
 
+class YieldConfig(ConfigModel):
+    enabled: bool = True
+    late_ms: Annotated[float, Field(gt=0, le=500)] = 8.0  # a watchdog beat this late: fewer frames
+    on_time_ms: Annotated[float, Field(ge=0, le=500)] = 3.0  # this early: more, back to all
+    min_share: Annotated[float, Field(gt=0, le=1)] = 0.15  # never fewer frames than this share
+
+    @model_validator(mode="after")
+    def _on_time_before_late(self) -> YieldConfig:
+        if self.on_time_ms >= self.late_ms:
+            raise ValueError(f"on_time_ms ({self.on_time_ms:g}) must be below late_ms "
+                             f"({self.late_ms:g})")
+        return self
+
+
 class RuntimeConfig(ConfigModel):
     control_rate_hz: Annotated[float, Field(ge=5, le=200)]  # at least; also on every estimate
     #: nothing new (a newer position or attitude) received from the vehicle for this long,
@@ -47,6 +61,9 @@ class RuntimeConfig(ConfigModel):
     #: background threads (decoding, detection, encoding) this much lower in priority than the
     #: event loop's (telemetry, control): :mod:`drivers.threads`
     background_nice: Annotated[int, Field(ge=0, le=19)] = 10
+    #: in real time, perception and the console take fewer frames while the event loop runs
+    #: late: :mod:`autopilot.runtime.governor`
+    yield_to_control: YieldConfig = YieldConfig()
 
     @model_validator(mode="after")
     def _stall_outlasts_setpoints(self) -> RuntimeConfig:

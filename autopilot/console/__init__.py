@@ -146,7 +146,7 @@ class CameraFeed:
         try:
             async with contextlib.aclosing(self.host.vehicle.frames(self.camera)) as frames:
                 async for raw in frames:
-                    if not sampler.take(time.monotonic()):
+                    if not sampler.take(time.monotonic()) or not self.host.take_frame(self.camera):
                         continue
                     arrival = (self.host.clock.now() - raw.time_s) * 1e3
                     self.arrival_ms = [*self.arrival_ms[-299:], arrival]

@@ -123,6 +123,9 @@ class SimConsoleSource:
     async def processed_frame(self, camera: str, seq: int, timeout_s: float) -> None:
         return None  # (no pipelines here: the frames as they come)
 
+    def take_frame(self, camera: str) -> bool:
+        return True  # (the simulator's own console: no flight to yield to)
+
     def overlay_records(self, camera: str, frame) -> dict:
         return {"det": None, "pose": pose_record(self._state), "est": None, "setpoint": None,
                 "step": "simulated vehicle", "phase": ""}

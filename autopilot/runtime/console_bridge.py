@@ -74,6 +74,12 @@ class ConsoleBridge:
                               ) -> ProcessedFrame | None:
         return await self.perception.processed_frame(camera, seq, timeout_s)
 
+    def take_frame(self, camera: str) -> bool:
+        """Draw this frame of ``camera``? (Not all while the loop runs late: see
+        :mod:`autopilot.runtime.governor`.)"""
+        governor = self.perception.governor
+        return governor is None or governor.take(f"console:{camera}")
+
     def overlay_records(self, camera: str, frame: Frame) -> dict:
         """What the console draws over ``frame``, as the flight log's records (for
         :func:`autopilot.report.video.overlay_from`): the detections in it when a step's

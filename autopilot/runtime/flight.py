@@ -97,6 +97,10 @@ class RunStats:
     loop_lag_p99_ms: float | None = None
     loop_lag_max_ms: float | None = None
     loop_stalls: int = 0  # the loop silent for runtime.loop_stall_s or longer
+    #: frames perception and the console skipped while the loop ran late (real time), by
+    #: lane ("front", "console:front"), and the lowest share of frames taken
+    frames_yielded: dict[str, int] = field(default_factory=dict)
+    lowest_frame_share: float | None = None
     armed: bool = False  # the vehicle was armed at some time during the run (it flew)
     #: the setpoint guards' interventions (autopilot.watch: acting on one subject, a zone,
     #: as long as it lasts) and the setpoints they changed

@@ -20,6 +20,7 @@ from autopilot.runtime.control import ControlLoop, Rooms
 from autopilot.runtime.failsafes import Failsafes, make_fence
 from autopilot.runtime.flight import Flight, Service
 from autopilot.runtime.goal_desk import GoalDesk
+from autopilot.runtime.governor import LoadGovernor
 from autopilot.runtime.perception import PerceptionLanes
 from autopilot.runtime.planner import PlanningWorker
 from autopilot.runtime.readout import Readout
@@ -85,8 +86,12 @@ class Runtime:
         failsafes.drop_setpoints = self.setpoints.drop
         failsafes.perform = self.commands.perform
         failsafes.resume = self.console.resume = self.control.resume
+        governor = None if self.clock.lockstep else \
+            LoadGovernor.from_config(cfg.runtime.yield_to_control)
+        self.perception.governor = governor
         self.watchdog = LoopWatchdog(cfg.runtime.loop_stall_s, failsafes.on_loop_stall,
-                                     quiet=self.clock.lockstep)
+                                     quiet=self.clock.lockstep,
+                                     on_beat=governor.observe_lag if governor else None)
 
     # -- what the outside reads and asks ---------------------------------------------------
 
@@ -229,3 +234,7 @@ class Runtime:
         self.stats.loop_lag_p99_ms = dog.lag_percentile_ms(99)
         self.stats.loop_lag_max_ms = dog.lag_percentile_ms(100)
         self.stats.loop_stalls = len(dog.stalls_s)
+        governor = self.perception.governor
+        if governor is not None:
+            self.stats.frames_yielded = dict(governor.skipped)
+            self.stats.lowest_frame_share = round(governor.lowest_share, 3)

@@ -27,6 +27,7 @@ from drivers.stages import STAGES
 from drivers.threads import lower_this_thread
 
 if TYPE_CHECKING:
+    from autopilot.runtime.governor import LoadGovernor
     from autopilot.runtime.watch import Watch
 
 log = logging.getLogger(__name__)
@@ -87,6 +88,7 @@ class PerceptionLanes:
         self.lanes: dict[str, Lane] = {}
         self.latest_processed: dict[str, ProcessedFrame] = {}
         self._processed_signals: dict[str, asyncio.Event] = {}
+        self.governor: LoadGovernor | None = None  # (real time: frames skipped when late)
         self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="detect",
                                         initializer=lower_this_thread)
 
@@ -203,6 +205,8 @@ class PerceptionLanes:
         budget = detection_charge(f.config, [p.kind for p in pipelines])
         async with contextlib.aclosing(f.vehicle.frames(lane.camera)) as frames:
             async for frame in frames:
+                if self.governor is not None and not self.governor.take(lane.camera):
+                    continue
                 received = f.clock.now()
                 hints = [p.hint(frame.time_s, frame.camera) for p in pipelines]
                 results = await f.clock.run_blocking(

@@ -16,6 +16,11 @@ links with clear errors. Around the plugins:
   OFFBOARD is entered with DO_SET_MODE: if the caller stops, PX4's offboard-loss failsafe
   acts. Other messages MAVSDK has no call for (LANDING_TARGET) go through ``mavlink_direct``,
   on one thread of its own so that they keep their order.
+* MAVSDK's view: the high-rate streams the driver reads itself (position and attitude, at
+  PX4's 30–50 Hz each) reach MAVSDK thinned to :data:`MAVSDK_STREAM_HZ`; MAVSDK still sees every
+  message kind (its health and telemetry stay as they are), but not 200 messages a second, each
+  a call into it and a wake of its thread, taken from the event loop's CPU (the part that a busy
+  machine shares out, see docs/reliability.md).
 * time: position and attitude are read from the link as they arrive, each stamped with its own
   ``time_boot_ms`` mapped onto our clock by TIMESYNC round trips of our own (answers to MAVSDK's
   or anyone else's requests are not taken for ours).
@@ -59,6 +64,31 @@ _MAV_AUTOPILOT_INVALID = 8
 #: MAV_COMP_ID_AUTOPILOT1: the flight controller (as MAVSDK, we take no other component for it:
 #: a gimbal or camera with its own heartbeat is not the vehicle)
 _AUTOPILOT_COMPONENT = 1
+#: the streams read by the driver itself (never through MAVSDK's telemetry), and the rate at
+#: which MAVSDK still sees each of them
+MAVSDK_THINNED = frozenset({"ATTITUDE", "ATTITUDE_QUATERNION", "LOCAL_POSITION_NED",
+                            "GLOBAL_POSITION_INT"})
+MAVSDK_STREAM_HZ = 4.0
+
+
+class StreamThinner:
+    """Passes at most ``rate_hz`` messages of each of ``kinds`` (every other kind passes)."""
+
+    def __init__(self, kinds: frozenset[str], rate_hz: float) -> None:
+        self.kinds = kinds
+        self.period_s = 1.0 / rate_hz
+        self._next_s: dict[str, float] = {}
+        self.held_back = 0
+
+    def passes(self, kind: str, now_s: float) -> bool:
+        if kind not in self.kinds:
+            return True
+        due = self._next_s.get(kind)
+        if due is not None and due - 2.0 * self.period_s < now_s < due:  # (a clock gone back:
+            self.held_back += 1                                          # passed, restarted)
+            return False
+        self._next_s[kind] = now_s + self.period_s
+        return True
 
 
 class MavsdkDriver(MavlinkVehicle):
@@ -87,6 +117,7 @@ class MavsdkDriver(MavlinkVehicle):
         self._status_text: tuple[float, str] = (-math.inf, "")
         self._ignored: set[tuple[int, int]] = set()
         self._timesync_sent = TimesyncRequests()
+        self._to_mavsdk = StreamThinner(MAVSDK_THINNED, MAVSDK_STREAM_HZ)
         self._sender = ThreadPoolExecutor(max_workers=1, thread_name_prefix="mavsdk-send")
 
     # ------------------------------------------------------------------------------------
@@ -337,7 +368,7 @@ class MavsdkDriver(MavlinkVehicle):
             if sent is not None:
                 self._boot.observe_sync(sent, msg.tc1 / 1e9, self._clock.now())
         mavsdk = self._mavsdk
-        if mavsdk is not None:
+        if mavsdk is not None and self._to_mavsdk.passes(kind, self._clock.now()):
             mavsdk._mavsdk.pass_received_raw_bytes(bytes(msg.get_msgbuf()))
 
     # ------------------------------------------------------------------------------------
