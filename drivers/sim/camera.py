@@ -135,6 +135,9 @@ class PendingFrame:
     time_s: float
     seq: int
     image: Future[np.ndarray]
+    #: done once the scene is drawn and read back (the snapshot may then be overwritten); a
+    #: realistic camera's model and codec may still be working on the pixels
+    drawn: Future | None = None
     frame: Frame | None = None
 
 
@@ -195,14 +198,18 @@ class CameraRig:
         # out of their view, so skipping them only saves time
         self._option.geomgroup[2:] = 0
         self._thread: ThreadPoolExecutor | None = None
+        #: a realistic camera's model and codec, on a thread of their own: the next frame is
+        #: drawn while this one is post-processed (in order, one frame at a time)
+        self._post_thread: ThreadPoolExecutor | None = None
 
     def prepare(self, data: mujoco.MjData, cams: Iterable[SimCamera]) -> None:
         """Make the OpenGL and render contexts of ``cams`` now and draw each once, so that a
         missing OpenGL fails before flight (:class:`RenderingUnavailable`) and the first frames
         do not pay for context creation and Mesa's shader compilation (about 0.3 s)."""
         for cam in cams:
-            self._executor().submit(self._render, self._snapshot(data, cam), None, None,
-                                    cam.seq).result()
+            target = self._snapshot(data, cam)
+            drawn = self._executor().submit(self._draw_stage, target, None)
+            self._post_stage(target, drawn, None, cam.seq, 1.0)
 
     def submit(self, data: mujoco.MjData, cam: SimCamera, time_s: float,
                render_from_s: float | None = None,
@@ -212,9 +219,13 @@ class CameraRig:
         vehicle's at capture, for a realistic camera's motion blur and rolling shutter (None:
         at rest); ``gain``: its auto-exposure's brightness factor."""
         target = self._snapshot(data, cam)
-        pending = PendingFrame(cam, time_s, cam.seq,
-                               self._executor().submit(self._render, target, render_from_s,
-                                                       motion, cam.seq, gain))
+        drawn = self._executor().submit(self._draw_stage, target, render_from_s)
+        if cam.effects is None:
+            image = drawn
+        else:
+            image = self._post_executor().submit(self._post_stage, target, drawn, motion,
+                                                 cam.seq, gain)
+        pending = PendingFrame(cam, time_s, cam.seq, image, drawn)
         cam.seq += 1
         cam.rendered += 1
         target.pending = pending
@@ -224,7 +235,7 @@ class CameraRig:
         """Is ``cam``'s last frame still being drawn? (Capturing the next would wait for it.)"""
         target = self._targets.get(cam.cam_id)
         return target is not None and target.pending is not None \
-            and not target.pending.image.done()
+            and not target.pending.drawn.done()
 
     def _snapshot(self, data: mujoco.MjData, cam: SimCamera) -> _CameraTarget:
         """Update ``cam``'s scene from ``data`` (after collecting a frame still rendering it)."""
@@ -232,7 +243,7 @@ class CameraRig:
         if target is None:
             target = self._targets[cam.cam_id] = _CameraTarget(self._model, cam, self.seed)
         if target.pending is not None:  # the scene is about to be overwritten
-            self.finish(target.pending)
+            target.pending.drawn.result()
         mujoco.mjv_updateScene(self._model, data, self._option, None, target.camera,
                                mujoco.mjtCatBit.mjCAT_ALL.value, target.scene)
         if target.frustum_scale != 1.0:  # the render's wider field of view
@@ -246,6 +257,13 @@ class CameraRig:
             self._thread = ThreadPoolExecutor(max_workers=1, thread_name_prefix="render")
         return self._thread
 
+    def _post_executor(self) -> ThreadPoolExecutor:
+        if self._post_thread is None:
+            self._post_thread = ThreadPoolExecutor(
+                max_workers=1, thread_name_prefix="camera-model",
+                initializer=lower_thread_priority if self.background else None)
+        return self._post_thread
+
     def finish(self, pending: PendingFrame) -> Frame:
         """The captured frame (waits for the render if it is not done; once per frame)."""
         if pending.frame is None:
@@ -257,12 +275,11 @@ class CameraRig:
                 target.pending = None
         return pending.frame
 
-    def _render(self, target: _CameraTarget, render_from_s: float | None = None,
-                motion: VehicleMotion | None = None, seq: int = 0,
-                gain: float = 1.0) -> tuple[np.ndarray, bytes | None]:
-        """On the render thread: draw the snapshot, read it back top-down BGR (and make it look
-        like a real camera's, for a realistic camera); with the JPEG it was decoded from, if
-        its codec's round trip was the last thing done to it."""
+    def _draw_stage(self, target: _CameraTarget, render_from_s: float | None
+                    ) -> tuple[np.ndarray, bytes | None] | np.ndarray:
+        """On the render thread: draw the snapshot and read it back. An ideal camera's image,
+        top-down BGR, with no JPEG; a realistic camera's, rows still bottom-up (a copy: the
+        read-back buffer is the next frame's), for :meth:`_post_stage`."""
         if render_from_s is not None and self.render_gate is not None:
             self.render_gate(render_from_s)
         if self._gl is None:
@@ -279,17 +296,28 @@ class CameraRig:
             except Exception as exc:  # mujoco.FatalError and friends
                 raise _unavailable(exc) from exc
             _fast_texture_filtering(target.context)
-        context = target.context
-        name, effects, jpeg = target.cam.info.name, target.cam.effects, None
-        with STAGES.stage(f"render.{name}"):
-            bgr = self._draw(target, context)
-            if effects is None:
+        with STAGES.stage(f"render.{target.cam.info.name}"):
+            bgr = self._draw(target, target.context)
+            if target.cam.effects is None:
                 image = cv2.flip(bgr, 0)  # OpenGL rows run bottom-up
-        if effects is not None:
-            with STAGES.stage(f"camera model.{name}"):
-                image = self._realistic(target, effects, bgr, motion, seq, gain)
-            with STAGES.stage(f"codec.{name}"):
-                image, jpeg = self._codec(target, effects, image)
+                image.flags.writeable = False
+                return image, None
+            return bgr.copy() if bgr is target.bgra else bgr
+
+    def _post_stage(self, target: _CameraTarget, drawn: Future, motion: VehicleMotion | None,
+                    seq: int, gain: float) -> tuple[np.ndarray, bytes | None]:
+        """On the camera-model thread (once ``drawn`` is): make a realistic camera's render
+        look like a real camera's; with the JPEG it was decoded from, if its codec's round trip
+        was the last thing done to it."""
+        bgr = drawn.result()
+        effects = target.cam.effects
+        if effects is None:
+            return bgr
+        name = target.cam.info.name
+        with STAGES.stage(f"camera model.{name}"):
+            image = self._realistic(target, effects, bgr, motion, seq, gain)
+        with STAGES.stage(f"codec.{name}"):
+            image, jpeg = self._codec(target, effects, image)
         image.flags.writeable = False
         return image, jpeg
 
@@ -398,6 +426,10 @@ class CameraRig:
         for target in self._targets.values():
             if target.pending is not None:
                 target.pending.image.cancel()
+                target.pending.drawn.cancel()
+        if self._post_thread is not None:
+            self._post_thread.shutdown(wait=True, cancel_futures=True)
+            self._post_thread = None
         if self._thread is not None:
             self._thread.submit(self._release).result()
             self._thread.shutdown(wait=True)

@@ -176,6 +176,8 @@ def test_shedding_physics_never_waits_for_a_frame_still_drawing(sim_config):
         assert cam.shed >= 10
         release.set()
         sim.rig._executor().submit(lambda: None).result()  # (one thread: the frame is drawn)
+        if cam.effects is not None:  # (and its camera model, on a thread of its own, applied)
+            sim.rig._post_executor().submit(lambda: None).result()
         later = [o.payload for o in sim.advance_to(sim.time_s + 0.01) if o.kind == "frame"]
         (frame,) = later
         assert frame.time_s < 0.05  # captured when it was, delivered when drawn
