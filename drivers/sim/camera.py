@@ -209,7 +209,11 @@ class CameraRig:
         for cam in cams:
             target = self._snapshot(data, cam)
             drawn = self._executor().submit(self._draw_stage, target, None)
-            self._post_stage(target, drawn, None, cam.seq, 1.0)
+            if cam.effects is None:
+                drawn.result()
+            else:
+                self._post_executor().submit(self._post_stage, target, drawn, None, cam.seq,
+                                             1.0).result()
 
     def submit(self, data: mujoco.MjData, cam: SimCamera, time_s: float,
                render_from_s: float | None = None,
