@@ -26,7 +26,9 @@ makes them before flight. Pixels are read back as BGRA
 Frames are delivered top-down BGR, as OpenCV expects.
 
 A ``realistic`` camera (``CameraConfig.realistic``, the default) delivers what a small drone's
-camera would, not MuJoCo's ideal pinhole; on the render thread, after the read-back, in order:
+camera would, not MuJoCo's ideal pinhole; after the read-back, on a thread of its own (the
+camera model's: the render thread draws the next frame meanwhile, one frame at a time and in
+order, so a seed's frames are the same), in order:
 
 * **lens distortion** (OpenCV's k1 k2 p1 p2 k3, reported in the frame's intrinsics so the
   autopilot can undistort with them; see drivers/camera_model.py): MuJoCo renders an ideal
@@ -143,7 +145,7 @@ class PendingFrame:
 
 class _CameraTarget:
     """A camera's MuJoCo scene, and its render context (made on the render thread); for a
-    realistic camera, what its post-processing needs (made on the render thread too)."""
+    realistic camera, what its post-processing needs (made on the camera model's thread)."""
 
     def __init__(self, model: mujoco.MjModel, cam: SimCamera, seed: int) -> None:
         intr = cam.info.intrinsics
