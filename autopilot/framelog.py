@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import math
 from collections import deque
 from collections.abc import Mapping
 from concurrent.futures import ThreadPoolExecutor
@@ -20,29 +19,19 @@ import numpy as np
 
 from autopilot.flightlog.log import FlightLog
 from drivers.base import Frame, Vehicle
+from drivers.rate import RateSampler
 from drivers.threads import lower_this_thread
 
 FRAME_LOG_BUFFER = 32  # frames waiting for JPEG encoding; more are dropped (and counted)
 FRAME_LOG_PIPELINE = 3  # frames being encoded at once (each within this many frame periods)
 
 
-class FrameSampler:
+class FrameSampler(RateSampler):
     """Which frames of a camera go to the log: ``rate_hz`` per second on average, evenly
     spread; every frame when the rate is at or above the camera's."""
 
     def __init__(self, rate_hz: float, camera_rate_hz: float) -> None:
-        self._period_s = 1.0 / rate_hz if rate_hz > 0 else math.inf
-        self._slack_s = 0.5 / camera_rate_hz if camera_rate_hz > 0 else 0.0
-        self._due_s = -math.inf
-
-    def take(self, time_s: float) -> bool:
-        if math.isinf(self._period_s) or time_s < self._due_s - self._slack_s:
-            return False
-        # the next one is due a period after this one was due (the rate holds on average);
-        # after a gap (or at the start), a period after this one
-        due = self._due_s + self._period_s
-        self._due_s = due if due >= time_s else time_s + self._period_s
-        return True
+        super().__init__(rate_hz, camera_rate_hz)
 
 
 def encode_jpeg(image_bgr: np.ndarray, quality: int) -> bytes:

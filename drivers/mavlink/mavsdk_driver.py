@@ -53,6 +53,7 @@ from drivers.mavlink import ardupilot, px4
 from drivers.mavlink.common import MavlinkVehicle, cancel_all
 from drivers.mavlink.link import MavlinkLink, TimesyncRequests, unheard
 from drivers.mavlink.signing import Signing, refresh
+from drivers.rate import RateSampler
 
 log = logging.getLogger(__name__)
 
@@ -76,19 +77,15 @@ class StreamThinner:
 
     def __init__(self, kinds: frozenset[str], rate_hz: float) -> None:
         self.kinds = kinds
-        self.period_s = 1.0 / rate_hz
-        self._next_s: dict[str, float] = {}
+        self._samplers = {kind: RateSampler(rate_hz) for kind in kinds}
         self.held_back = 0
 
     def passes(self, kind: str, now_s: float) -> bool:
-        if kind not in self.kinds:
+        sampler = self._samplers.get(kind)
+        if sampler is None or sampler.take(now_s):
             return True
-        due = self._next_s.get(kind)
-        if due is not None and due - 2.0 * self.period_s < now_s < due:  # (a clock gone back:
-            self.held_back += 1                                          # passed, restarted)
-            return False
-        self._next_s[kind] = now_s + self.period_s
-        return True
+        self.held_back += 1
+        return False
 
 
 class MavsdkDriver(MavlinkVehicle):
