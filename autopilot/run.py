@@ -483,8 +483,10 @@ async def fly(plan: MissionPlan, out_dir: Path | None, *, realtime: bool = False
     if stages:
         from autopilot.bench.speed import stage_summary
 
-        summary["stages"] = stage_summary(STAGES.stop(), STAGES.threads(), sim_time,
-                                          wall_time, time.process_time() - cpu_start)
+        counted = STAGES.stop()
+        summary["stages"] = stage_summary(counted, STAGES.threads(), sim_time, wall_time,
+                                          time.process_time() - cpu_start,
+                                          STAGES.run_queue_wait_s())
     if log.error is not None:
         summary["log_error"] = f"{type(log.error).__name__}: {log.error}"
     if runtime is not None:  # frames the log took, and those it had to drop

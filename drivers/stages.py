@@ -49,6 +49,9 @@ class Stages:
         #: each thread's whole CPU time: at the start (by thread id), and the latest seen
         self._thread_start_ns: dict[int, int] = {}
         self._thread_ns: dict[int, tuple[str, int]] = {}
+        #: each task's (every thread's, Mesa's too) time spent runnable waiting for a core
+        self._wait_start_ns: dict[str, int] = {}
+        self._wait_ns: dict[str, int] = {}
 
     def start(self) -> None:
         """Count from now (what was counted before is forgotten)."""
@@ -60,6 +63,7 @@ class Stages:
         self._raster_start_ns, self._raster_ns = rasteriser_cpu_ns(), 0
         self._thread_ns = {}
         self._thread_start_ns = {ident: ns for ident, (_, ns) in _threads_cpu_ns().items()}
+        self._wait_start_ns, self._wait_ns = _tasks_waiting_ns(), {}
         self.on = True
 
     def sample_threads(self) -> None:
@@ -73,6 +77,15 @@ class Stages:
             ns -= self._thread_start_ns.get(ident, 0)
             if ns > self._thread_ns.get(ident, ("", -1))[1]:
                 self._thread_ns[ident] = (name, ns)
+        for tid, ns in _tasks_waiting_ns().items():
+            ns -= self._wait_start_ns.get(tid, 0)
+            if ns > self._wait_ns.get(tid, -1):
+                self._wait_ns[tid] = ns
+
+    def run_queue_wait_s(self) -> float | None:
+        """How long the process's threads (all, Mesa's too) were runnable but waited for a
+        core while counting, summed, as last sampled (None: not known on this system)."""
+        return sum(self._wait_ns.values()) / 1e9 if self._wait_ns else None
 
     def threads(self) -> dict[str, float]:
         """Each thread's whole CPU time while counting, counted in a stage or not (by name; a
@@ -194,6 +207,25 @@ def _task_cpu_ns(tid: int | str) -> int | None:
         pass
     found = _task_stat(tid)
     return None if found is None else _ticks_ns(found[1])
+
+
+def _tasks_waiting_ns() -> dict[str, int]:
+    """Each of the process's tasks' run-queue wait so far (``/proc/self/task/TID/schedstat``,
+    its second field; Linux with scheduler statistics, else none)."""
+    if not sys.platform.startswith("linux"):
+        return {}
+    try:
+        tids = os.listdir("/proc/self/task")
+    except OSError:
+        return {}
+    out = {}
+    for tid in tids:
+        try:
+            with open(f"/proc/self/task/{tid}/schedstat") as f:
+                out[tid] = int(f.read().split()[1])
+        except (OSError, ValueError, IndexError):
+            continue
+    return out
 
 
 def rasteriser_cpu_ns() -> int:

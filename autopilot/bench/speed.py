@@ -20,13 +20,17 @@ DEFAULT_MISSIONS = ("follow_ball", "follow_marker", "hover_image", "land_pad", "
 PROFILES = ("realistic", "ideal")
 #: the process is CPU-bound when it keeps this share of the machine's cores busy
 CPU_BOUND_SHARE = 0.85
+#: below it, the work comes in bursts when its threads waited for a core this share of the
+#: wall time (summed over threads) or more
+BURST_WAIT_SHARE = 0.3
 
 
 def stage_summary(cpu_s: Mapping[str, float], threads_s: Mapping[str, float],
-                  sim_time_s: float | None, wall_s: float, process_cpu_s: float) -> dict:
+                  sim_time_s: float | None, wall_s: float, process_cpu_s: float,
+                  run_queue_wait_s: float | None = None) -> dict:
     """A run's stages for its summary: CPU seconds by stage and by thread, what no stage
-    counted (``other``: the event loop, telemetry hand-over, imports), and each stage per
-    simulated second."""
+    counted (``other``: the event loop, telemetry hand-over, imports), each stage per
+    simulated second, and how long its threads waited for a core (None: not known)."""
     counted = sum(cpu_s.values())
     stages = {**{k: round(v, 4) for k, v in sorted(cpu_s.items())},
               "other": round(max(process_cpu_s - counted, 0.0), 4)}
@@ -35,13 +39,16 @@ def stage_summary(cpu_s: Mapping[str, float], threads_s: Mapping[str, float],
     return {"wall_s": round(wall_s, 3), "sim_time_s": sim_time_s,
             "process_cpu_s": round(process_cpu_s, 3), "cpu_s": stages,
             "threads_cpu_s": {k: round(v, 3) for k, v in sorted(threads_s.items())},
+            "run_queue_wait_s": None if run_queue_wait_s is None else round(run_queue_wait_s, 3),
             "ms_per_sim_s": per_sim}
 
 
 def bound(stages: Mapping, cores: int) -> str:
     """What the run's wall time is bounded by: the CPU when the process kept nearly all the
-    cores busy, else the busiest thread (the serial path; the render thread counted with the
-    rasteriser it waits for)."""
+    cores busy; bursts of work wider than the cores when, with cores idle on average, its
+    threads still waited for one (:data:`BURST_WAIT_SHARE` of the wall time or more, summed);
+    else the busiest thread (the serial path; the render thread counted with the rasteriser
+    it waits for)."""
     wall = stages["wall_s"]
     busy = stages["process_cpu_s"] / wall if wall > 0 else 0.0
     if busy >= CPU_BOUND_SHARE * cores:
@@ -52,9 +59,16 @@ def bound(stages: Mapping, cores: int) -> str:
         threads["render"] += stages["cpu_s"]["rasteriser"]
     name, cpu = max(threads.items(), key=lambda kv: kv[1]) if threads else ("?", 0.0)
     label = "render thread (with the rasteriser)" if name == "render" else f"{name} thread"
-    return (f"serial path: the {label} busy {100 * cpu / wall:.0f} % of the wall time, "
-            f"{busy:.2f} of {cores} cores busy; more parallel work would use the idle "
-            f"{cores - busy:.2f}")
+    busiest = f"the {label} busy {100 * cpu / wall:.0f} % of the wall time"
+    waited = stages.get("run_queue_wait_s")
+    if waited is not None and wall > 0 and waited / wall >= BURST_WAIT_SHARE:
+        return (f"bursts: {busy:.2f} of {cores} cores busy on average, yet its threads "
+                f"waited {waited / wall:.2f} s a second for a core: each frame's work (its "
+                "render, camera model, detection, the loop's reply) comes wider than the "
+                "cores, with idle gaps between; less CPU work a frame makes it faster, more "
+                f"threads would not ({busiest})")
+    return (f"serial path: {busiest}, {busy:.2f} of {cores} cores busy; more parallel work "
+            f"would use the idle {cores - busy:.2f}")
 
 
 def fly_one(mission: str, profile: str, overrides: Sequence[str], out: Path) -> dict:
@@ -81,6 +95,7 @@ def fly_one(mission: str, profile: str, overrides: Sequence[str], out: Path) -> 
             "wall_s": stages.get("wall_s"), "sim_time_s": stages.get("sim_time_s"),
             "process_cpu_s": stages.get("process_cpu_s"),
             "threads_cpu_s": stages.get("threads_cpu_s", {}),
+            "run_queue_wait_s": stages.get("run_queue_wait_s"),
             "bound": bound(stages, os.cpu_count() or 1) if stages else "",
             "process_wall_s": round(wall, 2)}
 

@@ -4,6 +4,8 @@ the bench's summary and bound from those counts."""
 
 from __future__ import annotations
 
+import hashlib
+import os
 import threading
 import time
 
@@ -18,6 +20,15 @@ def spin(seconds: float) -> None:
     end = time.thread_time() + seconds
     while time.thread_time() < end:
         pass
+
+
+def spin_without_the_gil(seconds: float) -> None:
+    """Burn this thread's CPU for ``seconds`` of its own CPU time in hashing, which lets the GIL
+    go: two such threads are both runnable at once, as native work (Mesa, OpenCV) is."""
+    block = bytes(1 << 20)
+    end = time.thread_time() + seconds
+    while time.thread_time() < end:
+        hashlib.sha256(block).digest()
 
 
 def test_a_stage_counts_its_own_cpu_time_not_an_inner_stages() -> None:
@@ -90,6 +101,36 @@ def test_the_bound_is_the_cpu_when_the_cores_are_busy_else_the_busiest_thread() 
                          6.5)
     text = bound(idle, cores=2)
     assert text.startswith("serial path: the render thread (with the rasteriser) busy 90 %")
+    # cores idle on average while its threads queued for one: the work comes in bursts
+    bursty = stage_summary({"rasteriser": 2.0}, {"MainThread": 2.0, "render": 2.5}, 20.0, 5.0,
+                           6.5, run_queue_wait_s=4.0)
+    text = bound(bursty, cores=2)
+    assert text.startswith("bursts: 1.30 of 2 cores busy on average, yet its threads waited "
+                           "0.80 s a second for a core")
+    assert "render thread (with the rasteriser) busy 90 %" in text
+    calm = stage_summary({}, {"MainThread": 2.0}, 20.0, 5.0, 2.5, run_queue_wait_s=0.5)
+    assert bound(calm, cores=2).startswith("serial path: the MainThread thread")
+
+
+@pytest.mark.skipif(not hasattr(os, "sched_setaffinity"), reason="needs Linux affinity")
+def test_the_run_queue_wait_is_counted_while_counting() -> None:
+    """Two threads hashing on one core (the GIL let go) take turns: each waits for the other
+    about half the time, and the wait is counted."""
+    stages = Stages()
+    cpus = os.sched_getaffinity(0)
+    os.sched_setaffinity(0, {min(cpus)})  # (this thread; the spinner inherits it)
+    try:
+        stages.start()
+        other = threading.Thread(target=spin_without_the_gil, args=(0.1,))
+        other.start()
+        spin_without_the_gil(0.1)
+        other.join()
+        stages.stop()
+    finally:
+        os.sched_setaffinity(0, cpus)
+    waited = stages.run_queue_wait_s()
+    assert waited is not None
+    assert waited >= 0.05
 
 
 def test_the_table_ranks_the_stages_and_says_a_failed_flight() -> None:
