@@ -406,7 +406,8 @@ def fly_one(hogs: int, folder: Path, mission: Path, driver: str, overrides: Sequ
 def run_bench(hogs: Sequence[int], follow_s: float = DEFAULT_FOLLOW_S, driver: str = "mavsdk",
               overrides: Sequence[str] = (), log: Callable[[str], None] = lambda m: None,
               out: Path | None = None, fps: float = VIEWER_FPS,
-              cores: tuple[int, int] | None = None) -> dict:
+              cores: tuple[int, int] | None = None, repeat: int = 1) -> dict:
+    """Fly follow_ball at each load of ``hogs``, ``repeat`` times each (a row per flight)."""
     from autopilot.mission import load_mission
 
     cores = cores or pick_cores()
@@ -426,15 +427,17 @@ def run_bench(hogs: Sequence[int], follow_s: float = DEFAULT_FOLLOW_S, driver: s
     rows = []
     try:
         for n in hogs:
-            rows.append(fly_one(n, folder / f"hogs{n}", mission, driver, overrides, cores,
-                                follow_s, fps, log))
+            for k in range(1, repeat + 1):
+                where = folder / (f"hogs{n}" if repeat == 1 else f"hogs{n}-{k}")
+                rows.append(fly_one(n, where, mission, driver, overrides, cores, follow_s,
+                                    fps, log))
     finally:
         if main:
             signal.signal(signal.SIGTERM, previous)
         if out is None:
             shutil.rmtree(folder, ignore_errors=True)
     rate = plan.config.runtime.control_rate_hz
-    return {"bench": "load", "mission": "follow_ball", "hogs": list(hogs),
+    return {"bench": "load", "mission": "follow_ball", "hogs": list(hogs), "repeat": repeat,
             "follow_s": follow_s, "driver": driver, "overrides": list(overrides),
             "vehicle_core": cores[0], "autopilot_core": cores[1], "viewer_fps": fps,
             "control_rate_hz": rate, "rows": rows, **conclusions(rows, rate),

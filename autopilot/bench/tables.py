@@ -69,9 +69,9 @@ FORMATTERS: dict[str, Callable[[dict], list[str]]] = {
     "load": _preformatted(
         "load", load_figures.format_table,
         "Real-time follow_ball on a busy CPU: `autopilot sim` on a core of its own, the "
-        "autopilot over MAVSDK (H.264 video in, a console viewer) sharing the other with N busy "
-        "processes, each in a session of its own (Linux's autogroups give each the "
-        "autopilot's share)"),
+        "autopilot over a MAVLink driver (the table's first line names it; H.264 video in, a "
+        "console viewer) sharing the other with N busy processes, each in a session of its own "
+        "(Linux's autogroups give each the autopilot's share); a row per flight"),
 }
 
 
@@ -82,8 +82,10 @@ def command_of(result: dict) -> str:
         parts += [f"--trials {result['trials']}", f"--rover-speed {result['rover_speed_m_s']:g}"]
         parts += [f"--strategy {n}" for n in landing.STRATEGIES if n in result]
     elif result["bench"] == "load":
-        parts += ["--hogs " + ",".join(str(n) for n in result["hogs"]),
-                  f"--follow-s {result['follow_s']:g}", f"--driver {result['driver']}"]
+        parts += ["--hogs " + ",".join(str(n) for n in result["hogs"])]
+        if result.get("repeat", 1) > 1:
+            parts.append(f"--repeat {result['repeat']}")
+        parts += [f"--follow-s {result['follow_s']:g}", f"--driver {result['driver']}"]
     elif result["bench"] == "speed":
         missions = list(result["missions"])
         if set(missions) != set(speed.DEFAULT_MISSIONS):

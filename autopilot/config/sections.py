@@ -30,7 +30,8 @@ class YieldConfig(ConfigModel):
     enabled: bool = True
     late_ms: Annotated[float, Field(gt=0, le=500)] = 8.0  # a watchdog beat this late: fewer frames
     on_time_ms: Annotated[float, Field(ge=0, le=500)] = 3.0  # this early: more, back to all
-    min_share: Annotated[float, Field(gt=0, le=1)] = 0.15  # never fewer frames than this share
+    min_share: Annotated[float, Field(gt=0, le=1)] = 0.15  # perception: never fewer than this share
+    viewer_min_share: Annotated[float, Field(gt=0, le=1)] = 0.1  # the console (yields first)
 
     @model_validator(mode="after")
     def _on_time_before_late(self) -> YieldConfig:

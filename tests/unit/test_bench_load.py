@@ -150,6 +150,21 @@ def test_the_curve_and_its_table():
     assert "up to 4 busy" in table
 
 
+def test_a_load_flown_again_counts_only_when_every_flight_at_it_held():
+    rows = [_row(2, True, 0.1, 60.0), _row(2, True, 0.1, 61.0),
+            _row(3, True, 0.3, 70.0), _row(3, False, 0.4, 80.0, why="lost"),
+            _row(3, True, 0.3, 72.0)]
+    result = {**_result(rows), "repeat": 2}
+    assert result["max_hogs_completed"] == 2  # one flight of three at 3 busy did not complete
+    assert result["control_rate_held_to"] == 2  # nor kept its rate
+    table = load_figures.format_table(result)
+    assert "each load flown 2 times (a row per flight)" in table
+    # the median over the flights at a load, the one not completed as infinite
+    assert "2 busy 0.050 m, 3 busy 0.050 m" in table
+    rows[2] = _row(3, False, 0.3, 70.0, why="lost")
+    assert "3 busy fail" in load_figures.format_table({**_result(rows), "repeat": 2})
+
+
 def test_the_table_says_when_nothing_was_measured_or_the_vehicle_fell_behind():
     row = {**_row(0, False, None, None, why="the vehicle did not start: EGL"),
            "tick_ms_p50": None, "vehicle_real_time_factor": 0.4}

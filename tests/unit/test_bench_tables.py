@@ -263,6 +263,10 @@ def test_the_load_curve_is_a_table_of_its_own_with_its_command():
     assert "### `load`" in page
     assert load_figures.format_table(result) in page
     assert "`autopilot bench load --hogs 0,2,4 --follow-s 20 --driver mavsdk --json`" in page
+    again = {**result, "hogs": [3], "repeat": 3, "driver": "pymavlink",
+             "overrides": ["scenario.seed=7"], "rows": [row(3, True, 60.0, 0.3)] * 3}
+    assert ("`autopilot bench load --hogs 3 --repeat 3 --follow-s 20 --driver pymavlink "
+            "--set scenario.seed=7 --json`") in tables.render([again])
 
 
 def test_an_older_result_without_the_relative_estimate_shows_its_absolute_mean_marked():
