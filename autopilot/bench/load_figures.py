@@ -7,6 +7,7 @@ from __future__ import annotations
 import itertools
 import math
 import re
+import statistics
 from collections.abc import Iterable, Mapping, Sequence
 
 #: shed above this share of frames counts as shedding (a frame now and then is noise, and the
@@ -216,9 +217,7 @@ def format_table(r: Mapping) -> str:
 
 
 def _median_rms(rows: Sequence[Mapping], hogs: int) -> str:
-    values = sorted(row["rms_range_error_m"] if row["completed"]
-                    and row["rms_range_error_m"] is not None else math.inf
-                    for row in rows if row["hogs"] == hogs)
-    mid = len(values) // 2
-    value = values[mid] if len(values) % 2 else (values[mid - 1] + values[mid]) / 2
+    value = statistics.median(row["rms_range_error_m"] if row["completed"]
+                              and row["rms_range_error_m"] is not None else math.inf
+                              for row in rows if row["hogs"] == hogs)
     return "fail" if math.isinf(value) else f"{value:.3f} m"

@@ -60,7 +60,7 @@ class LoadGovernor:
         s = self.settings
         if lag_s >= s.late_s:
             self.share = max(self._floor, self.share * s.decrease)
-            self.lowest_share = min(self.lowest_share, self.lane_share("perception"))
+            self.lowest_share = min(self.lowest_share, self._perception_share())
             self.late_beats += 1
         elif lag_s <= s.on_time_s:
             self.share = min(1.0, self.share + s.increase)
@@ -69,6 +69,9 @@ class LoadGovernor:
         """The share of ``lane``'s frames taken at the present level."""
         if lane.startswith(VIEWER_PREFIX):
             return max(self.settings.viewer_min_share, 2.0 * self.share - 1.0)
+        return self._perception_share()
+
+    def _perception_share(self) -> float:
         return max(self.settings.min_share, min(1.0, 2.0 * self.share))
 
     def take(self, lane: str) -> bool:
